@@ -1,0 +1,200 @@
+"""Self-describing artifacts: a JSON header, content hashes, atomic writes.
+
+Every artifact elicit-jax writes carries a header (``kind``, ``schema_version``, the config
+that made it, the content hashes of its inputs, seeds, library versions). Parquet artifacts
+keep it in the schema metadata under :data:`HEADER_KEY`; directory artifacts (checkpoints,
+runs) keep it in ``artifact.json``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.errors import ElicitError
+
+HEADER_KEY = b"elicit_jax"
+DIR_HEADER = "artifact.json"
+
+
+def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    """Content hash of a file, or of a directory (sorted relative paths and file hashes)."""
+    path = Path(path)
+    h = hashlib.sha256()
+    if path.is_dir():
+        for sub in sorted(p for p in path.rglob("*") if p.is_file()):
+            h.update(str(sub.relative_to(path)).encode())
+            h.update(file_sha256(sub).encode())
+        return h.hexdigest()
+    try:
+        with open(path, "rb") as f:
+            while block := f.read(chunk):
+                h.update(block)
+    except FileNotFoundError as e:
+        raise ElicitError("file not found", path) from e
+    return h.hexdigest()
+
+
+def library_versions() -> dict[str, str]:
+    """Versions of the libraries that shape results, without importing heavy modules."""
+    from importlib import metadata
+
+    out = {}
+    for name in ("elicit-jax", "jax", "jaxlib", "flax", "optax", "mujoco", "mujoco-mjx", "numpy"):
+        with contextlib.suppress(metadata.PackageNotFoundError):
+            out[name] = metadata.version(name)
+    return out
+
+
+def make_header(
+    kind: str,
+    schema_version: int,
+    *,
+    config: Mapping[str, Any] | None = None,
+    inputs: Mapping[str, str | Path] | None = None,
+    seed: int | None = None,
+    **fields: Any,
+) -> dict[str, Any]:
+    """Build an artifact header.
+
+    Args:
+      kind: artifact kind (``demos``, ``checkpoint``, ``scores``, ...).
+      schema_version: version of that kind's layout.
+      config: the config that produced the artifact (JSON-serialisable).
+      inputs: name -> path of each input; stored as name -> {path, sha256}.
+      seed: the PRNG seed, if any.
+      **fields: kind-specific fields (shapes, names, ...).
+    """
+    header: dict[str, Any] = {
+        "kind": kind,
+        "schema_version": schema_version,
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "config": dict(config or {}),
+        "inputs": {
+            name: {"path": str(p), "sha256": file_sha256(p)} for name, p in (inputs or {}).items()
+        },
+        "seed": seed,
+        "versions": library_versions(),
+    }
+    header.update(fields)
+    return header
+
+
+def dumps(obj: Any) -> str:
+    """JSON with numpy scalars and paths converted."""
+
+    def default(o: Any) -> Any:
+        if hasattr(o, "tolist"):
+            return o.tolist()
+        if isinstance(o, Path):
+            return str(o)
+        if hasattr(o, "__dataclass_fields__"):
+            import dataclasses
+
+            return dataclasses.asdict(o)
+        raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
+
+    return json.dumps(obj, default=default, indent=1, sort_keys=True)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary sibling path; rename it onto ``path`` only if the block succeeds.
+
+    Works for files and directories. On error the temporary is removed and ``path`` is
+    untouched, so no half-written artifact is ever visible.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    target = tmp / path.name
+    try:
+        yield target
+        if path.is_dir() and not path.is_symlink():
+            old = path.with_name(f".{path.name}.old-{os.getpid()}")
+            os.replace(path, old)
+            os.replace(target, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(target, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def write_json(path: str | Path, obj: Any) -> None:
+    """Atomically write ``obj`` as JSON."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(dumps(obj) + "\n")
+
+
+def read_json(path: str | Path) -> Any:
+    """Read JSON, turning a missing or malformed file into a one-line :class:`ElicitError`."""
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError as e:
+        raise ElicitError("file not found", path) from e
+    except json.JSONDecodeError as e:
+        raise ElicitError(f"malformed JSON ({e.msg} at line {e.lineno})", path) from e
+
+
+def write_parquet(path: str | Path, table: Any, header: Mapping[str, Any]) -> None:
+    """Atomically write a ``pyarrow.Table`` with ``header`` in its schema metadata."""
+    import pyarrow.parquet as pq
+
+    meta = dict(table.schema.metadata or {})
+    meta[HEADER_KEY] = dumps(header).encode()
+    table = table.replace_schema_metadata(meta)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def read_header(path: str | Path) -> dict[str, Any]:
+    """Header of any artifact: a Parquet file or a directory with ``artifact.json``."""
+    path = Path(path)
+    if not path.exists():
+        raise ElicitError("file not found", path)
+    if path.is_dir():
+        if not (path / DIR_HEADER).exists():
+            raise ElicitError(f"not an elicit-jax artifact (no {DIR_HEADER})", path)
+        return read_json(path / DIR_HEADER)
+    if path.suffix == ".json":
+        data = read_json(path)
+        if not isinstance(data, dict) or "kind" not in data:
+            raise ElicitError("not an elicit-jax artifact (no 'kind' field)", path)
+        return data
+    import pyarrow.parquet as pq
+
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except Exception as e:  # pyarrow raises several types for non-Parquet input
+        raise ElicitError(f"not a readable Parquet file ({type(e).__name__}: {e})", path) from e
+    if HEADER_KEY not in meta:
+        raise ElicitError("Parquet file has no elicit-jax header (was it written by us?)", path)
+    try:
+        return json.loads(meta[HEADER_KEY])
+    except json.JSONDecodeError as e:
+        raise ElicitError(f"malformed elicit-jax header: {e.msg}", path) from e
+
+
+def is_up_to_date(
+    output: str | Path, config: Mapping[str, Any], inputs: Mapping[str, str | Path]
+) -> bool:
+    """True when ``output`` exists and was made from this config and these exact inputs."""
+    try:
+        header = read_header(output)
+    except ElicitError:
+        return False
+    if header.get("config") != json.loads(dumps(dict(config))):
+        return False
+    recorded = header.get("inputs", {})
+    if set(recorded) != set(inputs):
+        return False
+    return all(recorded[k].get("sha256") == file_sha256(p) for k, p in inputs.items())
