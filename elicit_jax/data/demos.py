@@ -10,20 +10,33 @@ dimensions, observation field slices, task name, action bounds and provenance.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from elicit_jax.artifact import make_header, read_header, write_parquet
+from elicit_jax.data.columns import (
+    column_to_numpy,
+    demos_to_table,
+    fixed_to_numpy,
+    numeric_column,
+    parse_bound,
+    read_table,
+)
+from elicit_jax.data.validation import (
+    ARRAY_FIELDS,
+    SOURCE_EPISODE,
+    BoundsPolicy,
+    DemosWarning,
+    validate,
+)
 from elicit_jax.errors import ElicitError
 
 DEMOS_KIND = "demos"
 DEMOS_SCHEMA_VERSION = 1
 CORE_COLUMNS = ("episode", "operator", "step", "obs", "action", "reward", "success")
-BoundsPolicy = Literal["error", "warn", "clip"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,7 +131,7 @@ class Demos:
     def select(self, mask: np.ndarray) -> Demos:
         """Rows where ``mask`` (N,) is true; metadata kept."""
         mask = np.asarray(mask, dtype=bool)
-        arrays = {k: getattr(self, k)[mask] for k in _ARRAY_FIELDS}
+        arrays = {k: getattr(self, k)[mask] for k in ARRAY_FIELDS}
         extra = {k: v[mask] for k, v in self.extra.items()}
         return dataclasses.replace(self, **arrays, extra=extra)
 
@@ -134,13 +147,25 @@ class Demos:
         """Per-episode dicts of arrays (obs, action, reward, ...)."""
         out = []
         for _, s, e in self.episode_bounds():
-            ep = {k: getattr(self, k)[s:e] for k in _ARRAY_FIELDS}
+            ep = {k: getattr(self, k)[s:e] for k in ARRAY_FIELDS}
             ep.update({k: v[s:e] for k, v in self.extra.items()})
             out.append(ep)
         return out
 
 
-_ARRAY_FIELDS = ("obs", "action", "episode", "operator", "step", "reward", "success")
+def make_provenance(source: str | Path, importer: str, **fields: Any) -> dict[str, Any]:
+    """Provenance of imported data: source path, its sha256, importer, time, and ``fields``."""
+    import datetime as _dt
+
+    from elicit_jax.artifact import file_sha256
+
+    return {
+        "source": str(Path(source).resolve()),
+        "sha256": file_sha256(source),
+        "importer": importer,
+        "imported": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        **fields,
+    }
 
 
 def concat_demos(parts: Sequence[Demos], renumber: bool = True) -> Demos:
@@ -154,7 +179,7 @@ def concat_demos(parts: Sequence[Demos], renumber: bool = True) -> Demos:
                 f"cannot combine demos of dims obs={p.obs_dim}, act={p.action_dim} with "
                 f"obs={first.obs_dim}, act={first.action_dim}"
             )
-    arrays = {k: np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAY_FIELDS}
+    arrays = {k: np.concatenate([getattr(p, k) for p in parts]) for k in ARRAY_FIELDS}
     common = set.intersection(*(set(p.extra) for p in parts))
     extra = {k: np.concatenate([p.extra[k] for p in parts]) for k in sorted(common)}
     if renumber:
@@ -165,7 +190,10 @@ def concat_demos(parts: Sequence[Demos], renumber: bool = True) -> Demos:
             ep.append(order + offsets)
             offsets += int(inverse.max()) + 1 if p.n_steps else 0
         arrays["episode"] = np.concatenate(ep).astype(np.int64)
-    return dataclasses.replace(first, **arrays, extra=extra)
+    provenance = dict(first.provenance)
+    if any(dict(p.provenance) != provenance for p in parts[1:]):
+        provenance = {"parts": [dict(p.provenance) for p in parts]}
+    return dataclasses.replace(first, **arrays, extra=extra, provenance=provenance)
 
 
 def _first_seen_rank(ids: np.ndarray) -> np.ndarray:
@@ -189,54 +217,48 @@ def from_episodes(
     extra columns. ``meta`` fills the remaining :class:`Demos` fields.
     """
     n = len(episodes)
+    if n == 0:
+        raise ElicitError("no episodes to build a demonstration set from")
     if isinstance(operators, str):
         operators = [operators] * n
     successes = [True] * n if successes is None else list(successes)
     ids = list(range(n)) if episode_ids is None else list(episode_ids)
-    cols: dict[str, list[np.ndarray]] = {k: [] for k in _ARRAY_FIELDS}
-    extra_keys = (
-        sorted(set.intersection(*(set(ep) for ep in episodes)) - {"obs", "action", "reward"})
-        if n
-        else []
+    for name, seq in (("operators", operators), ("successes", successes), ("episode_ids", ids)):
+        if len(seq) != n:
+            raise ElicitError(f"{name} has {len(seq)} entries for {n} episodes")
+    cols: dict[str, list[np.ndarray]] = {k: [] for k in ARRAY_FIELDS}
+    extra_keys = sorted(
+        set.intersection(*(set(ep) for ep in episodes)) - {"obs", "action", "reward"}
     )
     extra: dict[str, list[np.ndarray]] = {k: [] for k in extra_keys}
     for i, ep in enumerate(episodes):
         t = len(ep["obs"])
+        if t == 0:
+            raise ElicitError(f"episode {ids[i]} is empty (0 steps)")
+        for key in ("action", "reward", *extra_keys):
+            if key in ep and len(ep[key]) != t:
+                raise ElicitError(
+                    f"episode {ids[i]}: '{key}' has {len(ep[key])} steps but 'obs' has {t}"
+                )
         cols["obs"].append(np.asarray(ep["obs"], np.float32).reshape(t, -1))
         cols["action"].append(np.asarray(ep["action"], np.float32).reshape(t, -1))
-        cols["reward"].append(np.asarray(ep.get("reward", np.zeros(t)), np.float32))
+        cols["reward"].append(np.asarray(ep.get("reward", np.zeros(t)), np.float32).reshape(t))
         cols["episode"].append(np.full(t, ids[i], np.int64))
-        cols["operator"].append(np.full(t, operators[i], dtype=object))
+        cols["operator"].append(np.full(t, str(operators[i]), dtype=object))
         cols["step"].append(np.arange(t, dtype=np.int32))
         cols["success"].append(np.full(t, bool(successes[i])))
         for k in extra_keys:
             extra[k].append(np.asarray(ep[k]))
-    if n == 0:
-        raise ElicitError("no episodes to build a demonstration set from")
+    for key in ("obs", "action"):
+        widths = {c.shape[1] for c in cols[key]}
+        if len(widths) > 1:
+            i = next(j for j, c in enumerate(cols[key]) if c.shape[1] != cols[key][0].shape[1])
+            raise ElicitError(
+                f"episode {ids[i]}: '{key}' has width {cols[key][i].shape[1]}, "
+                f"episode {ids[0]} has {cols[key][0].shape[1]}"
+            )
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return Demos(**arrays, extra={k: np.concatenate(v) for k, v in extra.items()}, **meta)
-
-
-def _to_table(demos: Demos) -> Any:
-    import pyarrow as pa
-
-    def fixed(arr: np.ndarray) -> pa.Array:
-        arr = np.ascontiguousarray(arr, dtype=np.float32)
-        return pa.FixedSizeListArray.from_arrays(pa.array(arr.reshape(-1)), arr.shape[1])
-
-    cols = {
-        "episode": pa.array(demos.episode.astype(np.int64)),
-        "operator": pa.array(demos.operator.astype(str).tolist(), type=pa.string()),
-        "step": pa.array(demos.step.astype(np.int32)),
-        "obs": fixed(demos.obs),
-        "action": fixed(demos.action),
-        "reward": pa.array(demos.reward.astype(np.float32)),
-        "success": pa.array(demos.success.astype(bool)),
-    }
-    for k, v in demos.extra.items():
-        v = np.asarray(v)
-        cols[k] = fixed(v) if v.ndim == 2 else pa.array(v)
-    return pa.table(cols)
 
 
 def write_demos(
@@ -246,9 +268,20 @@ def write_demos(
     config: Mapping[str, Any] | None = None,
     inputs: Mapping[str, str | Path] | None = None,
     seed: int | None = None,
-) -> None:
-    """Validate and atomically write ``demos`` to a Parquet artifact."""
-    validate(demos, str(path))
+    bounds: BoundsPolicy = "error",
+) -> Demos:
+    """Validate and atomically write ``demos`` to a Parquet artifact; returns what was written.
+
+    Args:
+      path: destination ``.parquet`` file (replaced atomically).
+      demos: the demonstrations.
+      config: the config that produced them (stored in the header).
+      inputs: name -> path of the files they came from (hashed into the header).
+      seed: PRNG seed, if any.
+      bounds: out-of-bounds actions: ``error``, ``warn`` (kept, and later reads warn
+        too) or ``clip`` (written clipped). Recorded in the header.
+    """
+    demos = validate(demos, str(path), bounds=bounds)
     header = make_header(
         DEMOS_KIND,
         DEMOS_SCHEMA_VERSION,
@@ -261,169 +294,109 @@ def write_demos(
         obs_fields={f.name: [f.start, f.stop] for f in demos.obs_fields},
         action_low=demos.action_low,
         action_high=demos.action_high,
+        action_bounds_policy=bounds,
         provenance=dict(demos.provenance),
         n_episodes=demos.n_episodes,
         n_steps=demos.n_steps,
         extra_columns=sorted(demos.extra),
     )
-    write_parquet(path, _to_table(demos), header)
+    write_parquet(path, demos_to_table(demos), header)
+    return demos
 
 
-def read_demos(path: str | Path, *, bounds: BoundsPolicy = "error") -> Demos:
+def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos:
     """Read and validate a demonstration artifact.
 
     Args:
       path: the Parquet file.
-      bounds: what to do with actions outside their declared bounds: ``error`` (default),
-        ``warn`` or ``clip``.
+      bounds: what to do with actions outside their declared bounds: ``error``, ``warn``
+        or ``clip``; ``None`` (default) uses the policy recorded when the file was written
+        (``error`` unless the importer was told otherwise).
 
     Raises:
       ElicitError: one line naming the file (and episode/step) of the first problem found.
     """
-    import pyarrow.parquet as pq
-
     header = read_header(path)
     if header.get("kind") != DEMOS_KIND:
         raise ElicitError(f"is a '{header.get('kind')}' artifact, expected demonstrations", path)
-    if int(header.get("schema_version", -1)) > DEMOS_SCHEMA_VERSION:
+    try:
+        version = int(header.get("schema_version", -1))
+    except (TypeError, ValueError) as e:
+        raise ElicitError(f"bad schema version {header.get('schema_version')!r}", path) from e
+    if version > DEMOS_SCHEMA_VERSION:
         raise ElicitError(
-            f"schema version {header['schema_version']} is newer than this elicit-jax "
-            f"understands ({DEMOS_SCHEMA_VERSION}); upgrade elicit-jax",
+            f"schema version {version} is newer than this elicit-jax understands "
+            f"({DEMOS_SCHEMA_VERSION}); upgrade elicit-jax",
             path,
         )
-    table = pq.read_table(path)
-    missing = [c for c in CORE_COLUMNS if c not in table.column_names]
+    table = read_table(path)
+    missing = [
+        c for c in (*CORE_COLUMNS, *header.get("extra_columns", [])) if c not in table.column_names
+    ]
     if missing:
         raise ElicitError(f"missing column(s) {', '.join(missing)}", path)
-    obs = _fixed_to_numpy(table, "obs", path)
-    action = _fixed_to_numpy(table, "action", path)
+    for name in ("episode", "operator", "step", "reward", "success"):
+        if table.column(name).null_count:
+            raise ElicitError(
+                f"column '{name}' has {table.column(name).null_count} null rows", path
+            )
+    obs = fixed_to_numpy(table, "obs", path)
+    action = fixed_to_numpy(table, "action", path)
     for name, arr, key in (("obs", obs, "obs_dim"), ("action", action, "action_dim")):
         if key in header and arr.shape[1] != int(header[key]):
             raise ElicitError(
                 f"column '{name}' has width {arr.shape[1]} but header says {key}={header[key]}",
                 path,
             )
-    extra = {}
-    for k in header.get("extra_columns", []):
-        if k in table.column_names:
-            col = table.column(k)
-            extra[k] = (
-                _fixed_to_numpy(table, k, path)
-                if col.type.num_fields == 0 and hasattr(col.type, "list_size")
-                else col.to_numpy(zero_copy_only=False)
-            )
-    demos = Demos(
-        obs=obs,
-        action=action,
-        episode=table.column("episode").to_numpy().astype(np.int64),
-        operator=np.asarray(table.column("operator").to_pylist(), dtype=object),
-        step=table.column("step").to_numpy().astype(np.int32),
-        reward=table.column("reward").to_numpy().astype(np.float32),
-        success=table.column("success").to_numpy(zero_copy_only=False).astype(bool),
-        task=str(header.get("task", "unknown")),
-        obs_fields=tuple(
-            ObsField(n, int(a), int(b)) for n, (a, b) in header.get("obs_fields", {}).items()
-        ),
-        action_low=_bound(header.get("action_low", -1.0)),
-        action_high=_bound(header.get("action_high", 1.0)),
-        provenance=header.get("provenance", {}),
-        extra=extra,
-    )
-    if (
-        "n_episodes" in header
-        and demos.n_steps
-        and int(header["n_episodes"]) != len(np.unique(demos.episode))
-    ):
+    extra = {k: column_to_numpy(table, k, path) for k in header.get("extra_columns", [])}
+    try:
+        demos = Demos(
+            obs=obs,
+            action=action,
+            episode=numeric_column(table, "episode", np.int64, path),
+            operator=np.asarray([str(x) for x in table.column("operator").to_pylist()], object),
+            step=numeric_column(table, "step", np.int32, path),
+            reward=numeric_column(table, "reward", np.float32, path),
+            success=numeric_column(table, "success", bool, path),
+            task=str(header.get("task", "unknown")),
+            obs_fields=tuple(
+                ObsField(str(n), int(a), int(b))
+                for n, (a, b) in header.get("obs_fields", {}).items()
+            ),
+            action_low=parse_bound(header.get("action_low", -1.0)),
+            action_high=parse_bound(header.get("action_high", 1.0)),
+            provenance=header.get("provenance", {}),
+            extra=extra,
+        )
+    except (TypeError, ValueError) as e:
+        raise ElicitError(f"malformed demos header ({e})", path) from e
+    n_unique = len(np.unique(demos.episode))
+    if "n_episodes" in header and int(header["n_episodes"]) != n_unique:
         raise ElicitError(
-            f"header lists {header['n_episodes']} episodes but the file holds "
-            f"{len(np.unique(demos.episode))} (an empty or truncated episode?)",
+            f"header lists {header['n_episodes']} episodes but the file holds {n_unique} "
+            "(an empty or truncated episode?)",
             path,
         )
-    return validate(demos, str(path), bounds=bounds)
+    policy = bounds or header.get("action_bounds_policy", "error")
+    if policy not in ("error", "warn", "clip"):
+        raise ElicitError(f"unknown action bounds policy {policy!r}", path)
+    return validate(demos, str(path), bounds=policy)
 
 
-def _bound(v: Any) -> float | tuple[float, ...]:
-    return tuple(float(x) for x in v) if isinstance(v, list | tuple) else float(v)
-
-
-def _fixed_to_numpy(table: Any, name: str, path: Any) -> np.ndarray:
-    import pyarrow as pa
-
-    col = table.column(name).combine_chunks()
-    if not pa.types.is_fixed_size_list(col.type):
-        raise ElicitError(
-            f"column '{name}' must be a fixed-size list of float32, got {col.type}", path
-        )
-    if col.null_count:
-        raise ElicitError(f"column '{name}' has {col.null_count} null rows", path)
-    width = col.type.list_size
-    return col.flatten().to_numpy(zero_copy_only=False).astype(np.float32).reshape(-1, width)
-
-
-def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy = "error") -> Demos:
-    """Check a :class:`Demos` for consistency; returns it (clipped if ``bounds='clip'``).
-
-    Checks: matching row counts, 2-D obs/action, finite values, at least one episode,
-    contiguous episodes, steps 0..T-1 in order, obs fields within obs_dim, actions within
-    their declared bounds.
-    """
-    n = demos.obs.shape[0]
-    if demos.obs.ndim != 2 or demos.action.ndim != 2:
-        raise ElicitError(
-            f"obs and action must be 2-D, got {demos.obs.shape} and {demos.action.shape}", source
-        )
-    for k in _ARRAY_FIELDS:
-        if len(getattr(demos, k)) != n:
-            raise ElicitError(
-                f"column '{k}' has {len(getattr(demos, k))} rows, expected {n}", source
-            )
-    if n == 0:
-        raise ElicitError("holds no steps (empty demonstration set)", source)
-    for name in ("obs", "action", "reward"):
-        arr = getattr(demos, name)
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            row = int(np.argwhere(bad)[0][0])
-            raise ElicitError(
-                f"non-finite {name} value at episode {demos.episode[row]}, step {demos.step[row]}",
-                source,
-            )
-    bounds_list = demos.episode_bounds()
-    ids = [e for e, _, _ in bounds_list]
-    if len(ids) != len(set(ids)):
-        dup = next(e for e in ids if ids.count(e) > 1)
-        raise ElicitError(f"episode {dup} is not contiguous (its rows are split)", source)
-    for e, s, stop in bounds_list:
-        steps = demos.step[s:stop]
-        expect = np.arange(stop - s)
-        if not np.array_equal(steps, expect):
-            i = int(np.flatnonzero(steps != expect)[0])
-            raise ElicitError(
-                f"episode {e}: steps must run 0..{stop - s - 1} in order, "
-                f"found {steps[i]} at position {i}",
-                source,
-            )
-    for f in demos.obs_fields:
-        if not 0 <= f.start < f.stop <= demos.obs_dim:
-            raise ElicitError(
-                f"obs field '{f.name}' {f.start}:{f.stop} lies outside obs_dim {demos.obs_dim}",
-                source,
-            )
-    lo = np.broadcast_to(np.asarray(demos.action_low, np.float32), (demos.action_dim,))
-    hi = np.broadcast_to(np.asarray(demos.action_high, np.float32), (demos.action_dim,))
-    out = (demos.action < lo - 1e-6) | (demos.action > hi + 1e-6)
-    if out.any():
-        row, dim = (int(x) for x in np.argwhere(out)[0])
-        msg = (
-            f"action[{dim}] = {demos.action[row, dim]:.4g} outside bounds "
-            f"[{lo[dim]:.4g}, {hi[dim]:.4g}] at episode {demos.episode[row]}, "
-            f"step {demos.step[row]} "
-            f"({int(out.any(axis=1).sum())} steps in all)"
-        )
-        if bounds == "error":
-            raise ElicitError(msg + "; pass --clip-actions or --warn-actions to accept", source)
-        if bounds == "warn":
-            warnings.warn(f"{source}: {msg}", stacklevel=2)
-        else:
-            demos = dataclasses.replace(demos, action=np.clip(demos.action, lo, hi))
-    return demos
+__all__ = [
+    "CORE_COLUMNS",
+    "DEMOS_KIND",
+    "DEMOS_SCHEMA_VERSION",
+    "SOURCE_EPISODE",
+    "BoundsPolicy",
+    "Demos",
+    "DemosWarning",
+    "ObsField",
+    "concat_demos",
+    "fields_from_sizes",
+    "from_episodes",
+    "make_provenance",
+    "read_demos",
+    "validate",
+    "write_demos",
+]

@@ -1,0 +1,214 @@
+"""``elicit-jax info`` for data artifacts (demos, episode lists) and raw source datasets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.describe import register
+from elicit_jax.errors import ElicitError
+
+
+def _console() -> Any:
+    from rich.console import Console
+
+    return Console()
+
+
+def _kv_table(title: str, rows: list[tuple[str, Any]]) -> Any:
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False, title_justify="left")
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    for k, v in rows:
+        table.add_row(k, "-" if v is None else str(v))
+    return table
+
+
+def _bound_text(v: Any) -> str:
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(f"{float(x):.3g}" for x in v) + "]"
+    return "?" if v is None else f"{float(v):.3g}"
+
+
+def operator_stats(path: str | Path) -> list[dict[str, Any]]:
+    """Per-operator episode counts, mean/std episode length and success rate (plus 'all').
+
+    Reads only the ``episode``, ``operator`` and ``success`` columns.
+    """
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path, columns=["episode", "operator", "success"])
+    except Exception as e:  # pyarrow raises several types for missing columns/corrupt files
+        raise ElicitError(f"cannot read demo columns ({type(e).__name__}: {e})", path) from e
+    ep = table.column("episode").to_numpy()
+    op = np.asarray(table.column("operator").to_pylist(), dtype=object)
+    ok = table.column("success").to_numpy(zero_copy_only=False).astype(bool)
+    ids, first, lengths = np.unique(ep, return_index=True, return_counts=True)
+    ep_op, ep_ok = op[first], ok[first]
+    rows = []
+    for name in [*sorted(set(ep_op.tolist())), None]:
+        sel = np.ones(len(ids), bool) if name is None else ep_op == name
+        n = lengths[sel]
+        rows.append(
+            {
+                "operator": "all" if name is None else name,
+                "episodes": int(sel.sum()),
+                "steps": int(n.sum()),
+                "mean_length": float(n.mean()),
+                "std_length": float(n.std()),
+                "success_rate": float(ep_ok[sel].mean()),
+            }
+        )
+    return rows
+
+
+@register("demos")
+def describe_demos(path: Path, header: dict[str, Any]) -> None:
+    """Overview, observation fields, per-operator statistics and provenance of a demos file."""
+    from rich.table import Table
+
+    console = _console()
+    console.print(f"[bold]{path}[/]: demonstrations (schema v{header.get('schema_version')})")
+    low, high = _bound_text(header.get("action_low")), _bound_text(header.get("action_high"))
+    console.print(
+        _kv_table(
+            "overview",
+            [
+                ("task", header.get("task")),
+                ("episodes", header.get("n_episodes")),
+                ("steps", header.get("n_steps")),
+                ("obs dim", header.get("obs_dim")),
+                ("action dim", header.get("action_dim")),
+                (
+                    "action bounds",
+                    f"{low} .. {high} ({header.get('action_bounds_policy', 'error')})",
+                ),
+                ("extra columns", ", ".join(header.get("extra_columns", [])) or None),
+                ("created", header.get("created")),
+                ("elicit-jax", header.get("versions", {}).get("elicit-jax")),
+            ],
+        )
+    )
+    fields = Table(title="observation fields", title_justify="left")
+    for col in ("field", "slice", "size"):
+        fields.add_column(col)
+    for name, (a, b) in header.get("obs_fields", {}).items():
+        fields.add_row(name, f"{a}:{b}", str(b - a))
+    console.print(fields)
+    ops = Table(title="episodes per operator", title_justify="left")
+    for col in ("operator", "episodes", "steps", "length mean", "length std", "success"):
+        ops.add_column(col, justify="left" if col == "operator" else "right")
+    for r in operator_stats(path):
+        ops.add_row(
+            r["operator"],
+            str(r["episodes"]),
+            str(r["steps"]),
+            f"{r['mean_length']:.1f}",
+            f"{r['std_length']:.1f}",
+            f"{100 * r['success_rate']:.1f}%",
+            style="bold" if r["operator"] == "all" else None,
+        )
+    console.print(ops)
+    prov = dict(header.get("provenance", {}))
+    console.print(_kv_table("provenance", sorted(prov.items())))
+
+
+@register("episode-list")
+def describe_episode_list(path: Path, header: dict[str, Any]) -> None:
+    """Size, source and operators of an episode-list selection."""
+    console = _console()
+    console.print(f"[bold]{path}[/]: episode list (schema v{header.get('schema_version')})")
+    ops = header.get("operators", [])
+    counts = {o: ops.count(o) for o in sorted(set(ops))}
+    names = header.get("source_episodes", [])
+    shown = ", ".join(map(str, names[:12])) + (" ..." if len(names) > 12 else "")
+    source = header.get("source", {})
+    console.print(
+        _kv_table(
+            "selection",
+            [
+                ("episodes", header.get("n_episodes")),
+                ("source episodes", shown),
+                ("per operator", ", ".join(f"{k}: {v}" for k, v in counts.items())),
+                ("source", source.get("source")),
+                ("source sha256", source.get("sha256")),
+                ("importer", source.get("importer")),
+                ("created", header.get("created")),
+            ],
+        )
+    )
+
+
+def describe_robomimic_file(path: Path) -> None:
+    """Summary of a raw robomimic HDF5 file: task, demos, obs keys and masks."""
+    from rich.table import Table
+
+    from elicit_jax.data.robomimic import demo_names, open_hdf5, read_mask, task_name
+
+    console = _console()
+    with open_hdf5(path) as f:
+        names = demo_names(f, path)
+        first = f["data"][names[0]]
+        lengths = [int(f["data"][n]["actions"].shape[0]) for n in names]
+        console.print(f"[bold]{path}[/]: robomimic dataset (not yet imported)")
+        console.print(
+            _kv_table(
+                "overview",
+                [
+                    ("task", task_name(f, path)),
+                    ("demos", len(names)),
+                    ("steps", sum(lengths)),
+                    ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                    ("action shape", first["actions"].shape[1:]),
+                ],
+            )
+        )
+        keys = Table(title=f"obs keys (of {names[0]})", title_justify="left")
+        keys.add_column("key")
+        keys.add_column("shape per step")
+        for k in sorted(first["obs"].keys()) if "obs" in first else []:
+            keys.add_row(k, str(first["obs"][k].shape[1:]))
+        console.print(keys)
+        masks = Table(title="masks (filter keys)", title_justify="left")
+        masks.add_column("key")
+        masks.add_column("demos", justify="right")
+        for k in sorted(f["mask"].keys()) if "mask" in f else []:
+            masks.add_row(k, str(len(read_mask(f, k, path))))
+        console.print(masks)
+
+
+def describe_lerobot_folder(path: Path) -> None:
+    """Summary of a raw LeRobot dataset folder: version, episodes, tasks and features."""
+    from rich.table import Table
+
+    from elicit_jax.data.lerobot import read_episodes, read_info, read_tasks
+
+    info = read_info(path)
+    rows = read_episodes(path, info)
+    lengths = [int(r["length"]) for r in rows] or [0]
+    console = _console()
+    console.print(f"[bold]{path}[/]: LeRobot dataset {info['codebase_version']} (not yet imported)")
+    console.print(
+        _kv_table(
+            "overview",
+            [
+                ("robot", info.get("robot_type")),
+                ("fps", info.get("fps")),
+                ("episodes", len(rows)),
+                ("frames", sum(lengths)),
+                ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                ("tasks", " | ".join(read_tasks(path, info).values())),
+            ],
+        )
+    )
+    feats = Table(title="features", title_justify="left")
+    for col in ("feature", "dtype", "shape"):
+        feats.add_column(col)
+    for name, ft in info["features"].items():
+        feats.add_row(name, str(ft.get("dtype")), str(ft.get("shape")))
+    console.print(feats)

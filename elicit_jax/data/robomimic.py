@@ -1,0 +1,304 @@
+"""robomimic HDF5 datasets: import to :class:`Demos`, export a selection as a ``mask/<key>``.
+
+Layout (robomimic v0.x): ``data/demo_N/{actions (T, A), rewards (T,), dones (T,),
+obs/<key> (T, ...)}`` with ``data/demo_N.attrs['num_samples']``; ``data.attrs['env_args']``
+is a JSON string whose ``env_name`` names the task; ``mask/<filter_key>`` holds byte strings
+of demo names. robomimic orders demos by their number, so do we.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fnmatch
+import json
+import re
+import shutil
+import warnings
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.data.demos import (
+    SOURCE_EPISODE,
+    Demos,
+    DemosWarning,
+    fields_from_sizes,
+    from_episodes,
+    make_provenance,
+    validate,
+)
+from elicit_jax.errors import ElicitError
+
+DEFAULT_OBS_KEYS = ("robot0_eef_pos", "robot0_eef_quat", "robot0_gripper_qpos", "object")
+_DEMO_RE = re.compile(r"demo_(\d+)\Z")
+
+
+@contextlib.contextmanager
+def open_hdf5(path: str | Path, mode: str = "r") -> Iterator[Any]:
+    """Open an HDF5 file, turning a missing or unreadable file into an :class:`ElicitError`."""
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise ElicitError("file not found", path)
+    try:
+        f = h5py.File(path, mode)
+    except OSError as e:
+        raise ElicitError(f"not a readable HDF5 file ({e})", path) from e
+    with f:
+        yield f
+
+
+def demo_names(f: Any, path: str | Path) -> list[str]:
+    """Names of the demos under ``data``, sorted by number as robomimic does."""
+    if "data" not in f:
+        raise ElicitError("no 'data' group (not a robomimic dataset?)", path)
+    names = list(f["data"].keys())
+    bad = [n for n in names if not _DEMO_RE.match(n)]
+    if bad:
+        raise ElicitError(f"unexpected entry data/{bad[0]} (robomimic expects demo_N)", path)
+    if not names:
+        raise ElicitError("no demonstrations under 'data'", path)
+    return sorted(names, key=lambda n: int(n[5:]))
+
+
+def read_mask(f: Any, key: str, path: str | Path) -> list[str]:
+    """Demo names listed by ``mask/<key>`` (stored as byte strings)."""
+    if "mask" not in f or key not in f["mask"]:
+        have = sorted(f["mask"].keys()) if "mask" in f else []
+        raise ElicitError(
+            f"no mask/{key} (available filter keys: {', '.join(have) or 'none'})", path
+        )
+    return [x.decode() if isinstance(x, bytes) else str(x) for x in np.asarray(f["mask"][key][:])]
+
+
+def task_name(f: Any, path: str | Path) -> str:
+    """The task (``env_name`` of ``data.attrs['env_args']``), or ``unknown``."""
+    raw = f["data"].attrs.get("env_args")
+    if raw is None:
+        return "unknown"
+    try:
+        args = json.loads(raw.decode() if isinstance(raw, bytes) else str(raw))
+    except json.JSONDecodeError as e:
+        raise ElicitError(f"data.attrs['env_args'] is not valid JSON ({e.msg})", path) from e
+    return str(args.get("env_name", "unknown")) if isinstance(args, dict) else "unknown"
+
+
+def _operator_labels(
+    f: Any, path: str | Path, names: Sequence[str], pattern: str, default: str
+) -> list[str]:
+    keys = sorted(
+        k for k in (f["mask"].keys() if "mask" in f else []) if fnmatch.fnmatch(k, pattern)
+    )
+    if not keys:
+        raise ElicitError(f"no mask key matches '{pattern}'", path)
+    label: dict[str, str] = {}
+    for key in keys:
+        for demo in read_mask(f, key, path):
+            if demo in label:
+                raise ElicitError(
+                    f"{demo} is listed by both mask/{label[demo]} and mask/{key}", path
+                )
+            label[demo] = key
+    unlisted = [n for n in names if n not in label]
+    if unlisted:
+        warnings.warn(
+            f"{path}: {len(unlisted)} demos (e.g. {unlisted[0]}) are listed by no mask matching "
+            f"'{pattern}'; labelled '{default}'",
+            DemosWarning,
+            stacklevel=3,
+        )
+    return [label.get(n, default) for n in names]
+
+
+def _read_demo(
+    f: Any, path: str | Path, name: str, obs_keys: Sequence[str]
+) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
+    g = f["data"][name]
+    if "actions" not in g:
+        raise ElicitError(f"data/{name} has no 'actions'", path)
+    action = np.asarray(g["actions"][:], np.float32)
+    t = len(action)
+    if t == 0:
+        raise ElicitError(f"data/{name} is empty (0 steps)", path)
+    if action.ndim != 2:
+        raise ElicitError(f"data/{name}/actions must be (T, A), got {action.shape}", path)
+    n_samples = g.attrs.get("num_samples")
+    if n_samples is not None and int(n_samples) != t:
+        raise ElicitError(f"data/{name}: num_samples={int(n_samples)} but actions has {t}", path)
+    parts = []
+    for key in obs_keys:
+        if "obs" not in g or key not in g["obs"]:
+            have = sorted(g["obs"].keys()) if "obs" in g else []
+            raise ElicitError(
+                f"data/{name}/obs has no '{key}' (available: {', '.join(have) or 'none'}); "
+                "choose keys with --obs-keys",
+                path,
+            )
+        arr = np.asarray(g["obs"][key][:])
+        if arr.ndim > 2:
+            raise ElicitError(
+                f"data/{name}/obs/{key} has shape {arr.shape}: image keys are not supported", path
+            )
+        if len(arr) != t:
+            raise ElicitError(f"data/{name}/obs/{key} has {len(arr)} steps, actions {t}", path)
+        parts.append(arr.reshape(t, -1).astype(np.float32))
+    ep = {"obs": np.concatenate(parts, axis=1), "action": action}
+    if "rewards" in g:
+        ep["reward"] = np.asarray(g["rewards"][:], np.float32).reshape(-1)
+        if len(ep["reward"]) != t:
+            raise ElicitError(f"data/{name}/rewards has {len(ep['reward'])} steps, not {t}", path)
+    ep[SOURCE_EPISODE] = np.full(t, name, dtype=object)
+    return ep, tuple(p.shape[1] for p in parts)
+
+
+def import_robomimic(
+    path: str | Path,
+    *,
+    obs_keys: Sequence[str] | None = None,
+    operator: str = "unknown",
+    operators_from_masks: str | None = None,
+    filter_key: str | None = None,
+    task: str | None = None,
+    action_bounds: tuple[float, float] = (-1.0, 1.0),
+    progress: bool = False,
+) -> Demos:
+    """Read a robomimic HDF5 file into :class:`Demos` (episodes 0..E-1 in demo_N order).
+
+    Args:
+      path: the ``.hdf5`` file.
+      obs_keys: observation keys concatenated in this order; default the standard low-dim
+        set :data:`DEFAULT_OBS_KEYS`.
+      operator: operator label of every demo (or of demos no matching mask lists).
+      operators_from_masks: glob over mask keys, e.g. ``*_operator_*``; each demo is labelled
+        by the (single) matching mask that lists it.
+      filter_key: import only the demos listed by ``mask/<filter_key>``.
+      task: task name; default the ``env_name`` in ``data.attrs['env_args']``.
+      action_bounds: declared action bounds (robomimic actions lie in [-1, 1]).
+      progress: show a progress bar.
+
+    The episode outcome is ``max(rewards) >= 1`` (robosuite's sparse success reward), or
+    assumed successful when the file has no rewards; ``provenance['success_from']`` says which.
+    """
+    obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
+    with open_hdf5(path) as f:
+        names = demo_names(f, path)
+        if filter_key is not None:
+            wanted = set(read_mask(f, filter_key, path))
+            unknown = sorted(wanted - set(names))
+            if unknown:
+                raise ElicitError(f"mask/{filter_key} lists missing demo {unknown[0]}", path)
+            names = [n for n in names if n in wanted]
+            if not names:
+                raise ElicitError(f"mask/{filter_key} lists no demos", path)
+        labels = (
+            _operator_labels(f, path, names, operators_from_masks, operator)
+            if operators_from_masks
+            else [operator] * len(names)
+        )
+        iterator: Any = names
+        if progress:
+            from rich.progress import track
+
+            iterator = track(names, description=f"reading {Path(path).name}", transient=True)
+        episodes, sizes = [], None
+        for name in iterator:
+            ep, widths = _read_demo(f, path, name, obs_keys)
+            if sizes is not None and widths != sizes:
+                raise ElicitError(
+                    f"data/{name}: obs key sizes {widths} differ from {names[0]}'s {sizes}", path
+                )
+            episodes.append(ep)
+            sizes = widths
+        env_task = task_name(f, path)
+    has_rewards = all("reward" in ep for ep in episodes)
+    if not has_rewards:
+        for ep in episodes:
+            ep.pop("reward", None)
+    successes = [bool(ep["reward"].max() >= 1.0) if has_rewards else True for ep in episodes]
+    demos = from_episodes(
+        episodes,
+        operators=labels,
+        successes=successes,
+        task=task or env_task,
+        obs_fields=fields_from_sizes(list(zip(obs_keys, sizes, strict=True))),
+        action_low=float(action_bounds[0]),
+        action_high=float(action_bounds[1]),
+        provenance=make_provenance(
+            path,
+            "robomimic",
+            obs_keys=list(obs_keys),
+            filter_key=filter_key,
+            operators_from_masks=operators_from_masks,
+            success_from="max(rewards) >= 1" if has_rewards else "assumed (no rewards)",
+        ),
+    )
+    return validate(demos, str(path), bounds=None)
+
+
+def export_mask(
+    source: str | Path,
+    out: str | Path,
+    mask_key: str,
+    demos: Sequence[str],
+    *,
+    overwrite: bool = False,
+    expected_sha256: str | None = None,
+    header: dict[str, Any] | None = None,
+) -> list[str]:
+    """Copy ``source`` to ``out`` and add ``mask/<mask_key>`` listing ``demos``.
+
+    robomimic then trains on the selection unchanged (``train.hdf5_filter_key``).
+
+    Args:
+      source: the original robomimic file (left untouched).
+      out: the copy to write (atomically).
+      mask_key: the new filter key.
+      demos: demo names, e.g. ``["demo_0", "demo_12"]``.
+      overwrite: replace an existing ``mask/<mask_key>``.
+      expected_sha256: if given, the content hash ``source`` must have (the file the
+        demonstrations were imported from).
+      header: elicit-jax artifact header, stored as JSON in the new mask's ``elicit_jax``
+        attribute (robomimic ignores it).
+
+    Returns:
+      The demo names written, in robomimic's numeric order.
+    """
+    from elicit_jax.artifact import atomic_path, dumps, file_sha256
+
+    source, out = Path(source), Path(out)
+    if not mask_key or "/" in mask_key:
+        raise ElicitError(f"invalid mask key {mask_key!r}")
+    if out.resolve() == source.resolve():
+        raise ElicitError("output must differ from the source file (the source is kept)", out)
+    if expected_sha256 and file_sha256(source) != expected_sha256:
+        raise ElicitError(
+            "content differs from the file the demonstrations were imported from (sha256 "
+            "mismatch); pass the original file as --source",
+            source,
+        )
+    chosen = sorted(set(demos), key=lambda n: int(n[5:]) if _DEMO_RE.match(n) else -1)
+    if not chosen:
+        raise ElicitError("no demonstrations selected: refusing to write an empty mask")
+    with open_hdf5(source) as f:
+        present = set(demo_names(f, source))
+        missing = [n for n in chosen if n not in present]
+        if missing:
+            raise ElicitError(f"has no demo '{missing[0]}' to put in mask/{mask_key}", source)
+        if "mask" in f and mask_key in f["mask"] and not overwrite:
+            raise ElicitError(
+                f"already has mask/{mask_key}; pick another --mask-key or pass --overwrite",
+                source,
+            )
+    with atomic_path(out) as tmp:
+        shutil.copyfile(source, tmp)
+        with open_hdf5(tmp, "r+") as f:
+            group = f.require_group("mask")
+            if mask_key in group:
+                del group[mask_key]
+            dset = group.create_dataset(mask_key, data=np.array(chosen, dtype="S"))
+            if header is not None:
+                dset.attrs["elicit_jax"] = dumps(header)
+    return chosen

@@ -1,0 +1,133 @@
+"""Episode selections: which episodes of a source dataset to export.
+
+A selection comes from a demonstrations artifact (its episodes, optionally narrowed by an
+explicit id list) or from an ``episode-list`` JSON artifact written by ``elicit-jax export``.
+Each selected episode carries its name in the source dataset (``demo_12`` for robomimic, the
+``episode_index`` for LeRobot), taken from the demos' ``source_episode`` column, so exports
+map back to the original file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import make_header, read_header, write_json
+from elicit_jax.data.demos import SOURCE_EPISODE, Demos, read_demos
+from elicit_jax.errors import ElicitError
+
+EPISODE_LIST_KIND = "episode-list"
+EPISODE_LIST_SCHEMA_VERSION = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """Selected episodes and where they came from.
+
+    Attributes:
+      episodes: episode ids in the demonstrations artifact, in row order.
+      source_episodes: the same episodes' names in the source dataset.
+      operators: operator of each selected episode.
+      provenance: the demonstrations' provenance (source path, sha256, importer, ...).
+    """
+
+    episodes: tuple[int, ...]
+    source_episodes: tuple[str, ...]
+    operators: tuple[str, ...]
+    provenance: Mapping[str, Any]
+
+
+def parse_episode_ids(text: str) -> list[int]:
+    """Parse ``"0,3,5"`` or ranges ``"0-4,7"`` into a sorted list of unique ids."""
+    out: set[int] = set()
+    for part in (p.strip() for p in text.split(",")):
+        m = re.fullmatch(r"(\d+)(?:-(\d+))?", part)
+        if not m:
+            raise ElicitError(f"bad episode list {text!r}: use ids and ranges like 0,3,5-8")
+        a, b = int(m[1]), int(m[2] or m[1])
+        if b < a:
+            raise ElicitError(f"bad episode range {part!r} in {text!r}")
+        out.update(range(a, b + 1))
+    return sorted(out)
+
+
+def selection_from_demos(
+    demos: Demos, episodes: Sequence[int] | None = None, source: str = "<demos>"
+) -> Selection:
+    """The episodes of ``demos`` (all, or those with the given ids) as a :class:`Selection`."""
+    bounds = demos.episode_bounds()
+    have = {e for e, _, _ in bounds}
+    if episodes is not None:
+        missing = sorted(set(episodes) - have)
+        if missing:
+            raise ElicitError(f"has no episode {missing[0]} (ids {min(have)}..{max(have)})", source)
+        bounds = [b for b in bounds if b[0] in set(episodes)]
+    if not bounds:
+        raise ElicitError("no episodes selected", source)
+    names = demos.extra.get(SOURCE_EPISODE)
+    return Selection(
+        episodes=tuple(e for e, _, _ in bounds),
+        source_episodes=tuple(str(names[s]) if names is not None else str(e) for e, s, _ in bounds),
+        operators=tuple(str(demos.operator[s]) for _, s, _ in bounds),
+        provenance=dict(demos.provenance),
+    )
+
+
+def read_selection(path: str | Path, episodes: Sequence[int] | None = None) -> Selection:
+    """A selection from a demos artifact or an episode-list JSON, optionally narrowed."""
+    header = read_header(path)
+    kind = header.get("kind")
+    if kind == "demos":
+        return selection_from_demos(read_demos(path, bounds="warn"), episodes, str(path))
+    if kind != EPISODE_LIST_KIND:
+        raise ElicitError(f"is a '{kind}' artifact, expected demos or an episode list", path)
+    if int(header.get("schema_version", -1)) > EPISODE_LIST_SCHEMA_VERSION:
+        raise ElicitError(f"episode-list schema {header['schema_version']} is too new", path)
+    try:
+        ids = [int(x) for x in header["episodes"]]
+        names = [str(x) for x in header["source_episodes"]]
+        ops = [str(x) for x in header.get("operators", ["unknown"] * len(ids))]
+    except (KeyError, TypeError, ValueError) as e:
+        raise ElicitError(f"malformed episode list ({e})", path) from e
+    if not len(ids) == len(names) == len(ops):
+        raise ElicitError(
+            "episode list: episodes, source_episodes, operators differ in length", path
+        )
+    keep = np.ones(len(ids), bool) if episodes is None else np.isin(ids, list(episodes))
+    if episodes is not None and sorted(set(episodes) - set(ids)):
+        raise ElicitError(f"lists no episode {sorted(set(episodes) - set(ids))[0]}", path)
+    if not keep.any():
+        raise ElicitError("no episodes selected", path)
+    return Selection(
+        episodes=tuple(i for i, k in zip(ids, keep, strict=True) if k),
+        source_episodes=tuple(n for n, k in zip(names, keep, strict=True) if k),
+        operators=tuple(o for o, k in zip(ops, keep, strict=True) if k),
+        provenance=dict(header.get("source", {})),
+    )
+
+
+def write_episode_list(
+    path: str | Path,
+    selection: Selection,
+    *,
+    config: Mapping[str, Any] | None = None,
+    inputs: Mapping[str, str | Path] | None = None,
+) -> None:
+    """Atomically write ``selection`` as an ``episode-list`` JSON artifact."""
+    header = make_header(
+        EPISODE_LIST_KIND,
+        EPISODE_LIST_SCHEMA_VERSION,
+        config=config,
+        inputs=inputs,
+        episodes=list(selection.episodes),
+        source_episodes=list(selection.source_episodes),
+        operators=list(selection.operators),
+        n_episodes=len(selection.episodes),
+        source=dict(selection.provenance),
+    )
+    write_json(path, header)

@@ -1,0 +1,136 @@
+"""Invariants of a demonstration set, checked on every write and read.
+
+Each failure is one :class:`~elicit_jax.errors.ElicitError` line naming the file and, where
+it applies, the episode (with its name in the source dataset) and step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.data.demos import Demos
+
+BoundsPolicy = Literal["error", "warn", "clip"]
+SOURCE_EPISODE = "source_episode"
+ARRAY_FIELDS = ("obs", "action", "episode", "operator", "step", "reward", "success")
+
+
+class DemosWarning(UserWarning):
+    """Accepted but suspicious data (e.g. out-of-bounds actions under ``bounds='warn'``)."""
+
+
+def _first_bad_row(bad: np.ndarray) -> int:
+    return int(np.flatnonzero(bad)[0])
+
+
+def _where(demos: Demos, row: int) -> str:
+    """``episode E (source name), step S`` of a row."""
+    names = demos.extra.get(SOURCE_EPISODE)
+    src = f" ({names[row]})" if names is not None and len(names) == demos.n_steps else ""
+    return f"episode {demos.episode[row]}{src}, step {demos.step[row]}"
+
+
+def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy | None = "error") -> Demos:
+    """Check a :class:`Demos` for consistency; returns it (clipped if ``bounds='clip'``).
+
+    Checks: matching row counts, 2-D obs/action, finite values, at least one episode,
+    contiguous episodes, steps 0..T-1 in order, one operator and one outcome per episode,
+    obs fields within obs_dim, actions within their declared bounds (skipped when ``bounds``
+    is ``None``, as importers do before the user's bounds policy applies).
+    """
+    n = demos.obs.shape[0] if demos.obs.ndim else 0
+    if demos.obs.ndim != 2 or demos.action.ndim != 2:
+        raise ElicitError(
+            f"obs and action must be 2-D, got {demos.obs.shape} and {demos.action.shape}", source
+        )
+    for k in ARRAY_FIELDS:
+        if len(getattr(demos, k)) != n:
+            raise ElicitError(
+                f"column '{k}' has {len(getattr(demos, k))} rows, expected {n}", source
+            )
+    for k, v in demos.extra.items():
+        if len(v) != n:
+            raise ElicitError(f"extra column '{k}' has {len(v)} rows, expected {n}", source)
+    if n == 0:
+        raise ElicitError("holds no steps (empty demonstration set)", source)
+    for name in ("obs", "action", "reward"):
+        bad = ~np.isfinite(getattr(demos, name))
+        if bad.any():
+            row, *col = (int(x) for x in np.argwhere(bad)[0])
+            where = f"[{col[0]}]" if col else ""
+            raise ElicitError(f"non-finite {name}{where} value at {_where(demos, row)}", source)
+    bounds_list = demos.episode_bounds()
+    seen: dict[int, int] = {}
+    for e, s, _ in bounds_list:
+        if e in seen:
+            raise ElicitError(
+                f"episode {e} is not contiguous: its rows resume at row {s} (step "
+                f"{demos.step[s]}) after other episodes",
+                source,
+            )
+        seen[e] = s
+    for e, s, stop in bounds_list:
+        steps = demos.step[s:stop]
+        expect = np.arange(stop - s)
+        if not np.array_equal(steps, expect):
+            i = _first_bad_row(steps != expect)
+            raise ElicitError(
+                f"episode {e}: steps must run 0..{stop - s - 1} in order, "
+                f"found step {steps[i]} at position {i}",
+                source,
+            )
+        for name in ("operator", "success"):
+            col = getattr(demos, name)[s:stop]
+            if len(set(col.tolist())) > 1:
+                i = _first_bad_row(col != col[0])
+                raise ElicitError(
+                    f"episode {e}: {name} changes within the episode at step {i} "
+                    f"({col[0]!r} -> {col[i]!r})",
+                    source,
+                )
+    names = [f.name for f in demos.obs_fields]
+    if len(names) != len(set(names)):
+        raise ElicitError(f"duplicate obs field names in {names}", source)
+    for f in demos.obs_fields:
+        if not 0 <= f.start < f.stop <= demos.obs_dim:
+            raise ElicitError(
+                f"obs field '{f.name}' {f.start}:{f.stop} lies outside obs_dim {demos.obs_dim}",
+                source,
+            )
+    return demos if bounds is None else _check_bounds(demos, source, bounds)
+
+
+def _check_bounds(demos: Demos, source: str, bounds: BoundsPolicy) -> Demos:
+    try:
+        lo = np.broadcast_to(np.asarray(demos.action_low, np.float32), (demos.action_dim,))
+        hi = np.broadcast_to(np.asarray(demos.action_high, np.float32), (demos.action_dim,))
+    except ValueError as e:
+        raise ElicitError(
+            f"action bounds {demos.action_low}..{demos.action_high} do not match "
+            f"action_dim {demos.action_dim}",
+            source,
+        ) from e
+    if (lo > hi).any() or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise ElicitError(f"invalid action bounds {lo.tolist()}..{hi.tolist()}", source)
+    out = (demos.action < lo - 1e-6) | (demos.action > hi + 1e-6)
+    if not out.any():
+        return demos
+    row, dim = (int(x) for x in np.argwhere(out)[0])
+    msg = (
+        f"action[{dim}] = {demos.action[row, dim]:.4g} outside bounds "
+        f"[{lo[dim]:.4g}, {hi[dim]:.4g}] at {_where(demos, row)} "
+        f"({int(out.any(axis=1).sum())} steps in all)"
+    )
+    if bounds == "error":
+        raise ElicitError(msg + "; pass --clip-actions or --warn-actions to accept", source)
+    if bounds == "warn":
+        warnings.warn(f"{source}: {msg}", DemosWarning, stacklevel=3)
+        return demos
+    return dataclasses.replace(demos, action=np.clip(demos.action, lo, hi))

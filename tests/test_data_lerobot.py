@@ -1,0 +1,192 @@
+"""LeRobot folders v2.1 and v3.0: import, validation errors, export of an episode selection."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from fixtures_data import lerobot_episode, write_lerobot_v21, write_lerobot_v30
+
+from elicit_jax.data.demos import SOURCE_EPISODE
+from elicit_jax.data.lerobot import import_lerobot
+from elicit_jax.data.lerobot_export import export_lerobot
+from elicit_jax.errors import ElicitError
+
+TASKS = ["pick the cube", "stack the cube"]
+
+
+def _episodes(seed=0, n=5):
+    rng = np.random.default_rng(seed)
+    eps = [lerobot_episode(rng, i, 4 + i, success=i != 2) for i in range(n)]
+    eps[3]["task_index"] = 1
+    return eps
+
+
+@pytest.fixture(params=["v2.1", "v3.0"])
+def dataset(request, tmp_path):
+    eps = _episodes()
+    writer = write_lerobot_v21 if request.param == "v2.1" else write_lerobot_v30
+    return writer(tmp_path / f"ds-{request.param}", eps, TASKS), eps
+
+
+def test_import_each_layout(dataset):
+    root, eps = dataset
+    demos = import_lerobot(root, operator="op1")
+    # lengths 4, 5, 6, 7, 8 -> 30 frames
+    assert demos.n_episodes == 5 and demos.n_steps == 30
+    for (e, s, stop), ep in zip(demos.episode_bounds(), eps, strict=True):
+        np.testing.assert_allclose(demos.obs[s:stop], ep["state"], rtol=1e-6)
+        np.testing.assert_allclose(demos.action[s:stop], ep["action"], rtol=1e-6)
+        assert demos.extra[SOURCE_EPISODE][s] == str(e)
+        assert bool(demos.success[s]) == (e != 2)
+    assert demos.task == "pick the cube | stack the cube"
+    assert [(f.name, f.start, f.stop) for f in demos.obs_fields] == [("observation.state", 0, 6)]
+    # actions are degrees-like: bounds come from the data, per dimension
+    all_actions = np.concatenate([ep["action"] for ep in eps])
+    np.testing.assert_allclose(demos.action_high, all_actions.max(0), rtol=1e-6)
+    assert demos.provenance["codebase_version"] == root.name.split("-")[1]
+    assert set(demos.operator) == {"op1"}
+    sub = import_lerobot(root, episodes=[3, 1])
+    assert list(dict.fromkeys(sub.extra[SOURCE_EPISODE])) == ["1", "3"]
+
+
+@pytest.mark.parametrize("version", ["v2.1", "v3.0"])
+def test_export_selection_round_trip(dataset, tmp_path, version):
+    root, eps = dataset
+    out = tmp_path / f"out-{version}"
+    written = export_lerobot(root, out, [4, 1, 3], version=version, header={"kind": "export"})
+    assert written == [1, 3, 4]
+    info = json.loads((out / "meta" / "info.json").read_text())
+    # kept episodes have 5, 7 and 8 frames
+    assert info["codebase_version"] == version and info["total_episodes"] == 3
+    assert info["total_frames"] == 20 and info["splits"] == {"train": "0:3"}
+    assert json.loads((out / "artifact.json").read_text())["kind"] == "export"
+    back = import_lerobot(out)
+    assert back.extra[SOURCE_EPISODE][[0, 5, 12]].tolist() == ["0", "1", "2"]
+    np.testing.assert_allclose(back.obs[5:12], eps[3]["state"], rtol=1e-6)
+    assert back.task == "pick the cube | stack the cube"
+    if version == "v2.1":
+        rows = [json.loads(x) for x in (out / "meta/episodes.jsonl").read_text().splitlines()]
+        assert [r["length"] for r in rows] == [5, 7, 8]
+        assert rows[1]["tasks"] == ["stack the cube"]
+        stats = [
+            json.loads(x) for x in (out / "meta/episodes_stats.jsonl").read_text().splitlines()
+        ]
+        state = stats[1]["stats"]["observation.state"]
+        np.testing.assert_allclose(state["mean"], eps[3]["state"].mean(0), rtol=1e-5)
+        assert state["count"] == [7]
+        frames = pq.read_table(out / "data/chunk-000/episode_000002.parquet")
+    else:
+        meta = pq.read_table(out / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+        assert [(m["dataset_from_index"], m["dataset_to_index"]) for m in meta] == [
+            (0, 5),
+            (5, 12),
+            (12, 20),
+        ]
+        np.testing.assert_allclose(
+            meta[1]["stats/observation.state/max"], eps[3]["state"].max(0), rtol=1e-6
+        )
+        tasks = pd.read_parquet(out / "meta/tasks.parquet")
+        assert tasks.loc["stack the cube", "task_index"] == 1
+        frames = pq.read_table(out / "data/chunk-000/file-000.parquet").slice(12, 8)
+    # renumbered: episode_index 2 (source 4), global index 12..19, frame_index 0..7
+    assert set(frames.column("episode_index").to_pylist()) == {2}
+    assert frames.column("index").to_pylist() == list(range(12, 20))
+    assert frames.column("frame_index").to_pylist() == list(range(8))
+    assert "next.done" in frames.column_names  # other columns are kept
+
+
+def _break(root, what):
+    info_path = root / "meta" / "info.json"
+    info = json.loads(info_path.read_text())
+    if what == "version":
+        info["codebase_version"] = "v1.6"
+    elif what == "feature":
+        del info["features"]["observation.state"]
+    elif what == "video":
+        info["features"]["observation.images.top"] = {"dtype": "video", "shape": [3, 8, 8]}
+    info_path.write_text(json.dumps(info))
+
+
+@pytest.mark.parametrize(
+    "what, message",
+    [
+        ("version", "codebase_version 'v1.6' is not supported"),
+        ("feature", "meta/info.json has no feature 'observation.state'"),
+    ],
+)
+def test_metadata_errors(dataset, what, message):
+    root, _ = dataset
+    _break(root, what)
+    with pytest.raises(ElicitError) as err:
+        import_lerobot(root)
+    assert str(err.value).startswith(f"{root}: ") and message in str(err.value)
+
+
+def test_frame_errors_v21(tmp_path):
+    eps = _episodes()
+    root = write_lerobot_v21(tmp_path / "ds", eps, TASKS)
+    path = root / "data/chunk-000/episode_000002.parquet"
+    table = pq.read_table(path)
+    pq.write_table(table.slice(0, 5), path)  # episodes.jsonl still says 6 frames
+    with pytest.raises(ElicitError, match="episode 2: metadata says 6 frames, data has 5"):
+        import_lerobot(root)
+    frames = table.column("frame_index").to_pylist()
+    frames[3] = 9
+    pq.write_table(
+        table.set_column(
+            table.column_names.index("frame_index"),
+            "frame_index",
+            __import__("pyarrow").array(frames),
+        ),
+        path,
+    )
+    with pytest.raises(ElicitError) as err:
+        import_lerobot(root)
+    assert str(err.value) == f"{path}: episode 2: frame_index must run 0..5, found 9 at frame 3"
+    path.unlink()
+    with pytest.raises(ElicitError, match="missing data file"):
+        import_lerobot(root)
+
+
+def test_frame_errors_v30(tmp_path):
+    eps = _episodes()
+    eps[1]["state"][2, 4] = np.nan
+    root = write_lerobot_v30(tmp_path / "ds", eps, TASKS)
+    with pytest.raises(ElicitError) as err:
+        import_lerobot(root)
+    assert str(err.value) == f"{root}: non-finite obs[4] value at episode 1 (1), step 2"
+    with pytest.raises(ElicitError, match="has no episode 9"):
+        import_lerobot(root, episodes=[9])
+
+
+def test_export_refuses_videos_and_self(dataset, tmp_path):
+    root, _ = dataset
+    with pytest.raises(ElicitError, match="output must differ"):
+        export_lerobot(root, root, [0])
+    with pytest.raises(ElicitError, match=r"cannot write LeRobot codebase version 'v2\.0'"):
+        export_lerobot(root, tmp_path / "o", [0], version="v2.0")
+    _break(root, "video")
+    with pytest.raises(ElicitError, match="has video features"):
+        export_lerobot(root, tmp_path / "o", [0])
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ElicitError, match="not a LeRobot dataset folder"):
+        import_lerobot(tmp_path / "nowhere")
+
+
+def test_v21_chunks(tmp_path):
+    eps = _episodes()
+    root = write_lerobot_v21(tmp_path / "ds", eps, TASKS, chunks_size=2)
+    assert (root / "data/chunk-002/episode_000004.parquet").is_file()  # 4 // 2 = chunk 2
+    demos = import_lerobot(root)
+    np.testing.assert_allclose(demos.obs[-8:], eps[4]["state"], rtol=1e-6)
+    out = tmp_path / "out"
+    export_lerobot(root, out, [0, 2, 4])
+    # new indices 0, 1, 2 -> chunks 0, 0, 1 with chunks_size 2
+    assert (out / "data/chunk-001/episode_000002.parquet").is_file()
+    assert json.loads((out / "meta/info.json").read_text())["total_chunks"] == 2
+    back = import_lerobot(out)
+    np.testing.assert_allclose(back.obs[-8:], eps[4]["state"], rtol=1e-6)
