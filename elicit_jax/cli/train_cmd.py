@@ -1,0 +1,81 @@
+"""``elicit-jax train``: behaviour-clone a base policy (MLP / MDN / LSTM ensemble)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from elicit_jax.cli.app import app
+
+
+def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
+    from elicit_jax.errors import ElicitError
+
+    if text is None:
+        return None
+    try:
+        return tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError as e:
+        raise ElicitError(f"{flag} expects comma-separated integers, got {text!r}") from e
+
+
+@app.command()
+def train(
+    demos: Path = typer.Option(..., "--demos", help="Training demonstrations (Parquet)."),
+    out: Path = typer.Option(..., "--out", help="Run directory to write (one seed<k>/ per seed)."),
+    model: str = typer.Option("mlp", "--model", help="mlp (ensemble), mdn or lstm."),
+    profile: str = typer.Option("paper", "--profile", help="paper (paper sizes) or cpu (small)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Epochs (profile default)."),
+    hidden: str | None = typer.Option(None, "--hidden", help="Hidden sizes, e.g. 1024,1024."),
+    seeds: str | None = typer.Option(None, "--seeds", help="Training seeds, e.g. 0,1,2."),
+    ensemble_size: int | None = typer.Option(None, "--ensemble-size", help="Members K."),
+    lr: float | None = typer.Option(None, "--lr", help="Adam learning rate."),
+    batch_size: int | None = typer.Option(None, "--batch-size", help="Minibatch size."),
+    checkpoint_every: int | None = typer.Option(
+        None, "--checkpoint-every", help="Save parameters every N epochs."
+    ),
+    val_fraction: float | None = typer.Option(
+        None, "--val-fraction", help="Fraction of episodes held out for validation."
+    ),
+    dropout: float | None = typer.Option(None, "--dropout", help="Dropout between layers."),
+    seq_len: int | None = typer.Option(None, "--seq-len", help="LSTM training window length."),
+    bootstrap: bool | None = typer.Option(
+        None, "--bootstrap/--no-bootstrap", help="Per-member bootstrap resampling."
+    ),
+    grad_clip: float | None = typer.Option(
+        None, "--grad-clip", help="Clip gradients by global norm (original code: 10)."
+    ),
+    sequential_seeds: bool = typer.Option(
+        False, "--sequential-seeds", help="Train seeds one after another (less memory)."
+    ),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+) -> None:
+    """Train a base policy on demonstrations and write a checkpoint directory.
+
+    Example: elicit-jax train --demos base.parquet --out runs/base --profile cpu --seeds 0,1,2
+    """
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+
+    config = TrainConfig.from_profile(
+        profile,
+        model=model,
+        epochs=epochs,
+        hidden=_int_list(hidden, "--hidden"),
+        seeds=_int_list(seeds, "--seeds"),
+        ensemble_size=ensemble_size,
+        lr=lr,
+        batch_size=batch_size,
+        checkpoint_every=checkpoint_every,
+        val_fraction=val_fraction,
+        dropout=dropout,
+        seq_len=seq_len,
+        bootstrap=bootstrap,
+        grad_clip=grad_clip,
+        vmap_seeds=False if sequential_seeds else None,
+    )
+    train_policy(read_demos(demos), config, out, inputs={"demos": demos}, quiet=quiet)
+    if not quiet:
+        typer.echo(f"wrote {out}")

@@ -1,0 +1,233 @@
+"""Checkpoint directories: self-describing, readable without Flax.
+
+Layout of a training run ``runs/base`` (written atomically as a whole)::
+
+    runs/base/artifact.json            kind "training_run": config, inputs, seeds, seed dirs
+    runs/base/seed0/artifact.json      kind "checkpoint": config, model spec, dims, obs fields,
+                                       data hash, seed, epochs saved, best epoch, losses
+    runs/base/seed0/normalization.npz  obs_mean, obs_std  (obs_dim,)
+    runs/base/seed0/params/epoch_0200.npz, ..., best.npz
+    runs/base/seed0/loss.parquet       per epoch: train/val loss (mean and per member)
+
+Each ``.npz`` holds the member-stacked parameters as named arrays, ``"Trunk_0/Dense_0/kernel"``
+of shape ``(K, in, out)`` etc., so ``numpy.load`` is enough to inspect them. ``final`` is the
+last epoch's file.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import read_header, write_json
+from elicit_jax.errors import ElicitError
+
+CHECKPOINT_KIND = "checkpoint"
+RUN_KIND = "training_run"
+SCHEMA_VERSION = 1
+SPEC_KEYS = (
+    "kind",
+    "obs_dim",
+    "action_dim",
+    "n_members",
+    "hidden",
+    "dropout",
+    "n_components",
+    "reset_every",
+    "obs_fields",
+)
+_EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
+
+
+def epoch_file(epoch: int) -> str:
+    """File name of the parameters after ``epoch`` epochs."""
+    return f"epoch_{epoch:04d}.npz"
+
+
+def flatten_params(params: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested param dict -> ``{"a/b/kernel": leaf}``."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten_params(value, name + "/"))
+        else:
+            out[name] = value
+    return out
+
+
+def unflatten_params(flat: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """Inverse of :func:`flatten_params`."""
+    out: dict[str, Any] = {}
+    for name, value in flat.items():
+        node = out
+        *parents, leaf = name.split("/")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    return out
+
+
+def save_params(path: Path, params: Mapping[str, Any]) -> None:
+    """Write member-stacked params to ``path`` (``.npz`` of named arrays)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        np.savez(f, **{k: np.asarray(v) for k, v in flatten_params(params).items()})
+
+
+def load_params(path: Path) -> dict[str, Any]:
+    """Read a params ``.npz`` into a nested dict of numpy arrays."""
+    if not path.exists():
+        raise ElicitError("checkpoint parameters not found", path)
+    try:
+        with np.load(path) as data:
+            return unflatten_params({k: data[k] for k in data.files})
+    except (OSError, ValueError) as e:
+        raise ElicitError(f"unreadable parameter file ({e})", path) from e
+
+
+def write_seed_header(seed_dir: Path, header: Mapping[str, Any]) -> None:
+    """Write the seed directory's ``artifact.json`` (kind ``checkpoint``)."""
+    write_json(seed_dir / "artifact.json", dict(header))
+
+
+def seed_dirs(path: str | Path) -> dict[int, Path]:
+    """Seed -> checkpoint directory, for a run directory or a single seed directory."""
+    path = Path(path)
+    header = read_header(path)
+    kind = header.get("kind")
+    if kind == CHECKPOINT_KIND:
+        return {int(header["seed"]): path}
+    if kind != RUN_KIND:
+        raise ElicitError(f"is a '{kind}' artifact, expected a policy checkpoint", path)
+    return {int(s): path / d for s, d in header["seed_dirs"].items()}
+
+
+def list_checkpoints(path: str | Path) -> dict[int, list[int | str]]:
+    """Seed -> available checkpoints (saved epochs in order, then ``"best"``)."""
+    out: dict[int, list[int | str]] = {}
+    for seed, d in sorted(seed_dirs(path).items()):
+        epochs = sorted(
+            int(m.group(1)) for f in (d / "params").glob("*.npz") if (m := _EPOCH_RE.match(f.name))
+        )
+        names: list[int | str] = list(epochs)
+        if (d / "params" / "best.npz").exists():
+            names.append("best")
+        out[seed] = names
+    return out
+
+
+def _resolve_seed_dir(path: Path, seed: int | None) -> Path:
+    dirs = seed_dirs(path)
+    if seed is not None:
+        if seed not in dirs:
+            raise ElicitError(f"no seed {seed}; available seeds: {sorted(dirs)}", path)
+        return dirs[seed]
+    if len(dirs) > 1:
+        first = sorted(dirs)[0]
+        raise ElicitError(
+            f"holds seeds {sorted(dirs)}; pass a seed directory (e.g. {dirs[first]}) or seed=",
+            path,
+        )
+    return next(iter(dirs.values()))
+
+
+def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None = None) -> Any:
+    """Load a :class:`~elicit_jax.policy.base.Policy` from a checkpoint.
+
+    Args:
+      path: a seed directory (``runs/base/seed0``) or a run directory with one seed (or pass
+        ``seed``).
+      which: ``"best"`` (lowest validation loss), ``"final"`` (last epoch) or an epoch number.
+      seed: pick this seed of a run directory.
+
+    Raises:
+      ElicitError: missing directory, checkpoint or seed; parameters not matching the spec.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from elicit_jax.policy import models
+    from elicit_jax.policy.base import Policy
+
+    seed_dir = _resolve_seed_dir(Path(path), seed)
+    header = read_header(seed_dir)
+    if int(header.get("schema_version", -1)) > SCHEMA_VERSION:
+        raise ElicitError(
+            f"checkpoint schema {header['schema_version']} is newer than this elicit-jax "
+            f"understands ({SCHEMA_VERSION}); upgrade elicit-jax",
+            seed_dir,
+        )
+    spec = header["model"]
+    if which == "final":
+        which = int(header["final_epoch"])
+    if which == "best":
+        file = seed_dir / "params" / "best.npz"
+    elif isinstance(which, int) or str(which).isdigit():
+        file = seed_dir / "params" / epoch_file(int(which))
+        if not file.exists():
+            avail = list_checkpoints(seed_dir)[int(header["seed"])]
+            raise ElicitError(f"no checkpoint for epoch {which}; available: {avail}", seed_dir)
+    else:
+        raise ElicitError(f"unknown checkpoint {which!r}; use best, final or an epoch number")
+    params = load_params(file)
+    norm = load_params(seed_dir / "normalization.npz")
+    module = models.make_module(
+        spec["kind"], spec["hidden"], spec["action_dim"], spec["dropout"], spec["n_components"]
+    )
+    expected = jax.eval_shape(
+        lambda k: models.init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
+        jax.random.key(0),
+    )
+    want = {k: tuple(v.shape) for k, v in flatten_params(expected).items()}
+    got = {k: tuple(v.shape) for k, v in flatten_params(params).items()}
+    if want != got:
+        diff = sorted(set(want.items()) ^ set(got.items()))[:3]
+        raise ElicitError(f"parameters do not match the model spec in artifact.json: {diff}", file)
+    return Policy(
+        params=jax.tree.map(jnp.asarray, params),
+        obs_mean=jnp.asarray(norm["obs_mean"]),
+        obs_std=jnp.asarray(norm["obs_std"]),
+        kind=spec["kind"],
+        obs_dim=int(spec["obs_dim"]),
+        action_dim=int(spec["action_dim"]),
+        n_members=int(spec["n_members"]),
+        hidden=tuple(int(h) for h in spec["hidden"]),
+        dropout=float(spec["dropout"]),
+        n_components=int(spec["n_components"]),
+        reset_every=int(spec["reset_every"]),
+        obs_fields=tuple(spec.get("obs_fields", ())),
+    )
+
+
+def policy_spec(policy: Any) -> dict[str, Any]:
+    """The static spec of a policy, as stored in ``artifact.json``."""
+    spec = {k: getattr(policy, k) for k in SPEC_KEYS}
+    spec["hidden"] = list(spec["hidden"])
+    spec["obs_fields"] = list(spec["obs_fields"])
+    return spec
+
+
+def check_compatible(policy: Any, demos: Any, path: str | Path | None = None) -> None:
+    """Raise :class:`ElicitError` if ``demos`` do not fit ``policy`` (dims, obs field names).
+
+    Args:
+      policy: a loaded policy.
+      demos: a :class:`~elicit_jax.data.demos.Demos`.
+      path: the demonstration file, named in the error.
+    """
+    if demos.obs_dim != policy.obs_dim or demos.action_dim != policy.action_dim:
+        raise ElicitError(
+            f"demos have obs_dim={demos.obs_dim}, action_dim={demos.action_dim} but the policy "
+            f"was trained on obs_dim={policy.obs_dim}, action_dim={policy.action_dim}",
+            path,
+        )
+    names = tuple(f.name for f in demos.obs_fields)
+    if names and policy.obs_fields and names != tuple(policy.obs_fields):
+        raise ElicitError(
+            f"obs fields {list(names)} differ from the policy's {list(policy.obs_fields)}", path
+        )

@@ -1,0 +1,168 @@
+"""Training configuration: a frozen dataclass with the paper's defaults, and named profiles.
+
+Defaults follow METHOD.md: an MLP ensemble of 5 members, 2 x 1024 hidden units, dropout 0.5,
+Adam lr 1e-3 (MDN: 1e-4), batch 512, 1000 epochs, checkpoints every 200 epochs, 3 seeds.
+Fields left ``None`` take their model-specific default when the config is built
+(:meth:`TrainConfig.__post_init__`), so a stored config is always explicit.
+
+Profiles (:data:`PROFILES`):
+  * ``paper``: exactly the defaults above (LSTM: 5 x 2 x 512, windows of 10 steps).
+  * ``cpu``: small enough to train in about a minute on 2 CPU cores on ~50 demos x 100 steps:
+    hidden 2 x 256 (LSTM 2 x 64), 100 epochs (LSTM 20), checkpoints every 20 epochs, 1 seed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+from elicit_jax.errors import ElicitError
+
+MODELS = ("mlp", "mdn", "lstm")
+_DEFAULT_HIDDEN = MappingProxyType({"mlp": (1024, 1024), "mdn": (1024, 1024), "lstm": (512, 512)})
+_DEFAULT_MEMBERS = MappingProxyType({"mlp": 5, "mdn": 1, "lstm": 5})
+_DEFAULT_LR = MappingProxyType({"mlp": 1e-3, "mdn": 1e-4, "lstm": 1e-3})
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """How to train a base policy.
+
+    Attributes:
+      model: ``mlp`` (ensemble, default), ``mdn`` or ``lstm``.
+      ensemble_size: members K (None: 5, MDN 1).
+      hidden: hidden sizes (None: 2 x 1024, LSTM 2 x 512).
+      dropout: dropout between hidden layers of the MLP/MDN trunk (LSTM: unused).
+      lr: Adam learning rate (None: 1e-3, MDN 1e-4).
+      batch_size: minibatch size (samples; LSTM: windows).
+      epochs: passes over the training split.
+      checkpoint_every: save parameters every this many epochs (plus final and best).
+      progress_every: epochs per jitted chunk between progress updates (a divisor of
+        ``gcd(epochs, checkpoint_every)`` is used, so every chunk has the same length).
+      val_fraction: fraction of EPISODES held out for validation (at least one when there are
+        two or more episodes and the fraction is positive).
+      bootstrap: resample each member's training set with replacement (ThriftyDAgger-style).
+      grad_clip: clip gradients by global norm (None: off; the original code used 10).
+      seq_len: LSTM training window length; acting resets the state every ``seq_len`` steps.
+      n_components: MDN mixture components.
+      seeds: training seeds; each gives one checkpoint directory ``seed<k>``.
+      vmap_seeds: train all seeds in one vmapped call (else one after another).
+
+    Training is bit-for-bit reproducible for the same config on the same machine and library
+    versions; a seed trained alone and the same seed trained in a vmapped group can differ in
+    the last bits (different XLA programs).
+    """
+
+    model: str = "mlp"
+    ensemble_size: int | None = None
+    hidden: tuple[int, ...] | None = None
+    dropout: float = 0.5
+    lr: float | None = None
+    batch_size: int = 512
+    epochs: int = 1000
+    checkpoint_every: int = 200
+    progress_every: int = 10
+    val_fraction: float = 0.1
+    bootstrap: bool = False
+    grad_clip: float | None = None
+    seq_len: int = 10
+    n_components: int = 2
+    seeds: tuple[int, ...] = (0, 1, 2)
+    vmap_seeds: bool = True
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ElicitError(f"unknown model {self.model!r}; choose one of {', '.join(MODELS)}")
+        fill = {
+            "ensemble_size": _DEFAULT_MEMBERS[self.model],
+            "hidden": _DEFAULT_HIDDEN[self.model],
+            "lr": _DEFAULT_LR[self.model],
+        }
+        for name, value in fill.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
+        object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        self._check()
+
+    def _check(self) -> None:
+        checks = (
+            (self.ensemble_size >= 1, "ensemble_size must be >= 1"),
+            (len(self.hidden) >= 1 and min(self.hidden) >= 1, "hidden sizes must be >= 1"),
+            (0.0 <= self.dropout < 1.0, "dropout must be in [0, 1)"),
+            (self.lr > 0, "lr must be > 0"),
+            (self.batch_size >= 1, "batch_size must be >= 1"),
+            (self.epochs >= 1, "epochs must be >= 1"),
+            (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
+            (self.progress_every >= 1, "progress_every must be >= 1"),
+            (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
+            (self.grad_clip is None or self.grad_clip > 0, "grad_clip must be > 0"),
+            (self.seq_len >= 1, "seq_len must be >= 1"),
+            (self.n_components >= 1, "n_components must be >= 1"),
+            (len(self.seeds) >= 1, "at least one seed is needed"),
+            (len(set(self.seeds)) == len(self.seeds), "seeds must be distinct"),
+        )
+        for ok, msg in checks:
+            if not ok:
+                raise ElicitError(f"invalid training config: {msg}")
+
+    @classmethod
+    def from_profile(cls, profile: str = "paper", **overrides: Any) -> TrainConfig:
+        """A config from a named profile (``paper`` or ``cpu``) with field overrides.
+
+        ``None`` overrides are ignored, so CLI flags can be passed straight through.
+        """
+        if profile not in PROFILES:
+            raise ElicitError(f"unknown profile {profile!r}; choose one of {', '.join(PROFILES)}")
+        overrides = {k: v for k, v in overrides.items() if v is not None}
+        unknown = set(overrides) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ElicitError(f"unknown training option(s): {', '.join(sorted(unknown))}")
+        model = overrides.get("model", "mlp")
+        return cls(**{**PROFILES[profile](model), **overrides})
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (tuples become lists)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names
+        if unknown:
+            raise ElicitError(f"unknown training config key(s): {', '.join(sorted(unknown))}")
+        data = dict(data)
+        for key in ("hidden", "seeds"):
+            if data.get(key) is not None:
+                data[key] = tuple(data[key])
+        return cls(**data)
+
+
+def _paper(model: str) -> dict[str, Any]:
+    return {"model": model}
+
+
+def _cpu(model: str) -> dict[str, Any]:
+    if model == "lstm":
+        return {
+            "model": model,
+            "hidden": (64, 64),
+            "epochs": 20,
+            "checkpoint_every": 5,
+            "progress_every": 1,
+            "seeds": (0,),
+        }
+    return {
+        "model": model,
+        "hidden": (256, 256),
+        "epochs": 100,
+        "checkpoint_every": 20,
+        "progress_every": 5,
+        "seeds": (0,),
+    }
+
+
+PROFILES = MappingProxyType({"paper": _paper, "cpu": _cpu})
