@@ -29,7 +29,12 @@ def register(kind: str) -> Callable[[Describer], Describer]:
 def _load_describers() -> None:
     import importlib
 
-    for mod in ("elicit_jax.data.describe_demos", "elicit_jax.compat.describe_compat"):
+    for mod in (
+        "elicit_jax.data.describe_demos",
+        "elicit_jax.compat.describe_compat",
+        "elicit_jax.sim.describe_rollouts",
+        "elicit_jax.policy.describe_checkpoint",
+    ):
         try:
             importlib.import_module(mod)
         except ModuleNotFoundError as e:

@@ -1,0 +1,207 @@
+"""Rollout speed with the policy in the loop: MJX, C MuJoCo, and a robomimic-style reference.
+
+All three run square-nut with a paper-sized policy (MLP ensemble, 5 members, 2 x 1024) from
+the same seeded initial states, side by side in one process:
+
+- ``mjx``: one jitted function (vmapped environments, policy inside the loop);
+- ``mujoco``: elicit-jax's C backend (thread pool over MjData, one batched policy call per
+  control step);
+- ``reference``: robomimic-style: one environment, one policy call per step, rollouts one
+  after another, on C MuJoCo.
+
+Reported: env-steps/s (control steps of all environments per second), physics steps/s, the
+policy-FLOP bound (matmul GFLOP/s measured here / 10.8 MFLOP per policy step) and the fraction
+of it reached, the C backend's speed-up over the reference, the MJX compile time cold (empty
+cache, fresh process) and warm (persistent cache, fresh process), and scaling with the number
+of rollouts. The policy is freshly initialised (rollouts run the full horizon).
+
+Usage: python benchmarks/bench_rollouts.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from elicit_jax.runtime import configure
+
+configure()
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+from elicit_jax.policy.base import init_policy  # noqa: E402
+from elicit_jax.sim.env import make_task  # noqa: E402
+from elicit_jax.sim.evaluate import rollout_mujoco_policy  # noqa: E402
+from elicit_jax.sim.rollout_mjx import rollout_fn  # noqa: E402
+from elicit_jax.sim.rollout_mujoco import BatchSim  # noqa: E402
+
+HIDDEN = (1024, 1024)
+MEMBERS = 5
+OBS, ACT = 23, 7
+FLOP_PER_STEP = 2 * MEMBERS * (OBS * 1024 + 1024 * 1024 + 1024 * ACT)  # 10.8 MFLOP
+
+
+def paper_policy():
+    return init_policy(
+        jax.random.PRNGKey(0),
+        kind="mlp",
+        obs_dim=OBS,
+        action_dim=ACT,
+        n_members=MEMBERS,
+        hidden=HIDDEN,
+    )
+
+
+def matmul_gflops(batch: int = 50) -> float:
+    """Measured GFLOP/s of the policy's own matmuls at this batch size (jitted, float32)."""
+    policy = paper_policy()
+    obs = jnp.zeros((batch, OBS))
+    f = jax.jit(lambda p, o: p.members(o))
+    f(policy, obs).block_until_ready()
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < 2.0:
+        f(policy, obs).block_until_ready()
+        n += 1
+    return n * batch * FLOP_PER_STEP / (time.perf_counter() - t0) / 1e9
+
+
+def bench_mujoco(task, policy, n: int, horizon: int) -> float:
+    seeds = np.arange(n)
+    rollout_mujoco_policy(task, policy, seeds, 1)  # compile the policy call for this batch
+    t0 = time.perf_counter()
+    rollout_mujoco_policy(task, policy, seeds, horizon)
+    return n * horizon / (time.perf_counter() - t0)
+
+
+def bench_reference(task, policy, n: int, horizon: int) -> float:
+    act = jax.jit(lambda p, c, o: p.act(c, o))
+    act(policy, policy.init_carry(1), np.zeros((1, OBS), np.float32))  # compile first
+    t0 = time.perf_counter()
+    with BatchSim(task, 1, threads=1) as sim:
+        for i in range(n):
+            obs = sim.reset_seeds(np.array([i]))
+            carry = policy.init_carry(1)
+            for _ in range(horizon):
+                carry, a = act(policy, carry, obs.astype(np.float32))
+                obs = sim.step(np.asarray(a, np.float64))
+    return n * horizon / (time.perf_counter() - t0)
+
+
+def bench_mjx(task, policy, n: int, horizon: int) -> tuple[float, float]:
+    fn = rollout_fn(task, horizon)
+    q, m = task.init_states(np.arange(n))
+    q, m = q.astype(np.float32), m.astype(np.float32)
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(policy, q, m))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(policy, q, m))
+    return n * horizon / (time.perf_counter() - t0), first
+
+
+def compile_times(horizon: int) -> dict[str, float]:
+    """Seconds to the first MJX result in a fresh process (imports included), through the
+    evaluation path (exported rollout + persistent compilation cache): empty cache, then warm.
+    """
+    here = os.path.dirname(os.path.abspath(__file__))
+    code = "\n".join(
+        [
+            "import time; t0 = time.perf_counter()",
+            "from elicit_jax.runtime import configure; configure()",
+            f"import sys; sys.path.insert(0, {here!r})",
+            "import bench_rollouts as b, numpy as np, jax",
+            "from elicit_jax.sim.rollout_mjx import rollout_mjx",
+            f"rollout_mjx(b.make_task('square-nut'), b.paper_policy(), np.arange(50), {horizon})",
+            "print(time.perf_counter() - t0)",
+        ]
+    )
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=cache)
+        for name in ("cold", "warm"):
+            res = subprocess.run(
+                [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+            )
+            out[name] = float(res.stdout.strip().splitlines()[-1])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="Fewer steps and sizes.")
+    ap.add_argument("--json", help="Also write the results here.")
+    ap.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=[16, 50, 200],
+        help="Rollout counts for the scaling table (1000 hung in MJX on CPU here; see README).",
+    )
+    args = ap.parse_args()
+    task = make_task("square-nut")
+    sub = task.config.substeps
+    policy = paper_policy()
+    h_c, h_ref, h_mjx = (40, 10, 5) if args.quick else (100, 20, 10)
+    res: dict = {"threads": os.cpu_count(), "substeps": sub}
+
+    res["matmul_gflops"] = matmul_gflops()
+    res["bound_env_steps"] = res["matmul_gflops"] * 1e9 / FLOP_PER_STEP
+    log("bound", res["bound_env_steps"])
+    res["mujoco_50"] = bench_mujoco(task, policy, 50, h_c)
+    log("mujoco_50", res["mujoco_50"])
+    res["reference"] = bench_reference(task, policy, 3 if args.quick else 5, h_ref * 5)
+    log("reference", res["reference"])
+    res["mjx_50"], res["mjx_first_call_s"] = bench_mjx(task, policy, 50, h_mjx)
+    log("mjx_50", res["mjx_50"])
+    sizes = (16, 50) if args.quick else tuple(args.sizes)
+    res["scaling"] = {}
+    for n in sizes:
+        res["scaling"][n] = {
+            "mujoco": bench_mujoco(task, policy, n, max(10, h_c // 4)),
+            "mjx": res["mjx_50"] if n == 50 else bench_mjx(task, policy, n, h_mjx)[0],
+        }
+        log(f"scaling {n}", res["scaling"][n])
+    res["compile"] = compile_times(h_mjx)
+    report(res, sub)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(res, f, indent=1)
+
+
+def log(name: str, value: object) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {name}: {value}", flush=True)
+
+
+def report(res: dict, sub: int) -> None:
+    bound = res["bound_env_steps"]
+    print(f"policy: MLP 5 x (2 x 1024), {FLOP_PER_STEP / 1e6:.1f} MFLOP per env-step")
+    print(
+        f"matmul: {res['matmul_gflops']:.1f} GFLOP/s at batch 50 -> bound {bound:.0f} env-steps/s"
+    )
+    print(f"{'backend (50 rollouts)':28s} {'env-steps/s':>12s} {'physics/s':>12s} {'of bound':>9s}")
+    for name, key in (("mjx", "mjx_50"), ("mujoco (C, threads)", "mujoco_50"),
+                      ("reference (1 env, serial)", "reference")):  # fmt: skip
+        v = res[key]
+        print(f"{name:28s} {v:12.0f} {v * sub:12.0f} {v / bound:9.0%}")
+    print(f"C backend vs reference: {res['mujoco_50'] / res['reference']:.1f}x")
+    print(
+        f"MJX compile+first run: cold {res['compile']['cold']:.1f} s, warm (persistent cache) "
+        f"{res['compile']['warm']:.1f} s"
+    )
+    print(
+        f"{'rollouts':>8s} {'mujoco env-steps/s':>19s} {'mjx env-steps/s':>16s} "
+        f"{'mjx ms/rollout-step':>20s}"
+    )
+    for n, r in res["scaling"].items():
+        print(f"{n:8d} {r['mujoco']:19.0f} {r['mjx']:16.0f} {1e3 / r['mjx'] * 1:20.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,136 @@
+"""Scripted operators: waypoint state machines with a parameterised style.
+
+An operator drives a batch of environments from their observations. Each episode walks
+through the task's phases (approach, grasp, lift, carry, place, ...); a phase gives a target
+end-effector position, yaw and gripper command and says when it is done. The style sets how
+the phases are walked: speed, action noise, hesitations (pauses), waypoint jitter that the
+feedback later corrects, and the task-specific choices (route, approach side, grasp point and
+yaw). Actions are proportional control towards the target, clipped to [-1, 1]. Host-side numpy:
+operators serve the C MuJoCo backend, where collection runs.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.sim.env import Task, quat_yaw
+
+
+@dataclasses.dataclass(frozen=True)
+class Style:
+    """How an operator moves (task-specific choices live in ``choices``).
+
+    Attributes:
+      speed: largest position/rotation action magnitude (0-1].
+      gain: proportional gain (action per metre of error, in units of the task's pos_scale).
+      noise: standard deviation of Gaussian noise added to the motion actions.
+      hesitate_prob: per-step probability of starting a pause.
+      hesitate_steps: (low, high) length of a pause in control steps.
+      jitter: std (m) of a per-episode offset of the approach waypoints (corrected later).
+      tol: distance (m) at which a waypoint counts as reached.
+      choices: task-specific style choices (route, grasp point, grasp yaw offset, ...).
+    """
+
+    speed: float = 1.0
+    gain: float = 1.5
+    noise: float = 0.02
+    hesitate_prob: float = 0.0
+    hesitate_steps: tuple[int, int] = (3, 8)
+    jitter: float = 0.0
+    tol: float = 0.01
+    choices: tuple[tuple[str, Any], ...] = ()
+
+    def choice(self, key: str, default: Any) -> Any:
+        """A task-specific choice by name."""
+        return dict(self.choices).get(key, default)
+
+
+@dataclasses.dataclass
+class Targets:
+    """Per-environment targets of the current phase (B environments).
+
+    Attributes:
+      pos: (B, 3) target end-effector position.
+      yaw: (B,) target end-effector yaw.
+      grip: (B,) gripper command (-1 open, +1 closed).
+      done: (B,) bool, the phase's exit condition holds.
+    """
+
+    pos: np.ndarray
+    yaw: np.ndarray
+    grip: np.ndarray
+    done: np.ndarray
+
+
+class Operator(abc.ABC):
+    """A scripted operator for one task; subclasses define :meth:`targets` per phase."""
+
+    n_phases: int = 1
+
+    def __init__(self, task: Task, style: Style, name: str) -> None:
+        self.task = task
+        self.style = style
+        self.name = name
+        self.phase = np.zeros(0, np.int64)
+
+    def reset(self, obs: np.ndarray, rng: np.random.Generator) -> None:
+        """Start B new episodes from their first observations ``obs (B, 23)``."""
+        b = len(obs)
+        self.rng = rng
+        self.phase = np.zeros(b, np.int64)
+        self.phase_steps = np.zeros(b, np.int64)
+        self.pause = np.zeros(b, np.int64)
+        self.jitter = rng.normal(0.0, self.style.jitter, (b, 3)) * np.array([1.0, 1.0, 0.3])
+        self.start_obs = np.array(obs, np.float64)
+        self.setup(obs)
+
+    def setup(self, obs: np.ndarray) -> None:  # noqa: B027  (optional hook)
+        """Per-episode choices drawn at reset (override)."""
+
+    @abc.abstractmethod
+    def targets(self, obs: np.ndarray) -> Targets:
+        """Targets of each environment's current phase."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(B, 7)`` in [-1, 1] for observations ``obs (B, 23)``."""
+        s, cfg = self.style, self.task.config
+        tg = self.targets(obs)
+        advance = tg.done & (self.phase < self.n_phases - 1)
+        self.phase = np.where(advance, self.phase + 1, self.phase)
+        self.phase_steps = np.where(advance, 0, self.phase_steps + 1)
+        err = tg.pos - obs[:, 0:3]
+        move = np.clip(s.gain * err / cfg.pos_scale, -s.speed, s.speed)
+        yaw_err = np.clip(wrap(tg.yaw), -YAW_LIMIT, YAW_LIMIT) - quat_yaw(obs[:, 3:7])
+        turn = np.clip(s.gain * yaw_err / cfg.rot_scale, -s.speed, s.speed)
+        act = np.zeros((len(obs), 7))
+        act[:, 0:3] = move
+        act[:, 5] = turn
+        act[:, _NOISY] += self.rng.normal(0.0, s.noise, (len(obs), len(_NOISY)))
+        act[:, 6] = tg.grip
+        start = (self.pause == 0) & (self.rng.random(len(obs)) < s.hesitate_prob)
+        lo, hi = s.hesitate_steps
+        self.pause = np.where(start, self.rng.integers(lo, hi + 1, len(obs)), self.pause)
+        paused = self.pause > 0
+        act[paused, 0:6] = 0.0
+        self.pause = np.maximum(self.pause - 1, 0)
+        return np.clip(act, -1.0, 1.0)
+
+
+_NOISY = [0, 1, 2, 5]
+YAW_LIMIT = 3.07
+"""Largest wrist yaw an operator turns to (the joint stops at 3.09 rad, so the observed yaw
+equals the joint angle and operators turn within the joint's range, never across pi)."""
+
+
+def wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def reached(pos: np.ndarray, target: np.ndarray, tol: float) -> np.ndarray:
+    """(B,) bool: ``pos (B, 3)`` within ``tol`` of ``target (B, 3)``."""
+    return np.linalg.norm(pos - target, axis=-1) < tol

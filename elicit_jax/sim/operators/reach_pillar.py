@@ -1,0 +1,66 @@
+"""Scripted operators of ``reach-pillar``: around the left, around the right, or over the top.
+
+The base operator passes the pillar on its left (+y). ``same-style`` does the same with its
+own noise; ``mild`` takes a wider, slower left arc with pauses; ``conflict-right`` passes on
+the right and ``conflict-over`` climbs over the top, so averaging either with the base style
+steers into the pillar.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from elicit_jax.sim.operators.base import Operator, Style, Targets, reached
+from elicit_jax.sim.tasks.reach_pillar import PILLAR_HEIGHT
+
+
+class ReachPillarOperator(Operator):
+    """Three waypoints: beside (or above) the pillar's near side, its far side, the goal."""
+
+    n_phases = 3
+
+    def targets(self, obs: np.ndarray) -> Targets:
+        route = self.style.choice("route", "left")
+        clear = self.style.choice("clearance", 0.09)
+        eef, goal = obs[:, 0:3], obs[:, 9:12]
+        b = len(obs)
+        if route == "over":
+            z = np.full(b, PILLAR_HEIGHT + clear * 0.6)
+            near = np.stack([self.start_obs[:, 0], self.start_obs[:, 1], z], axis=1)
+            far = np.stack([goal[:, 0], goal[:, 1], z], axis=1)
+        else:
+            y = np.full(b, clear if route == "left" else -clear)
+            near = np.stack([np.full(b, -0.05), y, self.start_obs[:, 2]], axis=1)
+            far = np.stack([np.full(b, 0.06), y, goal[:, 2]], axis=1)
+        near = near + self.jitter
+        tol = self.style.tol * 2
+        phase = self.phase[:, None]
+        pos = np.where(phase == 0, near, np.where(phase == 1, far, goal))
+        done = np.where(
+            self.phase == 0,
+            reached(eef, near, tol),
+            np.where(self.phase == 1, reached(eef, far, tol), False),
+        )
+        return Targets(pos=pos, yaw=np.zeros(b), grip=-np.ones(b), done=done)
+
+
+STYLES: dict[str, tuple[Style, str]] = {
+    "base": (Style(noise=0.03), "proficient; passes the pillar on the left"),
+    "same-style": (
+        Style(noise=0.06, speed=0.9, jitter=0.005),
+        "compatible: the base route, noisier and a little slower",
+    ),
+    "mild": (
+        Style(noise=0.05, speed=0.75, hesitate_prob=0.03, choices=(("clearance", 0.12),)),
+        "mildly different: wider left arc, slower, hesitates",
+    ),
+    "conflict-right": (
+        Style(noise=0.03, choices=(("route", "right"),)),
+        "conflicting: passes the pillar on the right",
+    ),
+    "conflict-over": (
+        Style(noise=0.03, choices=(("route", "over"),)),
+        "conflicting: climbs over the pillar",
+    ),
+}
+OPERATOR_CLASS = ReachPillarOperator

@@ -1,0 +1,125 @@
+"""``square-nut``: pick a square nut by its handle and drop it over a square peg.
+
+The nut is a ring of four capsules with a capsule handle (MJX has no cylinder-box or mesh
+collisions, and capsules keep the contact cost low); the peg is a box. Contacts are explicit
+pairs: nut-floor (5), ring-peg (4), fingers-handle and fingers-far-ring-side (4). Fingers do not
+collide with the peg or the floor (the end effector cannot go below ``z_min``). Success, like
+robosuite: the nut's centre within ``xy_tol`` of the peg's axis, the nut low (resting around
+the peg, not on top of it), the gripper open.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.sim import mjcf
+from elicit_jax.sim.env import Task, TaskConfig, register_task, yaw_quat
+
+PEG_XY = (0.1, 0.1)
+PEG_HALF = 0.011
+PEG_HEIGHT = 0.1
+RING_HALF = 0.032
+"""Distance from the nut's centre to the axis of each ring side."""
+RING_RADIUS = 0.007
+HANDLE_FROM, HANDLE_TO = 0.039, 0.097
+NUT_Z = RING_RADIUS
+
+
+@dataclasses.dataclass(frozen=True)
+class SquareNutConfig(TaskConfig):
+    """Square-nut settings.
+
+    Attributes:
+      nut_x, nut_y, nut_yaw: ranges (low, high) of the nut's initial pose.
+      start_xy: half-width of the gripper's initial xy jitter around (0, 0).
+      start_z: gripper's initial height.
+      xy_tol: success distance of the nut's centre from the peg's axis.
+      z_tol: the nut must be below this height (resting on the floor around the peg).
+      open_tol: both finger positions above this count as released.
+    """
+
+    horizon: int = 500
+    nut_x: tuple[float, float] = (-0.13, -0.07)
+    nut_y: tuple[float, float] = (-0.12, -0.04)
+    nut_yaw: tuple[float, float] = (-0.6, 0.6)
+    start_xy: float = 0.02
+    start_z: float = 0.15
+    xy_tol: float = 0.03
+    z_tol: float = 0.03
+    open_tol: float = 0.02
+
+
+def ring_geoms(prefix: str, half: float, radius: float, mass: float) -> str:
+    """Four capsules forming a square ring of side axes at distance ``half`` from the centre."""
+    e = half + radius
+    sides = (
+        (-half, -e, -half, e),
+        (half, -e, half, e),
+        (-e, -half, e, -half),
+        (-e, half, e, half),
+    )
+    return "\n".join(
+        f'      <geom name="{prefix}{i}" type="capsule" fromto="{x0} {y0} 0 {x1} {y1} 0" '
+        f'size="{radius}" mass="{mass}" rgba="0.7 0.6 0.1 1"/>'
+        for i, (x0, y0, x1, y1) in enumerate(sides)
+    )
+
+
+@register_task
+class SquareNut(Task):
+    """Square nut onto a square peg (see the module docstring)."""
+
+    name = "square-nut"
+    config_cls = SquareNutConfig
+    peg_xy = PEG_XY
+    peg_height = PEG_HEIGHT
+    nut_z = NUT_Z
+
+    def xml(self) -> str:
+        px, py = PEG_XY
+        world = f"""
+    <body name="peg" pos="{px} {py} {PEG_HEIGHT / 2}">
+      <geom name="peg" type="box" size="{PEG_HALF} {PEG_HALF} {PEG_HEIGHT / 2}"
+            rgba="0.5 0.3 0.1 1"/>
+    </body>
+    <body name="nut" pos="-0.1 -0.08 {NUT_Z}">
+      <freejoint name="nut"/>
+      <site name="nut" size="0.004"/>
+{ring_geoms("ring", RING_HALF, RING_RADIUS, 0.025)}
+      <geom name="handle" type="capsule" fromto="{HANDLE_FROM} 0 0 {HANDLE_TO} 0 0"
+            size="{RING_RADIUS}" mass="0.03" rgba="0.7 0.6 0.1 1"/>
+    </body>"""
+        pairs = [("floor", f"ring{i}") for i in range(4)] + [("floor", "handle")]
+        pairs += [("peg", f"ring{i}") for i in range(4)]
+        pairs += [(f, g) for f in mjcf.FINGER_JOINTS for g in ("handle",)]
+        return mjcf.scene(
+            self.name, self.config.timestep, world, mjcf.pairs(pairs), mjcf.pose_sensors("nut")
+        )
+
+    def sample_init(self, rng: Any) -> tuple[Any, Any]:
+        import jax
+        import jax.numpy as jnp
+
+        c = self.config
+        lo = jnp.array([c.nut_x[0], c.nut_y[0], c.nut_yaw[0], -c.start_xy, -c.start_xy])
+        hi = jnp.array([c.nut_x[1], c.nut_y[1], c.nut_yaw[1], c.start_xy, c.start_xy])
+        u = jax.random.uniform(rng, (5,), minval=lo, maxval=hi)
+        qpos = jnp.asarray(self.qpos0)
+        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))
+        qpos = qpos.at[4:6].set(mjcf.FINGER_OPEN)
+        nut_pos = jnp.stack([u[0], u[1], jnp.asarray(self.nut_z)])
+        nut = jnp.concatenate([nut_pos, yaw_quat(u[2], jnp)])
+        qpos = qpos.at[6:13].set(nut)
+        return qpos, jnp.zeros((0, 3))
+
+    def success_from_obs(self, obs: Any, xp: Any = np) -> Any:
+        c = self.config
+        dx = obs[..., 9] - self.peg_xy[0]
+        dy = obs[..., 10] - self.peg_xy[1]
+        centred = dx * dx + dy * dy < c.xy_tol**2
+        low = obs[..., 11] < c.z_tol
+        released = xp.min(obs[..., 7:9], axis=-1) > c.open_tol
+        return centred & low & released
