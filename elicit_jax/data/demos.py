@@ -361,7 +361,9 @@ def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos
             task=str(header.get("task", "unknown")),
             obs_fields=tuple(
                 ObsField(str(n), int(a), int(b))
-                for n, (a, b) in header.get("obs_fields", {}).items()
+                for n, (a, b) in sorted(
+                    header.get("obs_fields", {}).items(), key=lambda kv: int(kv[1][0])
+                )
             ),
             action_low=parse_bound(header.get("action_low", -1.0)),
             action_high=parse_bound(header.get("action_high", 1.0)),

@@ -1,0 +1,95 @@
+"""Pipeline commands: ``pipeline run``, ``report``, ``quickstart``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from elicit_jax.cli.app import app
+
+pipeline_app = typer.Typer(
+    help="Run a pipeline definition (collect → train → score → fit → filter → train → evaluate).",
+    no_args_is_help=True,
+)
+app.add_typer(pipeline_app, name="pipeline")
+
+_PROFILE_HELP = "paper (the paper's sizes) or cpu (shrunk to fit a 2-core machine)."
+
+
+@pipeline_app.command("run")
+def pipeline_run(
+    definition: str = typer.Argument(
+        ..., help="A pipeline TOML file, or a shipped one: quickstart, filtering, models."
+    ),
+    profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
+    out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bars."),
+    ray: str = typer.Option(
+        None,
+        "--ray",
+        help="Run stages as Ray tasks: local, auto, HOST:PORT or ray://HOST:PORT "
+        "(needs the 'ray' extra; --out must be on a file system every node shares).",
+    ),
+) -> None:
+    """Run every stage that is not up to date; a re-run skips finished stages.
+
+    Example: elicit-jax pipeline run pipelines/filtering.toml --profile cpu --out runs/filtering
+    """
+    from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
+
+    config = PipelineRunConfig(
+        pipeline=definition,
+        profile=profile,
+        out=None if out is None else str(out),
+        progress=progress,
+        ray=ray,
+    )
+    run_pipeline(config)
+
+
+@pipeline_app.command("status")
+def pipeline_status(
+    definition: str = typer.Argument(..., help="A pipeline TOML file, or a shipped one."),
+    profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
+    out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
+) -> None:
+    """Show which stages are up to date and which the next run would run (runs nothing).
+
+    Example: elicit-jax pipeline status pipelines/filtering.toml --profile cpu
+    """
+    from elicit_jax.pipeline.run import PipelineRunConfig, pipeline_status
+
+    pipeline_status(
+        PipelineRunConfig(
+            pipeline=definition, profile=profile, out=None if out is None else str(out)
+        )
+    )
+
+
+@app.command("report")
+def report(
+    run_dir: Path = typer.Argument(..., help="A pipeline run directory."),
+    out: Path = typer.Option(None, "--out", "-o", help="Report directory [RUN_DIR/report]."),
+) -> None:
+    """Write the Markdown and self-contained HTML report of a pipeline run.
+
+    Example: elicit-jax report runs/filtering-cpu
+    """
+    from elicit_jax.pipeline.run import render_run_report
+
+    md, page = render_run_report(run_dir, out)
+    typer.echo(f"wrote {md} and {page}")
+
+
+@app.command("quickstart")
+def quickstart(
+    out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/quickstart-cpu]."),
+) -> None:
+    """Run the shipped quickstart pipeline (a few minutes on a 2-core CPU) and print results.
+
+    Example: elicit-jax quickstart
+    """
+    from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
+
+    run_pipeline(PipelineRunConfig(pipeline="quickstart", out=None if out is None else str(out)))

@@ -1,0 +1,208 @@
+"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report.ReportData`.
+
+Reads the run manifest (``run.json``: the definition and every stage) and, for each finished
+stage, its artifact: evaluations (success per seed), threshold fits, filter counts, maps and
+the demonstration sets' lengths. Stages that have not finished yet are listed in a note, so a
+report of a partial run is still correct about what it shows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import read_header, read_json
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.tables import (
+    FilterRow,
+    LengthRow,
+    ReportData,
+    ResultRow,
+    ThresholdRow,
+)
+
+MANIFEST = "run.json"
+MANIFEST_KIND = "pipeline-run"
+
+
+def read_manifest(run_dir: str | Path) -> dict[str, Any]:
+    """The run manifest, or a one-line error when ``run_dir`` is not a pipeline run."""
+    path = Path(run_dir) / MANIFEST
+    if not path.exists():
+        raise ElicitError(f"not a pipeline run directory (no {MANIFEST})", run_dir)
+    data = read_json(path)
+    if data.get("kind") != MANIFEST_KIND:
+        raise ElicitError(f"is a '{data.get('kind')}' artifact, expected a pipeline run", path)
+    return data
+
+
+def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path, columns=["episode", "operator"])
+    episode = table.column("episode").to_numpy()
+    operator = np.asarray(table.column("operator").to_pylist(), dtype=str)
+    _, first, counts = np.unique(episode, return_index=True, return_counts=True)
+    rows = []
+    for op in dict.fromkeys(operator[first].tolist()):
+        lens = counts[operator[first] == op]
+        rows.append(
+            LengthRow(
+                task=stage["config"]["collect"]["task"],
+                name=Path(stage["output"]).stem,
+                operator=op,
+                n_episodes=len(lens),
+                mean_length=float(lens.mean()),
+                std_length=float(lens.std()),
+            )
+        )
+    return rows
+
+
+def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+    data = read_json(path)
+    report = dict(data.get("report", {}))
+    cfg = stage["config"]
+    method = data.get("method", "fit")
+    report.setdefault("margin", report.get("margin_quantile"))
+    return ThresholdRow(
+        task=cfg["task"],
+        model=cfg["model"],
+        lambda_=float(data["lambda"]),
+        eta=float(data["eta"]),
+        compatible=f"{report.get('n_compatible', '?')} held-out demos of "
+        f"'{cfg['compatible_operator']}' (collect seed {cfg['holdout_seed']})",
+        incompatible=f"{report.get('n_incompatible', '?')} demos of "
+        f"'{cfg['incompatible_operator']}' (collect seed {cfg['incompatible_seed']}, disjoint "
+        "from every D_new)" + ("" if method == "fit" else "; thresholds set by hand, not fitted"),
+        metrics=report,
+    )
+
+
+def _filter_row(stage: Mapping[str, Any], path: Path) -> FilterRow:
+    h = read_header(path)
+    cfg = stage["config"]
+    return FilterRow(
+        task=cfg["task"],
+        model=cfg["model"],
+        method=cfg["method"],
+        operator=cfg["operator"],
+        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
+        pairs_total=int(h["pairs_in"]),
+        episodes_kept=int(h["episodes_out"]),
+        episodes_total=int(h["episodes_in"]),
+    )
+
+
+def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
+    """Per training seed: success rate and mean rollout length of its best checkpoint.
+
+    The best checkpoint is the one with the highest success over the rollouts (the paper's
+    and robomimic's convention; ties go to the earliest saved).
+    """
+    import pyarrow.parquet as pq
+
+    frame = pq.read_table(path).to_pandas()
+    per = (
+        frame.groupby(["seed", "checkpoint"], sort=False)
+        .agg(success=("success", "mean"), length=("length", "mean"), n=("success", "size"))
+        .reset_index()
+    )
+    rows = []
+    for seed, g in per.groupby("seed", sort=True):
+        best = g.loc[g["success"].idxmax()]
+        rows.append(
+            ResultRow(
+                task=config["evaluate"]["task"],
+                model=config["model"],
+                method=config["method"],
+                operator=config.get("operator"),
+                seed=int(seed),
+                success=float(best["success"]),
+                mean_length=float(best["length"]),
+                n_rollouts=int(best["n"]),
+                checkpoint=str(best["checkpoint"]),
+            )
+        )
+    return rows
+
+
+def _training_note(train: Mapping[str, Any]) -> str:
+    """One line per distinct training setup (model, sizes, epochs), as the report states it."""
+    setups = {}
+    for cfg in train.values():
+        t = cfg["train"]
+        key = (
+            t["model"],
+            tuple(t["hidden"]),
+            t["ensemble_size"],
+            t["epochs"],
+            t["checkpoint_every"],
+            t["batch_size"],
+            t["lr"],
+        )
+        setups[key] = None
+    parts = [
+        f"{m}: {e} member(s) × hidden {list(h)}, {ep} epochs (checkpoint every {ck}), "
+        f"batch {b}, lr {lr:g}"
+        for m, h, e, ep, ck, b, lr in setups
+    ]
+    return (
+        "Training: " + "; ".join(parts) + ". The paper: 5 × [1024, 1024], 1000 epochs, every 200."
+    )
+
+
+def gather(run_dir: str | Path) -> ReportData:
+    """Everything the report shows, read from ``run_dir``'s finished artifacts."""
+    run_dir = Path(run_dir)
+    manifest = read_manifest(run_dir)
+    cfg = manifest["config"]
+    results: list[ResultRow] = []
+    thresholds, lengths, filters, maps = [], [], [], []
+    configs: dict[str, dict[str, Any]] = {}
+    missing = []
+    for stage in manifest["stages"]:
+        path = run_dir / stage["output"]
+        configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
+        if stage["kind"] == "report":
+            continue
+        if not path.exists():
+            missing.append(stage["id"])
+            continue
+        kind = stage["kind"]
+        if kind == "collect":
+            lengths += _length_rows(stage, path)
+        elif kind == "fit-thresholds":
+            thresholds.append(_threshold_row(stage, path))
+        elif kind == "filter":
+            filters.append(_filter_row(stage, path))
+        elif kind == "map":
+            c = stage["config"]
+            maps.append((f"{c['task']}, {c['model']}: compatibility map per operator", str(path)))
+        elif kind == "evaluate":
+            results += result_rows(stage["config"], path)
+    notes = [_training_note(configs.get("train", {}))] if configs.get("train") else []
+    if missing:
+        notes.append(
+            f"{len(missing)} stage(s) have not finished, so their results are absent: "
+            + ", ".join(missing[:8])
+            + (" …" if len(missing) > 8 else "")
+        )
+    return ReportData(
+        pipeline=cfg["pipeline"],
+        profile=cfg["profile"],
+        description=cfg.get("description", ""),
+        run_dir=str(run_dir),
+        spec_text=cfg.get("spec_text", ""),
+        results=tuple(results),
+        thresholds=tuple(thresholds),
+        lengths=tuple(lengths),
+        filters=tuple(filters),
+        maps=tuple(maps),
+        configs=configs,
+        versions=manifest.get("versions", {}),
+        notes=tuple(notes),
+    )

@@ -1,0 +1,201 @@
+"""Run a pipeline definition end to end: plan the graph, run it, report, summarise.
+
+This is the library function behind ``elicit-jax pipeline run`` and ``elicit-jax quickstart``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.artifact import make_header, write_json
+from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather
+from elicit_jax.pipeline.graph import Graph
+from elicit_jax.pipeline.runner import RunResult, StageFn, print_summary, run_graph, run_lock
+from elicit_jax.pipeline.spec import PipelineSpec, load_spec
+
+REPORT_DIR = "report"
+
+
+@dataclasses.dataclass(frozen=True)
+class PipelineRunConfig:
+    """What to run.
+
+    Attributes:
+      pipeline: a definition file, or the name of a shipped one (``quickstart``,
+        ``filtering``, ``models``).
+      profile: ``paper`` or ``cpu``; default: the definition's own.
+      out: run directory; default ``runs/<name>-<profile>``.
+      progress: draw progress bars.
+      ray: run the stages as Ray tasks at this address (``local``, ``auto``, ``HOST:PORT``,
+        ``ray://HOST:PORT``; see :func:`elicit_jax.pipeline.ray_runner.ray_session`); default
+        ``None``: run them one after another in this process.
+    """
+
+    pipeline: str = "quickstart"
+    profile: str | None = None
+    out: str | None = None
+    progress: bool = True
+    ray: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class PipelineOutcome:
+    """A finished run: where it is, what ran, and its report files."""
+
+    run_dir: Path
+    result: RunResult
+    report_md: Path
+    report_html: Path
+
+
+def default_run_dir(spec: PipelineSpec) -> Path:
+    """``runs/<name>-<profile>``."""
+    return Path("runs") / f"{spec.name}-{spec.profile}"
+
+
+def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
+    """Write ``run.json``: the definition (text, source, profile) and every stage."""
+    stages = [
+        {
+            "id": s.id,
+            "kind": s.kind,
+            "output": s.output,
+            "config": dict(s.config),
+            "inputs": dict(s.inputs),
+            "seed": s.seed,
+        }
+        for s in graph
+    ]
+    header = make_header(
+        MANIFEST_KIND,
+        1,
+        config={
+            "pipeline": spec.name,
+            "profile": spec.profile,
+            "description": spec.description,
+            "source": spec.source,
+            "spec_text": spec.text,
+        },
+        stages=stages,
+    )
+    write_json(run_dir / MANIFEST, header)
+
+
+def run_pipeline(
+    config: PipelineRunConfig,
+    *,
+    console: Any = None,
+    registry: Mapping[str, StageFn] | None = None,
+) -> PipelineOutcome:
+    """Plan, run (skipping up-to-date stages), report and print the summary tables.
+
+    Args:
+      config: what to run.
+      console: a ``rich`` console (default: a new one).
+      registry: stage functions (default: the real ones, :func:`stages.real_registry`).
+    """
+    from rich.console import Console
+
+    from elicit_jax.pipeline.plan import build_graph
+    from elicit_jax.pipeline.stages import real_registry, resolve_config
+
+    console = console or Console()
+    spec = load_spec(config.pipeline, config.profile)
+    graph = build_graph(spec, resolve_config)
+    run_dir = Path(config.out) if config.out else default_run_dir(spec)
+    note = " — CPU profile: shrunk networks/epochs, not the paper's sizes" * (spec.profile == "cpu")
+    console.print(
+        f"[bold]{spec.name}[/] ({spec.profile} profile{note}): {len(graph)} stages, "
+        f"{len(spec.tasks)} task(s) × {len(spec.models)} model(s) × {len(spec.seeds)} seed(s) "
+        f"→ {run_dir}"
+    )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if config.ray is not None:
+        from elicit_jax.pipeline.ray_runner import import_ray, run_graph_ray
+
+        import_ray()
+        execute = functools.partial(run_graph_ray, address=config.ray)
+    else:
+        execute = run_graph
+    with run_lock(run_dir):
+        write_manifest(run_dir, spec, graph)
+        result = execute(
+            graph,
+            run_dir,
+            registry or real_registry(),
+            console=console,
+            show_progress=config.progress,
+            lock=False,
+        )
+    print_summary(result, console)
+    print_results(run_dir, console)
+    report = run_dir / REPORT_DIR
+    console.print(f"report: {report / 'report.html'} (Markdown: {report / 'report.md'})")
+    return PipelineOutcome(run_dir, result, report / "report.md", report / "report.html")
+
+
+def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str, list[str]]:
+    """Which stages of a run are up to date and which the next run would run (a stage whose
+    upstream will run counts as to run); prints a table per kind.
+
+    Returns:
+      ``{"up to date": [ids], "to run": [ids]}``.
+    """
+    from rich.console import Console
+    from rich.table import Table
+
+    from elicit_jax.pipeline.plan import build_graph
+    from elicit_jax.pipeline.runner import stage_up_to_date
+    from elicit_jax.pipeline.stages import resolve_config
+
+    console = console or Console()
+    spec = load_spec(config.pipeline, config.profile)
+    graph = build_graph(spec, resolve_config)
+    run_dir = Path(config.out) if config.out else default_run_dir(spec)
+    out: dict[str, list[str]] = {"up to date": [], "to run": []}
+    per_kind: dict[str, list[int]] = {}
+    todo: set[str] = set()
+    for stage in graph:
+        upstream_todo = bool(todo & set(stage.inputs.values()))
+        done = not upstream_todo and run_dir.exists() and stage_up_to_date(run_dir, graph, stage)
+        if not done:
+            todo.add(stage.id)
+        out["up to date" if done else "to run"].append(stage.id)
+        per_kind.setdefault(stage.kind, [0, 0])[0 if done else 1] += 1
+    table = Table(title=f"{spec.name} ({spec.profile} profile) in {run_dir}")
+    for col in ("stage", "up to date", "to run"):
+        table.add_column(col, justify="left" if col == "stage" else "right")
+    for kind, (done, todo) in per_kind.items():
+        table.add_row(kind, str(done), str(todo))
+    console.print(table)
+    return out
+
+
+def print_results(run_dir: Path, console: Any) -> None:
+    """Print the run's result tables (paper layout) from its finished artifacts."""
+    from rich.table import Table
+
+    from elicit_jax.pipeline.tables import models_table, results_tables
+
+    data = gather(run_dir)
+    for title, (header, rows) in results_tables(data) + models_table(data):
+        table = Table(title=title)
+        for col in header:
+            table.add_column(col)
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
+    for note in data.notes:
+        console.print(f"[yellow]{note}[/]")
+
+
+def render_run_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
+    """(Re)write the report of a run directory; returns the Markdown and HTML paths."""
+    from elicit_jax.pipeline.report import write_report
+
+    run_dir = Path(run_dir)
+    return write_report(gather(run_dir), Path(out) if out else run_dir / REPORT_DIR)

@@ -1,0 +1,261 @@
+"""Pipeline definitions: a TOML file read into frozen dataclasses, with profiles applied.
+
+A definition names the grid (tasks × operators × seeds × models), the training sets to
+compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.toml``)::
+
+    [pipeline]                      # name, description, profile, seeds, models, methods
+    [[task]]                        # one table per task: operators and demo counts
+    [collect] [train] [score] [thresholds] [filter] [evaluate]   # stage overrides
+    [profiles.cpu.train]            # overrides applied only under that profile
+
+Section keys are passed to the stage's library config by field name; unknown fields are
+reported when the stage graph is built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from elicit_jax.errors import ElicitError
+
+PROFILES = ("paper", "cpu")
+SECTIONS = ("collect", "train", "score", "thresholds", "filter", "evaluate", "report")
+METHODS = (
+    "base",
+    "naive",
+    "filtered",
+    "filtered-episode",
+    "random",
+    "longest",
+    "shortest",
+    "likelihood",
+    "novelty",
+)
+_TOP_KEYS = {"pipeline", "task", "profiles", *SECTIONS}
+_PIPELINE_KEYS = {"name", "description", "profile", "seeds", "models", "methods", "collect_seed"}
+_TASK_KEYS = {
+    "name",
+    "base_operator",
+    "operators",
+    "base_episodes",
+    "new_episodes",
+    "holdout_episodes",
+    "incompatible_operator",
+    "incompatible_episodes",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """One task of the grid and the demonstrations collected for it.
+
+    Attributes:
+      name: task name (``square-nut``, ``reach-pillar``, ...).
+      base_operator: the proficient operator whose demos form D_base.
+      operators: the new operators, each contributing one D_new.
+      base_episodes: size of D_base.
+      new_episodes: size of each D_new.
+      holdout_episodes: held-out base demos (collected with another seed): the compatible
+        contrast set used to fit the thresholds.
+      incompatible_operator: operator known a priori to conflict with the base style.
+      incompatible_episodes: its demos (another seed, disjoint from every D_new): the
+        incompatible contrast set.
+    """
+
+    name: str
+    base_operator: str
+    operators: tuple[str, ...]
+    base_episodes: int
+    new_episodes: int
+    holdout_episodes: int
+    incompatible_operator: str
+    incompatible_episodes: int
+
+
+@dataclasses.dataclass(frozen=True)
+class PipelineSpec:
+    """A parsed pipeline definition under one profile.
+
+    Attributes:
+      name: pipeline name.
+      description: one paragraph shown in reports.
+      profile: ``paper`` (the paper's sizes) or ``cpu`` (shrunk to fit a 2-core machine).
+      seeds: training seeds; results are reported as mean (std) over them.
+      models: policy kinds (``mlp``, ``mdn``, ``lstm``).
+      methods: training sets compared (``base``, ``naive``, ``filtered``, baselines).
+      collect_seed: base seed of demonstration collection.
+      tasks: the tasks with their operators.
+      sections: stage name -> config overrides (profile overrides already merged in).
+      source: where the definition was read from.
+      text: the definition's exact text, reproduced in reports.
+    """
+
+    name: str
+    description: str
+    profile: str
+    seeds: tuple[int, ...]
+    models: tuple[str, ...]
+    methods: tuple[str, ...]
+    collect_seed: int
+    tasks: tuple[TaskSpec, ...]
+    sections: Mapping[str, Mapping[str, Any]]
+    source: str
+    text: str
+
+    def section(self, name: str) -> dict[str, Any]:
+        """A copy of the overrides for stage ``name`` (empty if none)."""
+        return dict(self.sections.get(name, {}))
+
+    @property
+    def n_cells(self) -> int:
+        """Grid cells: tasks × models (each trains one base policy, all seeds at once)."""
+        return len(self.tasks) * len(self.models)
+
+
+def builtin_dir() -> Path:
+    """Directory of the pipeline definitions shipped inside the package."""
+    return Path(str(resources.files("elicit_jax") / "pipelines"))
+
+
+def builtin_names() -> list[str]:
+    """Names of the shipped definitions (``quickstart``, ``filtering``, ``models``)."""
+    return sorted(p.stem for p in builtin_dir().glob("*.toml"))
+
+
+def resolve_path(name_or_path: str | Path) -> Path:
+    """A definition file: an existing path, or the name of a shipped definition."""
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    shipped = builtin_dir() / f"{Path(str(name_or_path)).stem}.toml"
+    if path.suffix in ("", ".toml") and path.parent == Path(".") and shipped.exists():
+        return shipped
+    names = ", ".join(builtin_names())
+    raise ElicitError(f"no such pipeline file (shipped definitions: {names})", path)
+
+
+def load_spec(name_or_path: str | Path, profile: str | None = None) -> PipelineSpec:
+    """Read and validate a pipeline definition.
+
+    Args:
+      name_or_path: a TOML file, or the name of a shipped definition.
+      profile: ``paper`` or ``cpu``; default: the file's ``[pipeline] profile``.
+
+    Raises:
+      ElicitError: one line naming the file and the offending key.
+    """
+    path = resolve_path(name_or_path)
+    text = path.read_text()
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ElicitError(f"malformed TOML ({e})", path) from e
+    return parse_spec(data, source=str(path), text=text, profile=profile)
+
+
+def parse_spec(
+    data: Mapping[str, Any], *, source: str = "<spec>", text: str = "", profile: str | None = None
+) -> PipelineSpec:
+    """Build a :class:`PipelineSpec` from parsed TOML ``data`` (see :func:`load_spec`)."""
+    _check_keys(data, _TOP_KEYS, "top level", source)
+    head = data.get("pipeline")
+    if not isinstance(head, Mapping):
+        raise ElicitError("missing [pipeline] table", source)
+    _check_keys(head, _PIPELINE_KEYS, "[pipeline]", source)
+    profile = profile or head.get("profile", "paper")
+    if profile not in PROFILES:
+        raise ElicitError(
+            f"unknown profile '{profile}' (choose from {', '.join(PROFILES)})", source
+        )
+    overrides = data.get("profiles", {}).get(profile, {})
+    _check_keys(overrides, {*SECTIONS, "task"}, f"[profiles.{profile}]", source)
+    for prof in data.get("profiles", {}):
+        if prof not in PROFILES:
+            raise ElicitError(f"[profiles.{prof}]: unknown profile name", source)
+    sections = {}
+    for name in SECTIONS:
+        merged = {**_table(data, name, source), **_table(overrides, name, source)}
+        sections[name] = MappingProxyType(merged)
+    tasks_raw = data.get("task", [])
+    if not isinstance(tasks_raw, list) or not tasks_raw:
+        raise ElicitError("needs at least one [[task]] table", source)
+    task_over = _table(overrides, "task", source)
+    tasks = tuple(_task({**t, **task_over}, source) for t in tasks_raw)
+    if len({t.name for t in tasks}) != len(tasks):
+        raise ElicitError("a task is listed twice", source)
+    methods = tuple(head.get("methods", ("base", "naive", "filtered")))
+    for m in methods:
+        if m not in METHODS:
+            raise ElicitError(f"unknown method '{m}' (choose from {', '.join(METHODS)})", source)
+    if "base" not in methods:
+        raise ElicitError("methods must include 'base' (every comparison is against it)", source)
+    seeds = tuple(int(s) for s in head.get("seeds", (0,)))
+    models = tuple(str(m) for m in head.get("models", ("mlp",)))
+    if not seeds or not models:
+        raise ElicitError("[pipeline] seeds and models must not be empty", source)
+    return PipelineSpec(
+        name=str(head.get("name", Path(source).stem)),
+        description=str(head.get("description", "")).strip(),
+        profile=profile,
+        seeds=seeds,
+        models=models,
+        methods=methods,
+        collect_seed=int(head.get("collect_seed", 0)),
+        tasks=tasks,
+        sections=MappingProxyType(sections),
+        source=source,
+        text=text,
+    )
+
+
+def _check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
+    if not isinstance(table, Mapping):
+        raise ElicitError(f"{where} must be a table", source)
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ElicitError(
+            f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})",
+            source,
+        )
+
+
+def _table(data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
+    value = data.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ElicitError(f"[{name}] must be a table", source)
+    return dict(value)
+
+
+def _task(raw: Mapping[str, Any], source: str) -> TaskSpec:
+    _check_keys(raw, _TASK_KEYS, "[[task]]", source)
+    for key in ("name", "operators", "incompatible_operator"):
+        if key not in raw:
+            raise ElicitError(f"[[task]] is missing '{key}'", source)
+    operators = tuple(str(o) for o in raw["operators"])
+    if not operators:
+        raise ElicitError(f"[[task]] {raw['name']}: operators must not be empty", source)
+    counts = {
+        k: int(raw.get(k, d))
+        for k, d in (
+            ("base_episodes", 50),
+            ("new_episodes", 50),
+            ("holdout_episodes", 5),
+            ("incompatible_episodes", 3),
+        )
+    }
+    for k, v in counts.items():
+        if v < 1:
+            raise ElicitError(f"[[task]] {raw['name']}: {k} must be at least 1, got {v}", source)
+    return TaskSpec(
+        name=str(raw["name"]),
+        base_operator=str(raw.get("base_operator", "base")),
+        operators=operators,
+        incompatible_operator=str(raw["incompatible_operator"]),
+        **counts,
+    )

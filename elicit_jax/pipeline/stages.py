@@ -1,0 +1,331 @@
+"""The real stage functions: thin adapters from a :class:`StageContext` to the library.
+
+Each adapter reads its inputs, builds the library's frozen config from the stage config and
+calls ONE library function (``train_policy``, ``score_file``, ``fit_thresholds``,
+``filter_demos``, the simulator's collection and evaluation, the map renderer). Stages whose
+library writes sibling files (scores + per-episode summary, filtered demos + drop log) get a
+directory output, written atomically as a whole. :func:`resolve_config` turns a stage's raw
+overrides into the library's full config, so a changed library default changes the recorded
+config and re-runs the stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.runner import StageContext, StageFn
+
+FILTER_METHODS = {
+    "filtered": ("m", "pair"),
+    "filtered-episode": ("m", "episode"),
+    "random": ("random", None),
+    "longest": ("longest", None),
+    "shortest": ("shortest", None),
+    "likelihood": ("likelihood", None),
+    "novelty": ("novelty", None),
+}
+DEMOS_FILE = "demos.parquet"
+SCORES_FILE = "scores.parquet"
+
+
+def demos_file(path: Path) -> Path:
+    """The demonstrations file of a stage output: the file itself or ``DIR/demos.parquet``."""
+    return path / DEMOS_FILE if path.is_dir() else path
+
+
+def _fields(cls: type, overrides: Mapping[str, Any], stage: str) -> dict[str, Any]:
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ElicitError(
+            f"[{stage}] unknown option(s) {', '.join(unknown)} "
+            f"(allowed: {', '.join(sorted(names))})"
+        )
+    return dict(overrides)
+
+
+def _split(raw: Mapping[str, Any], meta: tuple[str, ...]) -> tuple[dict, dict]:
+    return {k: raw[k] for k in meta if k in raw}, {k: v for k, v in raw.items() if k not in meta}
+
+
+def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.sim.collect import CollectConfig
+    from elicit_jax.sim.operators import operator_names
+
+    meta, over = _split(raw, ("role",))
+    known = operator_names(over["task"])
+    if over["operator"] not in known:
+        raise ElicitError(
+            f"task '{over['task']}' has no operator '{over['operator']}' "
+            f"(known: {', '.join(known)})"
+        )
+    cfg = CollectConfig(**_fields(CollectConfig, over, "collect"))
+    return {**meta, "collect": dataclasses.asdict(cfg)}
+
+
+def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.policy.config import TrainConfig
+
+    meta, over = _split(raw, ("task", "profile", "method", "operator"))
+    cfg = TrainConfig.from_profile(meta["profile"], **_fields(TrainConfig, over, "train"))
+    return {**meta, "train": cfg.to_dict()}
+
+
+def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score import config_dict
+
+    meta, over = _split(raw, ("task", "model", "policy_seed", "set", "checkpoint"))
+    meta.setdefault("checkpoint", "best")
+    return {**meta, "score": config_dict(ScoreConfig(**_fields(ScoreConfig, over, "score")))}
+
+
+def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.compat.thresholds import FitConfig
+
+    keys = (
+        "task",
+        "model",
+        "compatible_operator",
+        "incompatible_operator",
+        "holdout_seed",
+        "incompatible_seed",
+        "lambda",
+        "eta",
+    )
+    meta, over = _split(raw, keys)
+    if ("lambda" in meta) != ("eta" in meta):
+        raise ElicitError("[thresholds] give both lambda and eta (manual), or neither (fit)")
+    if meta["compatible_operator"] == meta["incompatible_operator"]:
+        raise ElicitError("incompatible_operator must differ from the base operator")
+    fit = FitConfig(**_fields(FitConfig, over, "thresholds"))
+    return {**meta, "fit": dataclasses.asdict(fit)}
+
+
+def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.compat.filtering import FilterConfig
+
+    meta, over = _split(raw, ("task", "model", "method", "operator"))
+    method, level = FILTER_METHODS[meta["method"]]
+    over = {**over, "method": method, **({"level": level} if level else {})}
+    cfg = FilterConfig(**_fields(FilterConfig, over, "filter"))
+    if cfg.lambda_ is not None:
+        raise ElicitError("[filter] takes its thresholds from the fit stage; set [thresholds]")
+    return {**meta, "filter": dataclasses.asdict(cfg)}
+
+
+def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.sim.evaluate import EvalConfig
+
+    meta, over = _split(raw, ("model", "profile", "method", "operator", "seeds"))
+    over = {"checkpoints": ["all"], "select": "best", **over}
+    over["checkpoints"] = tuple(str(c) for c in over["checkpoints"])
+    cfg = EvalConfig(**_fields(EvalConfig, over, "evaluate"))
+    return {**meta, "evaluate": dataclasses.asdict(cfg)}
+
+
+_RESOLVERS = {
+    "collect": _resolve_collect,
+    "train": _resolve_train,
+    "score": _resolve_score,
+    "fit-thresholds": _resolve_fit,
+    "filter": _resolve_filter,
+    "evaluate": _resolve_evaluate,
+}
+
+
+def resolve_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+    """Full, validated config of a stage: pipeline keys plus the library config's fields
+    (``map`` and ``report`` stages keep their raw config)."""
+    resolver = _RESOLVERS.get(kind)
+    return raw if resolver is None else resolver(raw)
+
+
+def train_stage(ctx: StageContext) -> None:
+    """Train on the concatenation of the ``demos*`` inputs (D_base first); a filter output
+    that kept nothing contributes nothing."""
+    from elicit_jax.data.demos import concat_demos, read_demos
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+
+    names = sorted(n for n in ctx.inputs if n.startswith("demos"))
+    files = {n: demos_file(ctx.inputs[n]) for n in names}
+    files = {n: f for n, f in files.items() if f.exists() or n == "demos0"}
+    demos = concat_demos([read_demos(f) for f in files.values()])
+    train_policy(demos, TrainConfig.from_dict(ctx.config["train"]), ctx.output, inputs=files)
+
+
+def score_stage(ctx: StageContext) -> None:
+    """Score the ``demos*`` inputs (concatenated) with the base policy of ``policy_seed``."""
+    from elicit_jax.compat.score import config_from_dict
+    from elicit_jax.compat.score_file import score_file
+    from elicit_jax.data.demos import concat_demos, read_demos, write_demos
+    from elicit_jax.policy.checkpoint import load_policy
+
+    cfg = ctx.config
+    which = cfg["checkpoint"]
+    policy = load_policy(
+        ctx.inputs["policy"], int(which) if str(which).isdigit() else which, seed=cfg["policy_seed"]
+    )
+    names = sorted(n for n in ctx.inputs if n.startswith("demos"))
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        source = ctx.inputs[names[0]]
+        if len(names) > 1:
+            source = tmp / DEMOS_FILE
+            parts = [read_demos(ctx.inputs[n]) for n in names]
+            write_demos(source, concat_demos(parts), inputs={n: ctx.inputs[n] for n in names})
+        result = score_file(
+            policy,
+            source,
+            tmp / SCORES_FILE,
+            config_from_dict(cfg["score"]),
+            policy_path=ctx.inputs["policy"],
+        )
+        header = make_header(
+            "pipeline-scores",
+            1,
+            config=dict(cfg),
+            inputs=dict(ctx.inputs),
+            files=[SCORES_FILE, result.episodes_path.name],
+            n_pairs=result.n_pairs,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def fit_stage(ctx: StageContext) -> None:
+    """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
+    from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.thresholds import FitConfig
+
+    cfg = ctx.config
+    job = FitJob(
+        compatible=f"operator:{cfg['compatible_operator']}",
+        incompatible=f"operator:{cfg['incompatible_operator']}",
+        fit=FitConfig(**cfg["fit"]),
+        lambda_=cfg.get("lambda"),
+        eta=cfg.get("eta"),
+    )
+    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job)
+
+
+def filter_stage(ctx: StageContext) -> None:
+    """Filter one D_new by its scores under the fitted thresholds (M-filter or a baseline).
+
+    When the filter drops every pair (e.g. every demo of a conflicting operator rejected), the
+    output holds no demonstrations file and the retraining uses D_base alone.
+    """
+    import numpy as np
+
+    from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    cfg = FilterConfig(**{**ctx.config["filter"], "lambda_": lam, "eta": eta})
+    scores_path = ctx.inputs["scores"] / SCORES_FILE
+    _, scores = read_scores(scores_path)
+    drop, reason = drop_mask(scores, cfg)
+    counts = {
+        "pairs_in": int(drop.size),
+        "pairs_dropped": int(drop.sum()),
+        "episodes_in": int(np.unique(scores["episode"]).size),
+        "episodes_out": 0,
+    }
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        files = []
+        if not drop.all():
+            result = filter_demos(scores_path, ctx.inputs["demos"], tmp / DEMOS_FILE, cfg)
+            counts["episodes_out"] = result.episodes_out
+            files = [DEMOS_FILE, result.log_path.name]
+        else:
+            reason += "; every pair dropped, so the retraining uses D_base alone"
+        header = make_header(
+            "pipeline-filter",
+            1,
+            config=dict(ctx.config),
+            inputs=dict(ctx.inputs),
+            thresholds={"lambda": lam, "eta": eta},
+            reason=reason,
+            files=files,
+            **counts,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def collect_stage(ctx: StageContext) -> None:
+    """Collect scripted demonstrations of one operator (successes only) on C MuJoCo."""
+    from rich.progress import Progress
+
+    from elicit_jax.sim.collect import CollectConfig, collect
+
+    cfg = CollectConfig(**ctx.config["collect"])
+    with Progress(console=ctx.console, transient=True) as progress:
+        bar = progress.add_task(f"collect {cfg.operator}", total=cfg.episodes)
+        collect(cfg, ctx.output, progress=lambda kept, _: progress.update(bar, completed=kept))
+
+
+def map_stage(ctx: StageContext) -> None:
+    """Draw the compatibility map: held-out base demos and each D_new, one panel each."""
+    import numpy as np
+
+    from elicit_jax.compat.maps import write_png
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    cols = ("likelihood", "novelty", "operator", "incompatible")
+    _, ref = read_scores(ctx.inputs["scores:contrast"] / SCORES_FILE, cols)
+    keep = np.asarray(ref["operator"]).astype(str) == ctx.config["base_operator"]
+    parts = [{k: np.asarray(v)[keep] for k, v in ref.items()}]
+    parts[0]["operator"] = np.full(int(keep.sum()), f"{ctx.config['base_operator']} (held-out)")
+    for op in ctx.config["operators"]:
+        parts.append(read_scores(ctx.inputs[f"scores:{op}"] / SCORES_FILE, cols)[1])
+    scores = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in cols}
+    write_png(scores, lam, eta, ctx.output, axis=ctx.config.get("axis", "likelihood-error"))
+
+
+def evaluate_stage(ctx: StageContext) -> None:
+    """Roll out every seed and checkpoint of one training run on the same initial states."""
+    from rich.progress import Progress
+
+    from elicit_jax.sim.evaluate import EvalConfig, evaluate_policies, expand_policies
+
+    raw = dict(ctx.config["evaluate"])
+    cfg = EvalConfig(**{**raw, "checkpoints": tuple(raw["checkpoints"])})
+    label = Path(ctx.stage.output).stem
+    spec = f"{label}={ctx.inputs['policy']}"
+    total = len(expand_policies([spec], cfg.checkpoints))
+    with Progress(console=ctx.console, transient=True) as progress:
+        bar = progress.add_task(f"evaluate {label} ({cfg.rollouts} rollouts each)", total=total)
+        evaluate_policies(
+            [spec], cfg, out=ctx.output, progress=lambda ref, success: progress.advance(bar)
+        )
+
+
+def report_stage(ctx: StageContext) -> None:
+    """Gather the run's artifacts and write the Markdown + HTML report."""
+    from elicit_jax.pipeline.gather import gather
+    from elicit_jax.pipeline.report import write_report
+
+    write_report(gather(ctx.run_dir), ctx.output)
+
+
+def real_registry() -> dict[str, StageFn]:
+    """Stage kind -> function, for every stage whose library is wired."""
+    return {
+        "collect": collect_stage,
+        "map": map_stage,
+        "evaluate": evaluate_stage,
+        "train": train_stage,
+        "score": score_stage,
+        "fit-thresholds": fit_stage,
+        "filter": filter_stage,
+        "report": report_stage,
+    }

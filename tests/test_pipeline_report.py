@@ -1,0 +1,155 @@
+"""Report rendering: the paper's table layout, mean (std) over seeds, self-contained HTML."""
+
+from __future__ import annotations
+
+import base64
+import re
+
+import pytest
+
+from elicit_jax.artifact import read_header
+from elicit_jax.pipeline.report import CPU_NOTE, render_html, render_markdown, write_report
+from elicit_jax.pipeline.tables import (
+    FilterRow,
+    LengthRow,
+    ReportData,
+    ResultRow,
+    ThresholdRow,
+    mean_std,
+    models_table,
+    results_tables,
+)
+
+# The smallest valid PNG (1×1, transparent).
+PNG = base64.b64decode(
+    "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNkYPhfDwAChwGA60e6kgAAAABJRU5ErkJggg=="
+)
+
+
+def row(method, op, seed, success, model="mlp"):
+    return ResultRow("square-nut", model, method, op, seed, success, 100.0 + seed, 50, "best")
+
+
+def data(tmp_path, profile="cpu") -> ReportData:
+    png = tmp_path / "square-nut-mlp.png"
+    png.write_bytes(PNG)
+    results = [row("base", None, s, v) for s, v in enumerate((0.40, 0.36, 0.38))]
+    results += [row("naive", "same-style", s, v) for s, v in enumerate((0.50, 0.56, 0.56))]
+    results += [row("filtered", "same-style", s, v) for s, v in enumerate((0.52, 0.50, 0.54))]
+    results += [row("naive", "conflict-ring", s, v) for s, v in enumerate((0.20, 0.30, 0.28))]
+    results += [row("filtered", "conflict-ring", s, v) for s, v in enumerate((0.36, 0.40, 0.38))]
+    results += [row("base", None, 0, 0.1, model="mdn"), row("naive", "same-style", 0, 0.2, "mdn")]
+    return ReportData(
+        pipeline="filtering",
+        profile=profile,
+        description="A study.",
+        run_dir=str(tmp_path),
+        spec_text="# spec\n[pipeline]\nname = 'filtering'\n",
+        results=tuple(results),
+        thresholds=(
+            ThresholdRow(
+                "square-nut",
+                "mlp",
+                0.41,
+                0.052,
+                "held-out base",
+                "conflict-flip x3",
+                {
+                    "balanced_accuracy": 1.0,
+                    "margin": 0.125,
+                    "loo_accuracy": 0.875,
+                    "per_operator": {
+                        "conflict-flip": {
+                            "pairs": 300,
+                            "incompatible_pairs": 45,
+                            "episodes": 3,
+                            "rejected_episodes": 3,
+                        }
+                    },
+                },
+            ),
+        ),
+        lengths=(LengthRow("square-nut", "base", "base", 50, 87.25, 4.5),),
+        filters=(FilterRow("square-nut", "mlp", "filtered", "conflict-ring", 750, 1000, 10, 10),),
+        maps=(("square-nut, mlp: compatibility map per operator", str(png)),),
+        configs={"train": {"train/x": {"epochs": 100}}},
+        versions={"jax": "0.10.2"},
+    )
+
+
+def test_mean_std_over_seeds_by_hand():
+    # 100 × (0.40, 0.36, 0.38) = 40, 36, 38: mean 38; var = (4 + 4 + 0) / 3 = 2.67 → std 1.63
+    assert mean_std([0.40, 0.36, 0.38]) == "38.0 (1.6)"
+    assert mean_std([0.5]) == "50.0 (–)"
+    assert mean_std([]) == "–"
+
+
+def test_results_table_has_paper_layout(tmp_path):
+    (title, (header, rows)), _ = results_tables(data(tmp_path))
+    assert title.startswith("square-nut — mlp")
+    assert header == ["operator", "Naive", "M-Filtered"]
+    assert rows[0][0] == "base only: 38.0 (1.6)"
+    # same-style naive: 50, 56, 56 → mean 54, var = (16 + 4 + 4) / 3 = 8 → std 2.83;
+    # filtered: 52, 50, 54 → mean 52, var = (0 + 4 + 4) / 3 → std 1.63
+    assert rows[1] == ["same-style", "54.0 (2.8)", "52.0 (1.6)"]
+    # conflict-ring naive: 20, 30, 28 → mean 26, var = (36 + 16 + 4) / 3 = 18.7 → std 4.32
+    assert rows[2] == ["conflict-ring", "26.0 (4.3)", "38.0 (1.6)"]
+    ((_, (mheader, mrows)),) = models_table(data(tmp_path))
+    assert mheader == ["", "mlp", "mdn"]
+    assert mrows[0] == ["Base (D_base only)", "38.0 (1.6)", "10.0 (–)"]
+    assert mrows[1] == ["Naive + same-style", "54.0 (2.8)", "20.0 (–)"]
+
+
+def test_markdown_and_html_carry_every_section(tmp_path):
+    d = data(tmp_path)
+    md = render_markdown(d, map_dir="maps/")
+    for text in (
+        CPU_NOTE,
+        "| same-style | 54.0 (2.8) | 52.0 (1.6) |",
+        "0.41",
+        "0.052",
+        "750/1000 (75.0%)",
+        "87.2 (4.5)",
+        "![square-nut, mlp",
+        "(maps/square-nut-mlp.png)",
+        "name = 'filtering'",
+        "| square-nut | mlp | conflict-flip | 300 | 45 (15.0%) | 3/3 |",
+        '"jax": "0.10.2"',
+        "held-out base",
+    ):
+        assert text in md, text
+    page = render_html(d)
+    assert "data:image/png;base64," + base64.b64encode(PNG).decode() in page
+    assert not re.search(r"""(src|href)=["'](https?:|//|/)""", page)
+    assert "<script" not in page and "<link" not in page
+    assert "<b>CPU profile</b>" in page
+    assert "54.0 (2.8)" in page and "&lt;" not in md
+
+
+def test_paper_profile_has_no_cpu_note(tmp_path):
+    d = data(tmp_path, profile="paper")
+    assert CPU_NOTE not in render_markdown(d) and "CPU profile" not in render_html(d)
+
+
+def test_write_report_is_a_self_describing_directory(tmp_path):
+    md, page = write_report(data(tmp_path), tmp_path / "report")
+    assert md.read_text().startswith("# elicit-jax report: filtering (cpu profile)")
+    assert (tmp_path / "report" / "maps" / "square-nut-mlp.png").read_bytes() == PNG
+    header = read_header(tmp_path / "report")
+    assert header["kind"] == "pipeline-report" and header["n_results"] == 17
+    assert page.exists()
+
+
+@pytest.mark.parametrize("bad", ["a|b"])
+def test_markdown_escapes_pipes(tmp_path, bad):
+    d = data(tmp_path)
+    d = type(d)(**{**d.__dict__, "results": (row("naive", bad, 0, 0.5), *d.results)})
+    assert "a\\|b" in render_markdown(d)
+
+
+def test_report_of_a_directory_that_is_not_a_run_fails_in_one_line(tmp_path):
+    from elicit_jax.errors import ElicitError
+    from elicit_jax.pipeline.run import render_run_report
+
+    with pytest.raises(ElicitError, match=r"not a pipeline run directory \(no run.json\)"):
+        render_run_report(tmp_path)

@@ -1,0 +1,168 @@
+"""Pipeline definitions and the study graph built from them (no training: configs only)."""
+
+from __future__ import annotations
+
+import pytest
+
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.plan import build_graph, collect_seed
+from elicit_jax.pipeline.spec import builtin_names, load_spec, parse_spec, resolve_path
+
+MINI = {
+    "pipeline": {
+        "name": "mini",
+        "profile": "cpu",
+        "seeds": [0, 1],
+        "models": ["mlp"],
+        "methods": ["base", "naive", "filtered", "random"],
+    },
+    "task": [
+        {
+            "name": "reach-pillar",
+            "operators": ["a", "b"],
+            "incompatible_operator": "b",
+            "base_episodes": 5,
+            "new_episodes": 4,
+        }
+    ],
+    "train": {"epochs": 10},
+    "filter": {"level": "pair"},
+    "profiles": {"paper": {"train": {"epochs": 1000}}, "cpu": {"task": {"new_episodes": 3}}},
+}
+
+
+def test_shipped_definitions_parse_under_both_profiles():
+    assert {"quickstart", "filtering", "models"} <= set(builtin_names())
+    for name in builtin_names():
+        for profile in ("cpu", "paper"):
+            spec = load_spec(name, profile)
+            assert spec.profile == profile
+            assert spec.text.startswith("#")
+            graph = build_graph(spec)
+            assert graph.order[-1].id == "report"
+
+
+def test_shipped_definitions_name_real_operators_and_valid_options():
+    from elicit_jax.pipeline.stages import resolve_config
+
+    for name in builtin_names():
+        graph = build_graph(load_spec(name, "cpu"), resolve_config)
+        assert graph["report"].config["pipeline"] == name
+
+
+def test_unknown_operator_or_option_fails_before_running():
+    from elicit_jax.pipeline.stages import resolve_config
+
+    bad_op = {
+        **MINI,
+        "task": [
+            {**MINI["task"][0], "operators": ["nobody"], "incompatible_operator": "conflict-over"}
+        ],
+    }
+    with pytest.raises(ElicitError, match="has no operator 'nobody'"):
+        build_graph(parse_spec(bad_op), resolve_config)
+    bad_opt = {
+        **MINI,
+        "task": [
+            {**MINI["task"][0], "operators": ["mild"], "incompatible_operator": "conflict-over"}
+        ],
+        "train": {"epochz": 3},
+    }
+    with pytest.raises(ElicitError, match=r"\[train\] unknown option\(s\) epochz"):
+        build_graph(parse_spec(bad_opt), resolve_config)
+
+
+def test_profile_overrides_are_merged_over_sections():
+    cpu = parse_spec(MINI)
+    paper = parse_spec(MINI, profile="paper")
+    assert cpu.section("train") == {"epochs": 10}
+    assert paper.section("train") == {"epochs": 1000}
+    assert cpu.tasks[0].new_episodes == 3 and paper.tasks[0].new_episodes == 4
+
+
+@pytest.mark.parametrize(
+    ("patch", "message"),
+    [
+        ({"pipeline": {"name": "x", "sedes": [0]}}, "unknown key"),
+        ({"pipeline": {"name": "x", "profile": "gpu"}}, "unknown profile 'gpu'"),
+        ({"pipeline": {"name": "x", "methods": ["naive"]}}, "must include 'base'"),
+        ({"pipeline": {"name": "x", "methods": ["base", "magic"]}}, "unknown method 'magic'"),
+        ({"task": []}, "at least one"),
+        ({"task": [{"name": "t", "operators": ["a"]}]}, "missing 'incompatible_operator'"),
+        (
+            {
+                "task": [
+                    {
+                        "name": "t",
+                        "operators": ["a"],
+                        "incompatible_operator": "a",
+                        "base_episodes": 0,
+                    }
+                ]
+            },
+            "base_episodes must be at least 1",
+        ),
+        ({"bogus": {}}, "top level: unknown key"),
+    ],
+)
+def test_bad_definitions_fail_with_one_line(patch, message):
+    with pytest.raises(ElicitError, match=message) as info:
+        parse_spec({**MINI, **patch}, source="x.toml")
+    assert "\n" not in str(info.value) and str(info.value).startswith("x.toml: ")
+
+
+def test_missing_file_names_the_shipped_ones(tmp_path):
+    with pytest.raises(ElicitError, match=r"shipped definitions: .*quickstart"):
+        resolve_path(tmp_path / "nope.toml")
+    assert resolve_path("quickstart").name == "quickstart.toml"
+
+
+def test_graph_shape_and_disjoint_contrast_sets():
+    spec = parse_spec(MINI)
+    graph = build_graph(spec)
+    kinds = [s.kind for s in graph]
+    # collects: base, holdout, incompatible, a, b = 5; trains: base + 2 naive + 2×2 filtered/random
+    # = 7; evaluates 7; scores: contrast + 2 = 3; fit 1; filters 2 × 2 = 4; map 1; report 1.
+    assert {k: kinds.count(k) for k in set(kinds)} == {
+        "collect": 5,
+        "train": 7,
+        "evaluate": 7,
+        "score": 3,
+        "fit-thresholds": 1,
+        "filter": 4,
+        "map": 1,
+        "report": 1,
+    }
+    seeds = {s.id: s.config["seed"] for s in graph if s.kind == "collect"}
+    assert len(set(seeds.values())) == 5  # every demo set has its own collection seed
+    task = spec.tasks[0]
+    assert collect_seed(spec, task, "incompatible") != collect_seed(spec, task, "b")
+    contrast = graph["score/reach-pillar/mlp/contrast"]
+    assert set(contrast.inputs.values()) == {
+        "train/reach-pillar/mlp/base",
+        "collect/reach-pillar/holdout",
+        "collect/reach-pillar/incompatible",
+    }
+    new_sets = {f"collect/reach-pillar/new/{o}" for o in ("a", "b")}
+    assert not new_sets & set(contrast.inputs.values())
+    assert graph["train/reach-pillar/mlp/base"].config["seeds"] == [0, 1]
+
+
+def test_changed_filter_config_affects_only_filter_stages_and_their_dependents():
+    spec_a = parse_spec(MINI)
+    spec_b = parse_spec({**MINI, "filter": {"level": "episode"}})
+    ga, gb = build_graph(spec_a), build_graph(spec_b)
+    changed = {s.id for s in ga if dict(s.config) != dict(gb[s.id].config)}
+    assert changed == {
+        f"filter/reach-pillar/mlp/{m}/{o}" for m in ("filtered", "random") for o in ("a", "b")
+    }
+    affected = set().union(*(ga.dependents(i) for i in changed)) | changed
+    untouched = {s.id for s in ga} - affected
+    assert "train/reach-pillar/mlp/base" in untouched
+    assert "train/reach-pillar/mlp/naive/a" in untouched
+    assert "score/reach-pillar/mlp/a" in untouched
+    assert {
+        "train/reach-pillar/mlp/filtered/a",
+        "evaluate/reach-pillar/mlp/random-b",
+        "report",
+    } <= affected
