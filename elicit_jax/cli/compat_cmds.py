@@ -1,0 +1,216 @@
+"""Compatibility commands: score, fit-thresholds, filter, map."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from elicit_jax.cli.app import app
+from elicit_jax.errors import ElicitError
+
+_THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
+_LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
+_ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
+
+
+def _resolve(
+    thresholds: Path | None, lam: float | None, eta: float | None, preset: str | None = None
+) -> tuple[float, float] | None:
+    """(λ, η) from exactly one of: a thresholds file, --lambda/--eta, a preset; or None."""
+    given = [thresholds is not None, lam is not None or eta is not None, preset is not None]
+    if sum(given) > 1:
+        raise ElicitError("give only one of --thresholds, --lambda/--eta, --preset")
+    if (lam is None) != (eta is None):
+        raise ElicitError("--lambda and --eta go together")
+    if thresholds is not None:
+        from elicit_jax.compat.thresholds import read_thresholds
+
+        lam_, eta_, _ = read_thresholds(thresholds)
+        return lam_, eta_
+    if lam is not None and eta is not None:
+        return float(lam), float(eta)
+    if preset is not None:
+        from elicit_jax.compat.measures import PRESETS
+
+        if preset not in PRESETS:
+            raise ElicitError(f"unknown preset '{preset}' (choose {', '.join(sorted(PRESETS))})")
+        return PRESETS[preset]
+    return None
+
+
+@app.command()
+def score(
+    policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
+    demos: Path = typer.Option(..., "--demos", help="Demonstrations to score (demos artifact)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Scores artifact to write (.parquet)."),
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    preset: str | None = typer.Option(
+        None, "--preset", help="Paper thresholds: square-nut (default), round-nut, hammer."
+    ),
+    likelihood: str = typer.Option(
+        "ensemble-mean", "--likelihood", help="ensemble-mean (paper) or member-average (code)."
+    ),
+    ddof: int = typer.Option(0, "--ddof", help="Std convention of novelty: 0 paper, 1 code."),
+    accept_fraction: float = typer.Option(
+        0.05, "--accept-fraction", help="Reject a demo above this fraction incompatible."
+    ),
+    chunk_size: int = typer.Option(4096, "--chunk-size", help="Pairs per compiled chunk."),
+    which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
+    seed: int | None = typer.Option(None, "--seed", help="Seed of a multi-seed run directory."),
+) -> None:
+    """Score every state-action pair: likelihood error, novelty, compatibility M.
+
+    Writes per-pair scores to OUT and a per-episode summary (5% accept/reject rule) next to
+    it as OUT.episodes.parquet, and prints a table per operator.
+
+    Example: elicit-jax score --policy runs/base --demos new.parquet -o scores.parquet
+    --preset round-nut
+    """
+    from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score_file import score_checkpoint
+
+    resolved = _resolve(thresholds, lambda_, eta, preset)
+    base = ScoreConfig()
+    lam, et = resolved if resolved is not None else (base.lambda_, base.eta)
+    config = ScoreConfig(
+        likelihood=likelihood,  # type: ignore[arg-type]
+        ddof=ddof,
+        lambda_=lam,
+        eta=et,
+        accept_fraction=accept_fraction,
+        chunk_size=chunk_size,
+    )
+    which_: str | int = int(which) if which.isdigit() else which
+    score_checkpoint(policy, demos, out, config, which=which_, seed=seed)
+
+
+@app.command("fit-thresholds")
+def fit_thresholds_cmd(
+    scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
+    compatible: str = typer.Option(
+        ..., "--compatible", help="operator:NAME[,..] | episodes:ID[,..] | label:COL=VALUE"
+    ),
+    incompatible: str = typer.Option(..., "--incompatible", help="Same forms as --compatible."),
+    out: Path = typer.Option(..., "-o", "--out", help="thresholds.json to write."),
+    lambda_: float | None = typer.Option(None, "--lambda", help="Manual λ (skips fitting)."),
+    eta: float | None = typer.Option(None, "--eta", help="Manual η (with --lambda)."),
+    accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
+    grid_size: int = typer.Option(64, "--grid-size", help="Quantile levels per axis."),
+) -> None:
+    """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
+
+    Maximises balanced accuracy over a quantile grid, ties broken by the widest margin
+    (docs/thresholds.md). Reports balanced accuracy, margin, leave-one-out accuracy and the
+    rejections per operator.
+
+    Example: elicit-jax fit-thresholds --scores scores.parquet --compatible operator:base
+    --incompatible operator:op4 -o thresholds.json
+    """
+    from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.thresholds import FitConfig
+
+    job = FitJob(
+        compatible=compatible,
+        incompatible=incompatible,
+        fit=FitConfig(accept_fraction=accept_fraction, grid_size=grid_size),
+        lambda_=lambda_,
+        eta=eta,
+    )
+    fit_scores_file(scores, out, job)
+
+
+@app.command("filter")
+def filter_cmd(
+    scores: Path = typer.Option(..., "--scores", help="Scores of --demos."),
+    demos: Path = typer.Option(..., "--demos", help="New demonstrations D_new."),
+    out: Path = typer.Option(..., "-o", "--out", help="Filtered demos artifact (.parquet)."),
+    base: Path | None = typer.Option(None, "--base", help="D_base, kept whole, placed first."),
+    level: str = typer.Option("pair", "--level", help="pair or episode."),
+    method: str = typer.Option(
+        "m", "--method", help="m | random | shortest | longest | likelihood | novelty."
+    ),
+    pair_mode: str = typer.Option(
+        "renumber", "--pair-mode", help="After dropping pairs: renumber steps or split episodes."
+    ),
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    seed: int = typer.Option(0, "--seed", help="Seed of the random baseline."),
+    export: str | None = typer.Option(
+        None, "--export", help="Also export kept episodes: robomimic (mask) or lerobot."
+    ),
+    export_out: Path | None = typer.Option(
+        None, "--export-out", help="robomimic: the .hdf5 copy; lerobot: folder or .json list."
+    ),
+    mask_key: str | None = typer.Option(None, "--mask-key", help="robomimic: new filter key."),
+    source: Path | None = typer.Option(
+        None, "--source", help="Original dataset for --export (default: recorded at import)."
+    ),
+) -> None:
+    """Drop incompatible pairs (M = 0) or rejected demos from D_new; or a baseline filter.
+
+    Baselines drop as many pairs/episodes as the M filter would. Dropped rows and reasons
+    go to OUT.dropped.parquet.
+
+    With --export robomimic (or lerobot) the kept episodes are also written as a new mask key
+    in a copy of the original robomimic file (or a LeRobot dataset / episode list).
+
+    Example: elicit-jax filter --scores scores.parquet --demos new.parquet
+    --base base.parquet -o filtered.parquet --level episode
+
+    Example: elicit-jax filter --scores scores.parquet --demos new.parquet -o kept.parquet
+    --level episode --export robomimic --mask-key compatible --export-out compatible.hdf5
+    """
+    from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
+
+    resolved = _resolve(thresholds, lambda_, eta)
+    config = FilterConfig(
+        level=level,  # type: ignore[arg-type]
+        method=method,
+        pair_mode=pair_mode,  # type: ignore[arg-type]
+        lambda_=resolved[0] if resolved else None,
+        eta=resolved[1] if resolved else None,
+        seed=seed,
+    )
+    spec = None
+    if export is not None:
+        if export_out is None:
+            raise ElicitError("--export needs --export-out")
+        spec = ExportSpec(
+            format=export,  # type: ignore[arg-type]
+            out=str(export_out),
+            mask_key=mask_key,
+            source=None if source is None else str(source),
+        )
+    r = filter_demos(scores, demos, out, config, base_path=base, export=spec)
+    typer.echo(
+        f"{out}: dropped {r.pairs_dropped}/{r.pairs_in} pairs of D_new "
+        f"({r.episodes_in} -> {r.episodes_out} episodes; {r.reason}); log: {r.log_path}"
+    )
+    if r.export is not None:
+        typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
+
+
+@app.command("map")
+def map_cmd(
+    scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
+    out: Path = typer.Option(..., "-o", "--out", help="map.png or map.html (interactive)."),
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    axis: str = typer.Option(
+        "likelihood-error", "--axis", help="likelihood-error (ℓ) or neg-likelihood-error (−ℓ)."
+    ),
+) -> None:
+    """Draw the compatibility map: likelihood vs novelty per operator, threshold box.
+
+    Example: elicit-jax map --scores scores.parquet -o map.png
+    """
+    from elicit_jax.compat.maps import map_scores_file
+
+    resolved = _resolve(thresholds, lambda_, eta)
+    lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
+    typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")

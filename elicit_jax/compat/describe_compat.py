@@ -1,0 +1,108 @@
+"""``elicit-jax info`` for compatibility artifacts: scores, episode scores, thresholds, logs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.describe import register
+
+
+def _kv(title: str, rows: list[tuple[str, Any]]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False, title_justify="left")
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    for k, v in rows:
+        table.add_row(k, "-" if v is None else str(v))
+    Console().print(table)
+
+
+def _inputs(header: dict[str, Any]) -> list[tuple[str, Any]]:
+    return [
+        (f"input {k}", f"{v.get('path')} (sha256 {str(v.get('sha256'))[:12]}…)")
+        for k, v in header.get("inputs", {}).items()
+    ]
+
+
+@register("scores")
+def describe_scores(path: Path, header: dict[str, Any]) -> None:
+    """Thresholds, config, dims and inputs, then the per-operator table of its episodes."""
+    from elicit_jax.compat.score import episodes_path
+
+    cfg = header.get("config", {})
+    _kv(
+        f"{path}: per-pair compatibility scores (schema v{header.get('schema_version')})",
+        [
+            ("pairs", header.get("n_pairs")),
+            ("task", header.get("task")),
+            ("dims (obs, action)", (header.get("obs_dim"), header.get("action_dim"))),
+            ("policy kind", header.get("policy_kind")),
+            ("thresholds", header.get("thresholds")),
+            ("likelihood / ddof", f"{cfg.get('likelihood')} / {cfg.get('ddof')}"),
+            ("accept fraction", cfg.get("accept_fraction")),
+            *_inputs(header),
+        ],
+    )
+    ep = episodes_path(path)
+    if ep.exists():
+        describe_episode_scores(ep, None)
+
+
+@register("episode-scores")
+def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
+    """Per-operator summary of the per-episode scores."""
+    import pyarrow.parquet as pq
+
+    from elicit_jax.compat.score_file import print_operator_table
+
+    table = pq.read_table(path)
+    cols = {
+        n: (
+            np.asarray(table.column(n).to_pylist(), dtype=object)
+            if n == "operator"
+            else table.column(n).to_numpy()
+        )
+        for n in table.column_names
+    }
+    print_operator_table(cols, title=f"{path.name}: episodes per operator")
+
+
+@register("thresholds")
+def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
+    """The thresholds, how they were obtained, and their report."""
+    from elicit_jax.compat.fit import print_report
+
+    _kv(
+        f"{path}: thresholds ({header.get('method')})",
+        [
+            ("lambda", header.get("lambda")),
+            ("eta", header.get("eta")),
+            ("compatible set", header.get("config", {}).get("compatible")),
+            ("incompatible set", header.get("config", {}).get("incompatible")),
+            *_inputs(header),
+        ],
+    )
+    if "report" in header and "per_operator" in header["report"]:
+        print_report(header)
+
+
+@register("filter-log")
+def describe_filter_log(path: Path, header: dict[str, Any]) -> None:
+    """Dropped pairs per operator and reason."""
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path, columns=["operator", "episode", "reason"])
+    ops = np.asarray(table.column("operator").to_pylist(), dtype=object).astype(str)
+    eps = table.column("episode").to_numpy()
+    rows = [("config", header.get("config")), ("dropped pairs", header.get("n_dropped"))]
+    for op in sorted(set(ops.tolist())):
+        sel = ops == op
+        rows.append((f"operator {op}", f"{int(sel.sum())} pairs in {len(set(eps[sel]))} episodes"))
+    reasons = sorted(set(table.column("reason").to_pylist()))
+    rows += [("reason", r) for r in reasons] + _inputs(header)
+    _kv(f"{path}: filter log", rows)

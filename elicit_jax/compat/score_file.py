@@ -1,0 +1,399 @@
+"""Scores as artifacts: stream a demonstrations file through the scorer, write, read, summarise.
+
+Example:
+    >>> from elicit_jax.compat.score_file import score_file
+    >>> score_file(policy, "new.parquet", "scores.parquet", ScoreConfig(), policy_path="runs/base")
+
+writes ``scores.parquet`` (per pair) and ``scores.episodes.parquet`` (per episode); see
+:mod:`elicit_jax.compat.score` for their columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import (
+    HEADER_KEY,
+    atomic_path,
+    dumps,
+    make_header,
+    read_header,
+    write_parquet,
+)
+from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.score import (
+    EPISODES_KIND,
+    SCHEMA_VERSION,
+    SCORES_KIND,
+    check_dims,
+    config_dict,
+    episodes_path,
+    policy_spec,
+    score_batches,
+)
+from elicit_jax.errors import ElicitError
+
+_CORE = ("episode", "operator", "step", "obs", "action")
+ROW_GROUP = 1 << 17  # rows per written Parquet row group (bounds the writer's buffer)
+
+
+@dataclasses.dataclass(frozen=True)
+class ScoreResult:
+    """What :func:`score_file` wrote: paths and the per-episode summary columns."""
+
+    scores_path: Path
+    episodes_path: Path
+    n_pairs: int
+    episodes: Mapping[str, np.ndarray]
+
+
+class EpisodeAccumulator:
+    """Per-episode sums over streamed score batches (episodes contiguous, in order)."""
+
+    def __init__(self, accept_fraction: float) -> None:
+        self.accept_fraction = accept_fraction
+        self._rows: dict[int, list[Any]] = {}
+
+    def add(self, batch: Mapping[str, np.ndarray]) -> None:
+        """Fold one batch of per-pair scores in."""
+        ep = np.asarray(batch["episode"])
+        if not len(ep):
+            return
+        starts = np.concatenate([[0], np.flatnonzero(np.diff(ep)) + 1])
+        sums = {
+            k: np.add.reduceat(np.asarray(batch[k], np.float64), starts)
+            for k in ("incompatible", "compatibility", "likelihood", "novelty")
+        }
+        counts = np.diff(np.concatenate([starts, [len(ep)]]))
+        for i, s in enumerate(starts):
+            row = self._rows.setdefault(int(ep[s]), [str(batch["operator"][s]), 0, 0, 0, 0, 0])
+            row[1] += int(counts[i])
+            row[2] += int(sums["incompatible"][i])
+            row[3] += sums["compatibility"][i]
+            row[4] += sums["likelihood"][i]
+            row[5] += sums["novelty"][i]
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Per-episode columns: episode, operator, length, n_incompatible, fraction_incompatible,
+        mean_compatibility, mean_likelihood, mean_novelty, accepted."""
+        ids = np.array(list(self._rows), dtype=np.int64)
+        vals = list(self._rows.values())
+        length = np.array([v[1] for v in vals], dtype=np.int64)
+        n_inc = np.array([v[2] for v in vals], dtype=np.int64)
+        safe = np.maximum(length, 1)
+        return {
+            "episode": ids,
+            "operator": np.array([v[0] for v in vals], dtype=object),
+            "length": length,
+            "n_incompatible": n_inc,
+            "fraction_incompatible": (n_inc / safe).astype(np.float32),
+            "mean_compatibility": (np.array([v[3] for v in vals]) / safe).astype(np.float32),
+            "mean_likelihood": (np.array([v[4] for v in vals]) / safe).astype(np.float32),
+            "mean_novelty": (np.array([v[5] for v in vals]) / safe).astype(np.float32),
+            "accepted": ~(n_inc > self.accept_fraction * length),
+        }
+
+
+def summarise_episodes(pairs: Mapping[str, np.ndarray], accept_fraction: float) -> dict:
+    """Per-episode summary of in-memory per-pair scores (see :class:`EpisodeAccumulator`)."""
+    acc = EpisodeAccumulator(accept_fraction)
+    acc.add(pairs)
+    return acc.columns()
+
+
+def _passthrough(header: Mapping[str, Any], schema: Any) -> list[str]:
+    import pyarrow as pa
+
+    names = ["success"] if "success" in schema.names else []
+    for k in header.get("extra_columns", []):
+        if k not in schema.names or k in _CORE:
+            continue
+        kind = schema.field(k).type
+        if not (pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind)):
+            names.append(k)
+    return names
+
+
+def read_demo_batches(
+    path: str | Path, batch_rows: int, columns: Sequence[str]
+) -> Iterator[dict[str, np.ndarray]]:
+    """Stream a demonstrations Parquet file as numpy row batches (obs/action as 2-D)."""
+    import pyarrow.parquet as pq
+
+    pf = pq.ParquetFile(path)
+    for rb in pf.iter_batches(batch_size=batch_rows, columns=list(columns)):
+        out: dict[str, np.ndarray] = {}
+        for name in columns:
+            col = rb.column(name)
+            if name in ("obs", "action"):
+                width = col.type.list_size
+                out[name] = col.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
+                out[name] = out[name].reshape(-1, width)
+            elif name == "operator":
+                out[name] = np.asarray(col.to_pylist(), dtype=object)
+            else:
+                out[name] = col.to_numpy(zero_copy_only=False)
+        yield out
+
+
+def _arrow_table(batch: Mapping[str, np.ndarray], schema: Any) -> Any:
+    import pyarrow as pa
+
+    cols = []
+    for field in schema:
+        v = batch[field.name]
+        if pa.types.is_fixed_size_list(field.type):
+            arr = np.ascontiguousarray(v, dtype=np.float32)
+            cols.append(pa.FixedSizeListArray.from_arrays(pa.array(arr.reshape(-1)), arr.shape[1]))
+        elif field.name == "operator":
+            cols.append(pa.array([str(x) for x in v], type=pa.string()))
+        else:
+            cols.append(pa.array(np.asarray(v), type=field.type))
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def _scores_schema(action_dim: int, passthrough: Sequence[tuple[str, Any]]) -> Any:
+    import pyarrow as pa
+
+    fields = [
+        pa.field("episode", pa.int64()),
+        pa.field("operator", pa.string()),
+        pa.field("step", pa.int32()),
+        pa.field("likelihood", pa.float32()),
+        pa.field("novelty", pa.float32()),
+        pa.field("compatibility", pa.float32()),
+        pa.field("incompatible", pa.bool_()),
+        pa.field("prediction", pa.list_(pa.float32(), action_dim)),
+    ]
+    fields += [pa.field(n, t) for n, t in passthrough]
+    return pa.schema(fields)
+
+
+def score_file(
+    policy: Any,
+    demos_path: str | Path,
+    out_path: str | Path,
+    config: ScoreConfig,
+    *,
+    policy_path: str | Path | None = None,
+    policy_info: Mapping[str, Any] | None = None,
+    progress: bool = True,
+) -> ScoreResult:
+    """Score every pair of a demonstrations artifact, streaming; write scores + episode summary.
+
+    Args:
+      policy: the base ``Policy``.
+      demos_path: a ``demos`` Parquet artifact.
+      out_path: where to write the per-pair scores (the per-episode summary goes to
+        :func:`~elicit_jax.compat.score.episodes_path` of it).
+      config: scoring config (thresholds, likelihood kind, ddof, chunk size).
+      policy_path: the checkpoint the policy was loaded from (its hash goes in the header).
+      policy_info: how it was loaded (e.g. ``{"which": "best", "seed": 0}``), recorded too.
+      progress: show a rich progress bar.
+
+    Returns:
+      A :class:`ScoreResult`.
+    """
+    import pyarrow.parquet as pq
+
+    demos_path, out_path = Path(demos_path), Path(out_path)
+    header = read_header(demos_path)
+    if header.get("kind") != "demos":
+        raise ElicitError(
+            f"is a '{header.get('kind')}' artifact, expected demonstrations", demos_path
+        )
+    pf = pq.ParquetFile(demos_path)
+    missing = [c for c in (*_CORE, "success") if c not in pf.schema_arrow.names]
+    if missing:
+        raise ElicitError(f"missing column(s) {', '.join(missing)}", demos_path)
+    import pyarrow as pa
+
+    for name in ("obs", "action"):
+        if not pa.types.is_fixed_size_list(pf.schema_arrow.field(name).type):
+            raise ElicitError(f"column '{name}' must be a fixed-size list of float32", demos_path)
+    obs_dim = pf.schema_arrow.field("obs").type.list_size
+    action_dim = pf.schema_arrow.field("action").type.list_size
+    spans = header.get("obs_fields") or {}
+    fields = tuple(k for k, _ in sorted(spans.items(), key=lambda kv: kv[1][0]))
+    check_dims(policy, obs_dim, action_dim, str(demos_path), fields)
+    passthrough = _passthrough(header, pf.schema_arrow)
+    schema = _scores_schema(action_dim, [(n, pf.schema_arrow.field(n).type) for n in passthrough])
+    inputs = {"demos": demos_path} | ({"policy": policy_path} if policy_path else {})
+    cfg = config_dict(config)
+    common = {
+        "config": cfg,
+        "inputs": inputs,
+        "thresholds": {"lambda": config.lambda_, "eta": config.eta},
+        "obs_dim": obs_dim,
+        "action_dim": action_dim,
+        "task": header.get("task", "unknown"),
+        "policy_kind": str(policy_spec(policy, "kind", "mlp")),
+        "policy": dict(policy_info or {}),
+    }
+    scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=pf.metadata.num_rows)
+    schema = schema.with_metadata({HEADER_KEY: dumps(scores_header).encode()})
+    acc = EpisodeAccumulator(config.accept_fraction)
+    batches = read_demo_batches(demos_path, config.chunk_size, (*_CORE, *passthrough))
+    n_total = pf.metadata.num_rows
+    ep_path = episodes_path(out_path)
+    with atomic_path(out_path) as tmp, _Progress(progress, n_total) as advance:
+        with pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
+            pending: list[Any] = []
+            for out in score_batches(policy, batches, config, str(demos_path), n_total):
+                pending.append(_arrow_table(out, schema))
+                if sum(t.num_rows for t in pending) >= ROW_GROUP:
+                    writer.write_table(pa.concat_tables(pending))
+                    pending = []
+                acc.add(out)
+                advance(len(out["episode"]))
+            if pending:
+                writer.write_table(pa.concat_tables(pending))
+        episodes = acc.columns()
+        ep_header = make_header(
+            EPISODES_KIND,
+            SCHEMA_VERSION,
+            **common,
+            scores_file=out_path.name,
+            n_episodes=len(episodes["episode"]),
+        )
+        write_parquet(ep_path, episodes_table(episodes), ep_header)
+    return ScoreResult(out_path, ep_path, n_total, episodes)
+
+
+class _Progress:
+    """Context manager yielding an ``advance(n)`` callback (a rich bar, or a no-op)."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self.enabled, self.total, self._bar = enabled, total, None
+
+    def __enter__(self) -> Any:
+        if not self.enabled:
+            return lambda n: None
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+        self._bar = Progress(
+            "[bold]scoring pairs", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
+        )
+        self._bar.start()
+        task = self._bar.add_task("score", total=self.total)
+        return lambda n: self._bar.advance(task, n)
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+
+def episodes_table(episodes: Mapping[str, np.ndarray]) -> Any:
+    """Arrow table of per-episode summary columns."""
+    import pyarrow as pa
+
+    cols = {k: pa.array(v.tolist() if k == "operator" else v) for k, v in episodes.items()}
+    cols["operator"] = pa.array([str(x) for x in episodes["operator"]], type=pa.string())
+    return pa.table(cols)
+
+
+def read_scores(
+    path: str | Path, columns: Sequence[str] | None = None
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Header and columns (numpy; ``prediction`` as (N, A)) of a scores artifact."""
+    import pyarrow.parquet as pq
+
+    header = read_header(path)
+    if header.get("kind") != SCORES_KIND:
+        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", path)
+    table = pq.read_table(path, columns=list(columns) if columns else None)
+    out: dict[str, np.ndarray] = {}
+    for name in table.column_names:
+        col = table.column(name).combine_chunks()
+        if name == "prediction":
+            out[name] = col.flatten().to_numpy().astype(np.float32).reshape(len(col), -1)
+        elif name == "operator":
+            out[name] = np.asarray(col.to_pylist(), dtype=object)
+        else:
+            out[name] = col.to_numpy(zero_copy_only=False)
+    for k in ("likelihood", "novelty"):
+        if k in out and not np.isfinite(out[k]).all():
+            raise ElicitError(f"column '{k}' holds non-finite values", path)
+    return header, out
+
+
+def print_operator_table(episodes: Mapping[str, np.ndarray], title: str = "scores") -> None:
+    """Rich table per operator: episodes, pairs, % incompatible, mean M, accepted/rejected."""
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in (
+        "operator",
+        "episodes",
+        "pairs",
+        "incompatible %",
+        "mean M",
+        "accepted",
+        "rejected",
+    ):
+        table.add_column(col, justify="left" if col == "operator" else "right")
+    ops = np.asarray(episodes["operator"]).astype(str)
+    for op in sorted(set(ops.tolist())):
+        sel = ops == op
+        n = int(episodes["length"][sel].sum())
+        inc = int(episodes["n_incompatible"][sel].sum())
+        mean_m = float((episodes["mean_compatibility"][sel] * episodes["length"][sel]).sum() / n)
+        acc = int(episodes["accepted"][sel].sum())
+        table.add_row(
+            op,
+            str(int(sel.sum())),
+            str(n),
+            f"{100 * inc / n:.1f}",
+            f"{mean_m:.3f}",
+            str(acc),
+            str(int(sel.sum()) - acc),
+        )
+    Console().print(table)
+
+
+def score_checkpoint(
+    policy_path: str | Path,
+    demos_path: str | Path,
+    out_path: str | Path,
+    config: ScoreConfig,
+    *,
+    which: str | int = "best",
+    seed: int | None = None,
+    show: bool = True,
+) -> ScoreResult:
+    """Load a policy checkpoint, score a demonstrations file, print a table per operator.
+
+    Args:
+      policy_path: a checkpoint (seed directory) or a one-seed run directory.
+      demos_path: the ``demos`` artifact to score.
+      out_path: the ``scores`` artifact to write.
+      config: thresholds, likelihood kind, ddof, chunk size.
+      which: ``best``, ``final`` or an epoch number.
+      seed: the seed of a multi-seed run directory.
+      show: progress bar and summary table.
+    """
+    from elicit_jax.policy.checkpoint import load_policy
+
+    policy = load_policy(policy_path, which, seed=seed)
+    result = score_file(
+        policy,
+        demos_path,
+        out_path,
+        config,
+        policy_path=policy_path,
+        policy_info={"which": which, "seed": seed},
+        progress=show,
+    )
+    if show:
+        print_operator_table(
+            result.episodes,
+            title=f"{Path(demos_path).name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
+            f"reject > {100 * config.accept_fraction:g}% incompatible)",
+        )
+    return result

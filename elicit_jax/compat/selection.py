@@ -1,0 +1,86 @@
+"""Episode selections written on the command line: ``operator:NAME[,NAME]``,
+``episodes:ID[,ID]`` or ``label:COLUMN=VALUE``.
+
+``label`` reads a per-pair column of the scores file (``success`` and the demonstrations'
+scalar extra columns are copied there by ``score``); an episode is selected when every one of
+its pairs has that value (compared as lower-case text, so ``label:success=true`` works).
+
+Example:
+    >>> sel = parse_selection("operator:alice,bob")
+    >>> ids = select_episodes(sel, scores_columns)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+import numpy as np
+
+from elicit_jax.errors import ElicitError
+
+KINDS = ("operator", "episodes", "label")
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """A parsed selection: ``kind`` in :data:`KINDS`, its values, and the original text."""
+
+    kind: str
+    values: tuple[str, ...]
+    text: str
+
+
+def parse_selection(text: str) -> Selection:
+    """Parse ``operator:a,b``, ``episodes:1,2`` or ``label:col=value``."""
+    kind, sep, rest = text.partition(":")
+    kind = kind.strip().lower()
+    if not sep or kind not in KINDS or not rest.strip():
+        raise ElicitError(
+            f"bad selection '{text}': use operator:NAME[,NAME], episodes:ID[,ID] or "
+            "label:COLUMN=VALUE"
+        )
+    if kind == "label":
+        col, eq, val = rest.partition("=")
+        if not eq or not col.strip():
+            raise ElicitError(f"bad selection '{text}': label needs COLUMN=VALUE")
+        return Selection(kind, (col.strip(), val.strip()), text)
+    values = tuple(v.strip() for v in rest.split(",") if v.strip())
+    if kind == "episodes":
+        try:
+            [int(v) for v in values]
+        except ValueError as e:
+            raise ElicitError(f"bad selection '{text}': episode ids must be integers") from e
+    return Selection(kind, values, text)
+
+
+def select_episodes(sel: Selection, columns: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Sorted episode ids of the pairs' ``columns`` matching ``sel``; errors when none match.
+
+    Args:
+      sel: a parsed selection.
+      columns: per-pair columns with ``episode``, ``operator`` and any label columns.
+    """
+    episode = np.asarray(columns["episode"], np.int64)
+    if sel.kind == "operator":
+        match = np.isin(np.asarray(columns["operator"]).astype(str), list(sel.values))
+        ids = np.unique(episode[match])
+    elif sel.kind == "episodes":
+        wanted = np.array([int(v) for v in sel.values], np.int64)
+        missing = sorted(set(wanted.tolist()) - set(np.unique(episode).tolist()))
+        if missing:
+            raise ElicitError(f"selection '{sel.text}': no episode(s) {missing} in the scores")
+        ids = np.unique(wanted)
+    else:
+        col, value = sel.values
+        if col not in columns:
+            have = ", ".join(k for k in columns if k not in ("prediction",))
+            raise ElicitError(f"selection '{sel.text}': no column '{col}' (have: {have})")
+        text = np.char.lower(np.asarray(columns[col]).astype(str))
+        hit = text == value.lower()
+        ids_all, index = np.unique(episode, return_inverse=True)
+        all_hit = np.bincount(index, weights=~hit, minlength=len(ids_all)) == 0
+        ids = ids_all[all_hit]
+    if not len(ids):
+        raise ElicitError(f"selection '{sel.text}' matches no episode in the scores")
+    return ids

@@ -1,0 +1,108 @@
+"""Compatibility measures: hand-computed ℓ, ν, M, the 5% rule, and property tests."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from elicit_jax.compat.measures import (
+    PRESETS,
+    ScoreConfig,
+    compatibility,
+    likelihood_error,
+    novelty,
+    rejects,
+    score_pair,
+)
+from elicit_jax.errors import ElicitError
+
+# Two members, two action dims.
+MEMBERS = jnp.array([[0.0, 1.0], [2.0, 3.0]])
+ACTION = jnp.array([1.0, 0.0])
+
+
+def test_likelihood_ensemble_mean_by_hand():
+    # mean prediction = [1, 2]; diff to a = [0, 2]; squares [0, 4]; mean over dims = 2.0
+    assert float(likelihood_error(MEMBERS, ACTION, "ensemble-mean")) == pytest.approx(2.0)
+
+
+def test_likelihood_member_average_clips_by_hand():
+    # clipped members: [[0, 1], [1, 1]]; clipped action [1, 0]
+    # member 0: diffs [-1, 1] -> mean sq 1.0; member 1: diffs [0, 1] -> 0.5; average 0.75
+    got = float(likelihood_error(MEMBERS, ACTION, "member-average", clip=1.0))
+    assert got == pytest.approx(0.75)
+    # without effective clipping (clip=10): member 0 diffs [-1, 1] -> 1; member 1 [1, 3] -> 5
+    # average 3.0, which differs from the ensemble-mean 2.0 (mean of squares >= square of mean)
+    assert float(likelihood_error(MEMBERS, ACTION, "member-average", clip=10.0)) == pytest.approx(
+        3.0
+    )
+
+
+def test_novelty_both_std_conventions_by_hand():
+    # per dim, members differ by 2: population std = 1, sample std (ddof 1) = sqrt(2)
+    assert float(novelty(MEMBERS, ddof=0)) == pytest.approx(1.0)
+    assert float(novelty(MEMBERS, ddof=1)) == pytest.approx(np.sqrt(2.0))
+
+
+def test_compatibility_by_hand():
+    # familiar (nu < eta): M = 1 - min(l / lambda, 1)
+    assert float(compatibility(0.1, 0.01, 0.4, 0.05)) == pytest.approx(0.75)  # 1 - 0.25
+    assert float(compatibility(0.4, 0.01, 0.4, 0.05)) == 0.0  # l = lambda -> incompatible
+    assert float(compatibility(0.9, 0.01, 0.4, 0.05)) == 0.0  # capped at 0
+    # novel (nu >= eta): M = 1 whatever l
+    assert float(compatibility(0.9, 0.05, 0.4, 0.05)) == 1.0
+
+
+def test_score_pair_and_mdn_spread():
+    cfg = ScoreConfig(lambda_=4.0, eta=1.5)
+    s = score_pair(MEMBERS, ACTION, jnp.float32(4.0), jnp.float32(1.5), cfg)
+    # l = 2 (above), nu = 1 < 1.5 familiar -> M = 1 - 2/4 = 0.5
+    assert float(s.likelihood) == pytest.approx(2.0)
+    assert float(s.compatibility) == pytest.approx(0.5)
+    assert not bool(s.incompatible)
+    np.testing.assert_allclose(np.asarray(s.mean), [1.0, 2.0])
+    # an MDN-style spread replaces the across-member std: mean([2, 4]) = 3 >= 1.5 -> novel
+    s2 = score_pair(
+        MEMBERS[:1], ACTION, jnp.float32(4.0), jnp.float32(1.5), cfg, jnp.array([2.0, 4.0])
+    )
+    assert float(s2.novelty) == pytest.approx(3.0)
+    assert float(s2.compatibility) == 1.0
+    # one member [0, 1] vs a = [1, 0]: l = mean([1, 1]) = 1
+    assert float(s2.likelihood) == pytest.approx(1.0)
+
+
+def test_five_percent_rule_by_hand():
+    # 100 steps: 5 incompatible is exactly 5% -> accepted; 6 exceeds it -> rejected
+    assert not rejects(5, 100)
+    assert rejects(6, 100)
+    # 90 steps: 5% = 4.5, so 4 accepted and 5 rejected
+    assert not rejects(4, 90)
+    assert rejects(5, 90)
+
+
+def test_config_validation_and_presets():
+    assert ScoreConfig.from_preset("round-nut").lambda_ == PRESETS["round-nut"][0] == 0.35
+    assert ScoreConfig.from_preset("hammer").eta == 0.06
+    for bad in ({"likelihood": "x"}, {"ddof": 2}, {"lambda_": 0.0}, {"eta": -1.0}):
+        with pytest.raises(ElicitError):
+            ScoreConfig(**bad)
+    with pytest.raises(ElicitError, match="unknown preset"):
+        ScoreConfig.from_preset("peg")
+
+
+_vals = st.floats(0.0, 5.0, allow_nan=False)
+_pos = st.floats(1e-3, 5.0, allow_nan=False)
+_M = jax.jit(compatibility)
+
+
+@settings(max_examples=200, deadline=None)
+@given(ell=_vals, nu=_vals, lam=_pos, eta=_pos, lam2=_pos)
+def test_compatibility_properties(ell, nu, lam, eta, lam2):
+    m = float(_M(ell, nu, lam, eta))
+    assert 0.0 <= m <= 1.0
+    if nu >= eta:
+        assert m == 1.0
+    lo, hi = sorted((lam, lam2))
+    assert float(_M(ell, nu, lo, eta)) <= float(_M(ell, nu, hi, eta)) + 1e-7

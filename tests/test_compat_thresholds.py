@@ -1,0 +1,153 @@
+"""Threshold fitting: recovers planted thresholds, deterministic, clear failures, selections."""
+
+import numpy as np
+import pytest
+
+from elicit_jax.compat.selection import parse_selection, select_episodes
+from elicit_jax.compat.thresholds import (
+    FitConfig,
+    evaluate_thresholds,
+    fit_thresholds,
+    incompatible_counts,
+    operator_rejections,
+    read_thresholds,
+    write_thresholds,
+)
+from elicit_jax.errors import ElicitError
+
+LAM, ETA = 0.4, 0.05
+
+
+def _planted(seed=0, n_comp=5, n_inc=5, length=80):
+    """Synthetic scores whose separating region hugs the planted (λ, η) = (0.4, 0.05).
+
+    Every demo: 30% novel pairs (ν in [0.052, 0.2]) with large ℓ in [0.5, 2], the rest
+    familiar (ν < 0.046) with ℓ in [0, 0.38]. Incompatible demos also have 12 familiar pairs
+    (15%) with ℓ in [0.42, 0.45] and ν in [0.044, 0.046]. So: η above 0.052 makes the novel
+    pairs count (rejecting compatible demos), η below ~0.0447 misses the bad pairs; λ above
+    ~0.44 misses them, λ below ~0.35 rejects compatible demos (> 5% of their pairs).
+    """
+    rng = np.random.default_rng(seed)
+    ell, nu, ep, labels = [], [], [], {}
+    for e in range(n_comp + n_inc):
+        comp = e < n_comp
+        novel = np.arange(length) < int(0.3 * length)
+        err = np.where(novel, rng.uniform(0.5, 2.0, length), rng.uniform(0.0, 0.38, length))
+        n = np.where(novel, rng.uniform(0.052, 0.2, length), rng.uniform(0.0, 0.046, length))
+        if not comp:
+            bad = np.arange(length) >= length - 12
+            err[bad] = rng.uniform(0.42, 0.45, 12)
+            n[bad] = rng.uniform(0.044, 0.046, 12)
+        perm = rng.permutation(length)
+        ell.append(err[perm]), nu.append(n[perm]), ep.append(np.full(length, 100 + e))
+        labels[100 + e] = comp
+    return np.concatenate(ell), np.concatenate(nu), np.concatenate(ep), labels
+
+
+def test_incompatible_counts_by_hand():
+    # one episode, pairs (l, nu): (0.5, 0.01) (0.2, 0.01) (0.9, 0.3)
+    ell = np.array([0.5, 0.2, 0.9])
+    nu = np.array([0.01, 0.01, 0.3])
+    lams, etas = np.array([0.1, 0.6]), np.array([0.05, 0.5])
+    c = incompatible_counts(ell, nu, np.zeros(3, int), 1, lams, etas)
+    # lam 0.1, eta 0.05: pairs with l >= 0.1 and nu < 0.05 -> first two -> 2
+    # lam 0.1, eta 0.5: all three -> 3; lam 0.6, eta 0.05: none -> 0; lam 0.6, eta 0.5: (0.9) -> 1
+    np.testing.assert_array_equal(c[0], [[2, 3], [0, 1]])
+
+
+def test_recovers_planted_thresholds():
+    ell, nu, ep, labels = _planted()
+    fit = fit_thresholds(ell, nu, ep, labels, FitConfig(grid_size=64))
+    assert fit.balanced_accuracy == 1.0
+    assert 0.35 <= fit.lambda_ <= 0.45
+    assert 0.044 <= fit.eta <= 0.052
+    assert fit.loo_accuracy == 1.0 and fit.n_loo == 10
+    assert fit.episodes["rejected"].tolist() == [False] * 5 + [True] * 5
+    # the reported thresholds really give that accuracy when re-evaluated
+    ba, _ = evaluate_thresholds(ell, nu, ep, labels, fit.lambda_, fit.eta)
+    assert ba == 1.0
+
+
+def test_fit_is_deterministic_and_order_invariant():
+    ell, nu, ep, labels = _planted(seed=3)
+    a = fit_thresholds(ell, nu, ep, labels)
+    perm = np.random.default_rng(0).permutation(len(ell))
+    b = fit_thresholds(ell[perm], nu[perm], ep[perm], labels)
+    assert (a.lambda_, a.eta, a.margin_steps) == (b.lambda_, b.eta, b.margin_steps)
+
+
+def test_single_demo_sets_have_no_loo():
+    ell, nu, ep, labels = _planted(n_comp=1, n_inc=1)
+    fit = fit_thresholds(ell, nu, ep, labels)
+    assert fit.loo_accuracy is None and fit.n_loo == 0
+    assert fit.balanced_accuracy == 1.0
+
+
+def test_empty_and_degenerate_sets_fail_clearly():
+    ell, nu, ep, labels = _planted()
+    with pytest.raises(ElicitError, match="compatible set holds no"):
+        fit_thresholds(ell, nu, ep, {k: False for k in labels})
+    with pytest.raises(ElicitError, match="incompatible set holds no"):
+        fit_thresholds(ell, nu, ep, {k: True for k in labels})
+    # two copies of the same demo, one labelled each way: nothing can separate them
+    same_ell = np.concatenate([ell[:80], ell[:80]])
+    same_nu = np.concatenate([nu[:80], nu[:80]])
+    same_ep = np.repeat([1, 2], 80)
+    with pytest.raises(ElicitError, match="better than chance"):
+        fit_thresholds(same_ell, same_nu, same_ep, {1: True, 2: False})
+
+
+def test_operator_rejections_by_hand():
+    # episode 0 (alice): 20 pairs, 2 incompatible (10% > 5%) -> rejected
+    # episode 1 (bob): 20 pairs, 1 incompatible (5% = 5%) -> accepted
+    ell = np.zeros(40)
+    nu = np.zeros(40)
+    ell[[0, 1, 20]] = 1.0
+    ep = np.repeat([0, 1], 20)
+    op = np.repeat(["alice", "bob"], 20)
+    r = operator_rejections(ell, nu, ep, op, 0.4, 0.05)
+    assert r["alice"] == {
+        "pairs": 20,
+        "incompatible_pairs": 2,
+        "episodes": 1,
+        "rejected_episodes": 1,
+    }
+    assert r["bob"] == {"pairs": 20, "incompatible_pairs": 1, "episodes": 1, "rejected_episodes": 0}
+
+
+def test_selections():
+    cols = {
+        "episode": np.array([0, 0, 1, 1, 2, 2]),
+        "operator": np.array(["base", "base", "op", "op", "op", "op"], dtype=object),
+        "success": np.array([True, True, True, False, False, False]),
+    }
+    assert select_episodes(parse_selection("operator:op"), cols).tolist() == [1, 2]
+    assert select_episodes(parse_selection("episodes:2,0"), cols).tolist() == [0, 2]
+    # label: every pair of the episode must match -> only episode 0 is all-true
+    assert select_episodes(parse_selection("label:success=true"), cols).tolist() == [0]
+    for bad in ("op:x", "operator:", "label:success", "episodes:a"):
+        with pytest.raises(ElicitError, match="bad selection"):
+            parse_selection(bad)
+    with pytest.raises(ElicitError, match="matches no episode"):
+        select_episodes(parse_selection("operator:carol"), cols)
+    with pytest.raises(ElicitError, match="no episode"):
+        select_episodes(parse_selection("episodes:7"), cols)
+    with pytest.raises(ElicitError, match="no column 'grade'"):
+        select_episodes(parse_selection("label:grade=A"), cols)
+
+
+def test_thresholds_artifact_round_trip(tmp_path):
+    scores = tmp_path / "scores.parquet"
+    scores.write_bytes(b"stand-in scores content")
+    out = tmp_path / "t.json"
+    write_thresholds(
+        out, lambda_=0.3, eta=0.07, method="manual", scores_path=scores, config={}, report={}
+    )
+    lam, eta, header = read_thresholds(out)
+    assert (lam, eta) == (0.3, 0.07)
+    assert header["kind"] == "thresholds"
+    assert len(header["inputs"]["scores"]["sha256"]) == 64
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"kind": "demos"}')
+    with pytest.raises(ElicitError, match="expected thresholds"):
+        read_thresholds(bad)
