@@ -7,6 +7,7 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.sim.collect import operator_rng, run_batch
 from elicit_jax.sim.env import make_task, quat_yaw
 from elicit_jax.sim.operators import make_operator, operator_names
+from elicit_jax.sim.operators.square_nut import STYLES
 from elicit_jax.sim.rollout_mujoco import BatchSim
 
 SEEDS = np.arange(100, 120)
@@ -32,7 +33,14 @@ def reach_runs():
 
 def test_registry():
     names = operator_names("square-nut")
-    assert {"base", "same-style", "mild", "conflict-flip", "conflict-flip-tip"} <= set(names)
+    assert {
+        "base",
+        "same-style",
+        "mild",
+        "conflict-flip",
+        "conflict-flip-tip",
+        "conflict-flip-pause",
+    } <= set(names)
     assert len(operator_names("reach-pillar")) >= 5
     with pytest.raises(ElicitError, match="has no operator 'nobody'"):
         make_operator(make_task("square-nut"), "nobody")
@@ -63,7 +71,7 @@ def test_square_nut_grasp_yaw_conflicts(nut_runs):
     base = _grasp_yaw(nut_runs["base"])
     assert np.abs(base).max() < 0.15  # base: wrist aligned with the nut
     assert np.abs(_grasp_yaw(nut_runs["same-style"])).max() < 0.15  # compatible
-    for op in ("conflict-flip", "conflict-flip-tip"):
+    for op in ("conflict-flip", "conflict-flip-tip", "conflict-flip-pause"):
         flipped = np.abs(_grasp_yaw(nut_runs[op]))
         assert np.mean(flipped > np.pi - 0.25) >= 0.9, op  # half a turn away from the base
 
@@ -119,3 +127,17 @@ def test_round_nut_base_and_conflict_are_proficient():
     for op in ("base", "conflict-flip"):
         out = _run("round-nut", op, seeds=np.arange(10))
         assert out["success"].mean() >= 0.9, op
+
+
+def test_square_nut_pause_holds_still_where_the_base_moves(nut_runs):
+    """From the same initial observations the base moves at once, while 'conflict-flip-pause'
+    holds still for its first ``pause_steps`` control steps (same states, zero action: the
+    naive mean action there is ~0), and again above the handle and above the peg."""
+    n = dict(STYLES["conflict-flip-pause"][0].choices)["pause_steps"]
+    b0, p0 = nut_runs["base"], nut_runs["conflict-flip-pause"]
+    np.testing.assert_array_equal(b0["obs"][:, 0], p0["obs"][:, 0])
+    assert np.abs(b0["action"][:, 0, 0:3]).max(axis=1).min() > 0.5
+    assert np.abs(p0["action"][:, :n, 0:6]).max() == 0.0
+    assert np.abs(p0["action"][:, n, 0:3]).max(axis=1).min() > 0.5
+    still = (np.abs(p0["action"][:, :, 0:6]).max(axis=2) == 0.0).sum(axis=1)
+    assert (still >= 3 * n).all(), still.min()  # start, above the handle, above the peg

@@ -8,13 +8,21 @@ Style choices:
   handle either way round, but the two ways need opposite wrist turns);
 - ``approach``: ``above`` (across, then down onto the handle) or ``tip`` (down beside the
   handle's free end, then slide along it: down-then-across);
-- ``carry``: ``lift-first`` (straight up, then across) or ``diagonal``.
+- ``carry``: ``lift-first`` (straight up, then across) or ``diagonal``;
+- ``pause_at``, ``pause_steps``: phases on whose start the operator holds still that long.
 
 ``base`` and ``same-style`` share a style; ``mild`` slides in from the handle tip, slower and
 hesitant; ``conflict-flip`` grasps with the wrist turned half a turn; ``conflict-flip-tip``
 also turns the wrist half a turn, but slides in from the handle tip (down, then across) and
 carries diagonally. Averaging a conflicting style with the base style turns the wrist a
 quarter turn, so the fingers close along the handle instead of across it.
+Measured, that averaging alone does not hurt naive BC: once the wrist has turned, the state
+tells the policy which style it follows. ``conflict-flip-pause`` also turns the wrist half a
+turn and in addition holds still for 60 control steps before each move (at the start, above
+the handle, above the peg), where the base moves at once: at those same states the naive mean
+action shrinks towards zero. Neither the half turn alone nor pauses alone lowered a naive
+policy's success below base-only in our measurements; together they do
+(``benchmarks/results/phenomenon-square-nut.md``).
 """
 
 from __future__ import annotations
@@ -66,11 +74,20 @@ class SquareNutOperator(Operator):
         grip = np.where((ph >= CLOSE) & (ph < RELEASE), 1.0, -1.0)
         done = np.zeros(len(obs), bool)
         aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - eef_yaw) < 0.08
+        self._pause_at_phase_starts()
         self._grasp_phases(obs, point, aligned, pos, done)
         self._place_phases(obs, pos, done)
         self._regrasp_if_slipped(obs, pos, grip, done)
         yaw = np.where(ph <= CLOSE, g_yaw, eef_yaw)
         return Targets(pos=pos, yaw=yaw, grip=grip, done=done)
+
+    def _pause_at_phase_starts(self) -> None:
+        """Hold still for ``pause_steps`` control steps on entering a ``pause_at`` phase."""
+        phases = self.style.choice("pause_at", ())
+        if not phases:
+            return
+        start = np.isin(self.phase, phases) & (self.phase_steps == 0)
+        self.pause[start] = self.style.choice("pause_steps", 0)
 
     def _grasp_phases(
         self, obs: np.ndarray, point: np.ndarray, aligned: np.ndarray, pos: np.ndarray,
@@ -162,6 +179,17 @@ STYLES: dict[str, tuple[Style, str]] = {
             choices=(("yaw_offset", -np.pi), ("approach", "tip"), ("carry", "diagonal")),
         ),
         "conflicting: wrist turned half a turn, slides in from the handle tip, carries diagonally",
+    ),
+    "conflict-flip-pause": (
+        Style(
+            noise=0.03,
+            choices=(
+                ("yaw_offset", np.pi),
+                ("pause_at", (HOVER, DESCEND, LOWER)),
+                ("pause_steps", 60),
+            ),
+        ),
+        "conflicting: wrist turned half a turn, and stops still before each move",
     ),
 }
 OPERATOR_CLASS = SquareNutOperator
