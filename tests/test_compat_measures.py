@@ -84,7 +84,7 @@ def test_five_percent_rule_by_hand():
 
 def test_config_validation_and_presets():
     assert ScoreConfig.from_preset("round-nut").lambda_ == PRESETS["round-nut"][0] == 0.35
-    assert ScoreConfig.from_preset("hammer").eta == 0.06
+    assert ScoreConfig.from_preset("hammer-drawer").eta == 0.06
     for bad in ({"likelihood": "x"}, {"ddof": 2}, {"lambda_": 0.0}, {"eta": -1.0}):
         with pytest.raises(ElicitError):
             ScoreConfig(**bad)

@@ -33,7 +33,7 @@ LIKELIHOODS: tuple[str, ...] = ("ensemble-mean", "member-average")
 PRESETS: dict[str, tuple[float, float]] = {
     "square-nut": (0.4, 0.05),
     "round-nut": (0.35, 0.05),
-    "hammer": (0.35, 0.06),
+    "hammer-drawer": (0.35, 0.06),
 }
 
 

@@ -8,8 +8,10 @@ or ``jax.numpy``), so C MuJoCo and MJX roll out the same task definition.
 
 Observation (23 values, robomimic-style names): ``robot0_eef_pos`` (3),
 ``robot0_eef_quat`` (4, w-x-y-z), ``robot0_gripper_qpos`` (2) and ``object`` (14: object
-position and quaternion, then its position and quaternion in the end-effector frame). It is
-the model's sensor data, which both simulators compute identically.
+position and quaternion, then its position and quaternion in the end-effector frame; a task
+may fill it otherwise and says so, e.g. ``hammer-drawer`` puts the drawer's handle and
+opening in the last four values). It is the model's sensor data, which both simulators
+compute identically.
 
 Action (7 values in [-1, 1]): delta position (3, scaled by ``pos_scale`` metres per control
 step), delta rotation as an axis-angle vector (3, scaled by ``rot_scale`` radians; only its z
@@ -239,7 +241,7 @@ def register_task(cls: type[Task]) -> type[Task]:
 def _load_tasks() -> None:
     import importlib
 
-    for mod in ("reach_pillar", "square_nut", "round_nut"):
+    for mod in ("reach_pillar", "square_nut", "round_nut", "hammer_drawer"):
         try:
             importlib.import_module(f"elicit_jax.sim.tasks.{mod}")
         except ModuleNotFoundError as e:

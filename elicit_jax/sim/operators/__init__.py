@@ -13,6 +13,7 @@ _MODULES = {
     "reach-pillar": "reach_pillar",
     "square-nut": "square_nut",
     "round-nut": "round_nut",
+    "hammer-drawer": "hammer_drawer",
 }
 
 

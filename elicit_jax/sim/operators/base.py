@@ -95,6 +95,31 @@ class Operator(abc.ABC):
     def targets(self, obs: np.ndarray) -> Targets:
         """Targets of each environment's current phase."""
 
+    def restart_if_dropped(
+        self,
+        obs: np.ndarray,
+        targets: tuple[np.ndarray, np.ndarray, np.ndarray],
+        carrying: tuple[int, int],
+        restart: int,
+        gap: float,
+    ) -> None:
+        """A correction: restart at phase ``restart`` with the jaw open when, during the
+        ``carrying`` phases (first, last), the object (``obs[:, 9:12]``) is more than ``gap``
+        below the end effector, i.e. it slipped from the jaw.
+
+        Args:
+          targets: the phase targets being built, updated in place: position (B, 3),
+            gripper (B,), phase done (B,).
+        """
+        pos, grip, done = targets
+        eef, obj, ph = obs[:, 0:3], obs[:, 9:12], self.phase
+        slipped = (ph >= carrying[0]) & (ph <= carrying[1]) & (eef[:, 2] - obj[:, 2] > gap)
+        self.phase[slipped] = restart
+        self.phase_steps[slipped] = 0
+        grip[slipped] = -1.0
+        done[slipped] = False
+        pos[slipped] = eef[slipped] + np.array([0.0, 0.0, 0.01])
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(B, 7)`` in [-1, 1] for observations ``obs (B, 23)``."""
         s, cfg = self.style, self.task.config

@@ -77,7 +77,7 @@ class SquareNutOperator(Operator):
         self._pause_at_phase_starts()
         self._grasp_phases(obs, point, aligned, pos, done)
         self._place_phases(obs, pos, done)
-        self._regrasp_if_slipped(obs, pos, grip, done)
+        self.restart_if_dropped(obs, (pos, grip, done), (LIFT, LOWER), HOVER, gap=0.045)
         yaw = np.where(ph <= CLOSE, g_yaw, eef_yaw)
         return Targets(pos=pos, yaw=yaw, grip=grip, done=done)
 
@@ -139,18 +139,6 @@ class SquareNutOperator(Operator):
         done |= m & (nut[:, 2] < 0.02)
         done |= (ph == RELEASE) & (self.phase_steps >= 8)
         pos[ph == RETREAT, 2] = HOVER_Z
-
-    def _regrasp_if_slipped(
-        self, obs: np.ndarray, pos: np.ndarray, grip: np.ndarray, done: np.ndarray
-    ) -> None:
-        """A correction: when the nut has dropped from the jaw, open and start over."""
-        eef, nut, ph = obs[:, 0:3], obs[:, 9:12], self.phase
-        slipped = (ph >= LIFT) & (ph <= LOWER) & (eef[:, 2] - nut[:, 2] > 0.045)
-        self.phase[slipped] = HOVER
-        self.phase_steps[slipped] = 0
-        grip[slipped] = -1.0
-        done[slipped] = False
-        pos[slipped] = eef[slipped] + np.array([0.0, 0.0, 0.01])
 
 
 STYLES: dict[str, tuple[Style, str]] = {
