@@ -202,6 +202,27 @@ def test_bootstrap_gives_each_member_its_own_resample(demos):
     assert not np.array_equal(samples[0], samples[1])
 
 
+def test_gradient_clipping_bounds_the_update(demos):
+    from elicit_jax.policy.loop import init_states
+    from elicit_jax.policy.train import _loop_spec
+
+    # Adam's step is lr * m / (sqrt(v) + eps) ~ lr * sign(g) when |g| >> eps = 1e-8, so a clip
+    # that is large changes nothing, while a clip at 1e-12 makes |g| << eps and every step
+    # ~ lr * g / eps <= 3e-3 * 1e-12 / 1e-8 = 3e-7: after 2 epochs x 8 batches the weights must
+    # have moved by less than 16 * 3e-7 ~ 5e-6, against ~1e-2 without clipping.
+    data = prepare(demos, 0.2, 1)
+    moved = {}
+    for clip in (None, 1e3, 1e-12):
+        cfg = _config("mlp", epochs=2, checkpoint_every=1, progress_every=1, grad_clip=clip)
+        init = init_states(_loop_spec(cfg, data, OBS, ACT), cfg.seeds).params
+        final = train_states(cfg, data, OBS, ACT, cfg.seeds)[0].params
+        deltas = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), init, final)
+        moved[clip] = max(jax.tree.leaves(deltas))
+    assert moved[None] > 1e-3
+    assert moved[1e3] == pytest.approx(moved[None], rel=1e-6)
+    assert moved[1e-12] < 5e-6
+
+
 def test_cli_train_and_info(demos, tmp_path):
     from typer.testing import CliRunner
 

@@ -11,7 +11,7 @@ from elicit_jax.policy.config import TrainConfig
 
 
 class TrainProgress:
-    """Progress of a training run: epoch, train/val loss, samples/s; a summary at the end.
+    """Progress of a training run: epoch, train/val loss, steps/s; a summary at the end.
 
     Args:
       config: the run's config.
@@ -71,11 +71,13 @@ class TrainProgress:
 
     def update(self, done: int, train: np.ndarray, val: np.ndarray, seconds: float) -> None:
         """A chunk finished: ``train``/``val`` are (S, n, K) losses, ``seconds`` its wall time."""
-        rate = self.n_train * train.shape[1] * len(self._seeds) / max(seconds, 1e-9)
+        seconds = max(seconds, 1e-9)
+        steps = -(-self.n_train // self.config.batch_size) * train.shape[1] / seconds
+        rate = self.n_train * train.shape[1] * len(self._seeds) / seconds
         tl = float(np.mean(train[:, -1]))
         vl = float(np.mean(val[:, -1]))
         val_text = f"{vl:.4g}" if np.isfinite(vl) else "-"
-        stats = f"train {tl:.4g}  val {val_text}  {rate:,.0f} samples/s"
+        stats = f"train {tl:.4g}  val {val_text}  {steps:,.1f} steps/s  {rate:,.0f} samples/s"
         self._bar.update(self._task, completed=done, stats=stats)
 
     def summary(self, results: dict[int, tuple[np.ndarray, np.ndarray, int, float]]) -> None:
