@@ -77,42 +77,20 @@ def resolve_backend(backend: str) -> str:
 
 
 def rollout_mujoco_policy(
-    task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int = 0
+    task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int = 0, groups: int = 2
 ) -> dict[str, np.ndarray]:
-    """Roll out ``policy`` on C MuJoCo: one batched policy call per control step.
+    """Roll out ``policy`` on C MuJoCo: one batched policy call per control step and group.
+
+    See :func:`elicit_jax.sim.rollout_mujoco.rollout_policy` (policy and physics of two
+    groups of environments overlap).
 
     Returns:
       dict of ``success (B,)``, ``steps_to_success (B,)`` (horizon when never), ``ret (B,)``,
       ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success).
     """
-    import jax
+    from elicit_jax.sim.rollout_mujoco import rollout_policy
 
-    from elicit_jax.sim.rollout_mujoco import BatchSim
-
-    act = _jitted_act()
-    b = len(seeds)
-    with BatchSim(task, b, threads=threads or None) as sim:
-        obs = sim.reset_seeds(seeds)
-        carry = policy.init_carry(b)
-        done = sim.success.copy()
-        steps = np.full(b, horizon, np.int32)
-        ret = np.zeros(b)
-        for t in range(horizon):
-            if done.all():
-                break
-            carry, action = act(policy, carry, obs.astype(np.float32))
-            obs = sim.step(np.asarray(jax.device_get(action), np.float64), active=~done)
-            newly = sim.success & ~done
-            steps[newly] = t + 1
-            ret += newly
-            done |= sim.success
-        return {
-            "success": done,
-            "steps_to_success": steps,
-            "ret": ret,
-            "final_obs": obs,
-            "unstable": sim.unstable.copy(),
-        }
+    return rollout_policy(task, _jitted_act(), policy, seeds, horizon, threads or None, groups)
 
 
 @functools.cache
