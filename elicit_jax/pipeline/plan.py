@@ -16,17 +16,9 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from elicit_jax.pipeline.graph import Graph, Stage
-from elicit_jax.pipeline.spec import PipelineSpec, TaskSpec
+from elicit_jax.pipeline.spec import METHODS, PipelineSpec, TaskSpec
 
-FILTER_METHODS = (
-    "filtered",
-    "filtered-episode",
-    "random",
-    "longest",
-    "shortest",
-    "likelihood",
-    "novelty",
-)
+FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
 COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
 
