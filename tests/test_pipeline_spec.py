@@ -80,6 +80,31 @@ def test_profile_overrides_are_merged_over_sections():
     assert cpu.tasks[0].new_episodes == 3 and paper.tasks[0].new_episodes == 4
 
 
+def test_per_task_profile_overrides_and_task_filter():
+    two = {
+        **MINI,
+        "task": [
+            {**MINI["task"][0], "profiles": {"cpu": {"operators": ["a"], "new_episodes": 2}}},
+            {**MINI["task"][0], "name": "square-nut"},
+        ],
+    }
+    cpu, paper = parse_spec(two), parse_spec(two, profile="paper")
+    # the task's own cpu table wins over [profiles.cpu.task] (new_episodes 3), which wins
+    # over the [[task]] table (4); the other task gets only the profile-wide override
+    assert (cpu.tasks[0].operators, cpu.tasks[0].new_episodes) == (("a",), 2)
+    assert (cpu.tasks[1].operators, cpu.tasks[1].new_episodes) == (("a", "b"), 3)
+    assert (paper.tasks[0].operators, paper.tasks[0].new_episodes) == (("a", "b"), 4)
+    bad = {**MINI, "task": [{**MINI["task"][0], "profiles": {"gpu": {}}}]}
+    with pytest.raises(ElicitError, match=r"\[task.profiles.gpu\]: unknown profile"):
+        parse_spec(bad)
+    only = load_spec("filtering", "cpu", tasks=("square-nut",))
+    assert [t.name for t in only.tasks] == ["square-nut"]
+    assert only.tasks[0].operators == ("same-style", "mild", "conflict-flip-pause")
+    assert len(load_spec("filtering", "paper").tasks) == 3
+    with pytest.raises(ElicitError, match="no task nowhere in this definition"):
+        load_spec("filtering", "cpu", tasks=("nowhere",))
+
+
 @pytest.mark.parametrize(
     ("patch", "message"),
     [

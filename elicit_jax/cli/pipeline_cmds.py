@@ -15,6 +15,11 @@ pipeline_app = typer.Typer(
 app.add_typer(pipeline_app, name="pipeline")
 
 _PROFILE_HELP = "paper (the paper's sizes) or cpu (shrunk to fit a 2-core machine)."
+_TASKS_HELP = "Comma-separated tasks of the definition to run [all]."
+
+
+def _tasks(value: str | None) -> tuple[str, ...] | None:
+    return tuple(t.strip() for t in value.split(",") if t.strip()) if value else None
 
 
 @pipeline_app.command("run")
@@ -24,6 +29,7 @@ def pipeline_run(
     ),
     profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
+    tasks: str = typer.Option(None, "--tasks", help=_TASKS_HELP),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bars."),
     ray: str = typer.Option(
         None,
@@ -34,7 +40,9 @@ def pipeline_run(
 ) -> None:
     """Run every stage that is not up to date; a re-run skips finished stages.
 
-    Example: elicit-jax pipeline run pipelines/filtering.toml --profile cpu --out runs/filtering
+    Examples:
+      elicit-jax pipeline run pipelines/filtering.toml --profile cpu --tasks square-nut
+      elicit-jax pipeline run filtering --out runs/filtering --ray auto
     """
     from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 
@@ -44,6 +52,7 @@ def pipeline_run(
         out=None if out is None else str(out),
         progress=progress,
         ray=ray,
+        tasks=_tasks(tasks),
     )
     run_pipeline(config)
 
@@ -53,6 +62,7 @@ def pipeline_status(
     definition: str = typer.Argument(..., help="A pipeline TOML file, or a shipped one."),
     profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
+    tasks: str = typer.Option(None, "--tasks", help=_TASKS_HELP),
 ) -> None:
     """Show which stages are up to date and which the next run would run (runs nothing).
 
@@ -62,7 +72,10 @@ def pipeline_status(
 
     pipeline_status(
         PipelineRunConfig(
-            pipeline=definition, profile=profile, out=None if out is None else str(out)
+            pipeline=definition,
+            profile=profile,
+            out=None if out is None else str(out),
+            tasks=_tasks(tasks),
         )
     )
 

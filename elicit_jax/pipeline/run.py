@@ -30,6 +30,8 @@ class PipelineRunConfig:
       profile: ``paper`` or ``cpu``; default: the definition's own.
       out: run directory; default ``runs/<name>-<profile>``.
       progress: draw progress bars.
+      tasks: run only these of the definition's tasks (default: all); the default run
+        directory then ends in their names.
       ray: run the stages as Ray tasks at this address (``local``, ``auto``, ``HOST:PORT``,
         ``ray://HOST:PORT``; see :func:`elicit_jax.pipeline.ray_runner.ray_session`); default
         ``None``: run them one after another in this process.
@@ -40,6 +42,7 @@ class PipelineRunConfig:
     out: str | None = None
     progress: bool = True
     ray: str | None = None
+    tasks: tuple[str, ...] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,9 +55,10 @@ class PipelineOutcome:
     report_html: Path
 
 
-def default_run_dir(spec: PipelineSpec) -> Path:
-    """``runs/<name>-<profile>``."""
-    return Path("runs") / f"{spec.name}-{spec.profile}"
+def default_run_dir(spec: PipelineSpec, tasks: tuple[str, ...] | None = None) -> Path:
+    """``runs/<name>-<profile>``, plus ``-<task>...`` when only some tasks run."""
+    suffix = "".join(f"-{t}" for t in tasks or ())
+    return Path("runs") / f"{spec.name}-{spec.profile}{suffix}"
 
 
 def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
@@ -104,9 +108,9 @@ def run_pipeline(
     from elicit_jax.pipeline.stages import real_registry, resolve_config
 
     console = console or Console()
-    spec = load_spec(config.pipeline, config.profile)
+    spec = load_spec(config.pipeline, config.profile, config.tasks)
     graph = build_graph(spec, resolve_config)
-    run_dir = Path(config.out) if config.out else default_run_dir(spec)
+    run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     note = " — CPU profile: shrunk networks/epochs, not the paper's sizes" * (spec.profile == "cpu")
     console.print(
         f"[bold]{spec.name}[/] ({spec.profile} profile{note}): {len(graph)} stages, "
@@ -153,9 +157,9 @@ def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str,
     from elicit_jax.pipeline.stages import resolve_config
 
     console = console or Console()
-    spec = load_spec(config.pipeline, config.profile)
+    spec = load_spec(config.pipeline, config.profile, config.tasks)
     graph = build_graph(spec, resolve_config)
-    run_dir = Path(config.out) if config.out else default_run_dir(spec)
+    run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     out: dict[str, list[str]] = {"up to date": [], "to run": []}
     per_kind: dict[str, list[int]] = {}
     todo: set[str] = set()

@@ -7,6 +7,7 @@ compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.
     [[task]]                        # one table per task: operators and demo counts
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # stage overrides
     [profiles.cpu.train]            # overrides applied only under that profile
+    [task.profiles.cpu]             # per-task overrides under that profile (after the above)
 
 Section keys are passed to the stage's library config by field name; unknown fields are
 reported when the stage graph is built.
@@ -48,6 +49,7 @@ _TASK_KEYS = {
     "holdout_episodes",
     "incompatible_operator",
     "incompatible_episodes",
+    "profiles",
 }
 
 
@@ -140,12 +142,17 @@ def resolve_path(name_or_path: str | Path) -> Path:
     raise ElicitError(f"no such pipeline file (shipped definitions: {names})", path)
 
 
-def load_spec(name_or_path: str | Path, profile: str | None = None) -> PipelineSpec:
+def load_spec(
+    name_or_path: str | Path,
+    profile: str | None = None,
+    tasks: tuple[str, ...] | None = None,
+) -> PipelineSpec:
     """Read and validate a pipeline definition.
 
     Args:
       name_or_path: a TOML file, or the name of a shipped definition.
       profile: ``paper`` or ``cpu``; default: the file's ``[pipeline] profile``.
+      tasks: run only these of the definition's tasks (default: all).
 
     Raises:
       ElicitError: one line naming the file and the offending key.
@@ -156,7 +163,17 @@ def load_spec(name_or_path: str | Path, profile: str | None = None) -> PipelineS
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ElicitError(f"malformed TOML ({e})", path) from e
-    return parse_spec(data, source=str(path), text=text, profile=profile)
+    spec = parse_spec(data, source=str(path), text=text, profile=profile)
+    if tasks:
+        known = [t.name for t in spec.tasks]
+        unknown = [t for t in tasks if t not in known]
+        if unknown:
+            raise ElicitError(
+                f"no task {', '.join(unknown)} in this definition (it has {', '.join(known)})",
+                path,
+            )
+        spec = dataclasses.replace(spec, tasks=tuple(t for t in spec.tasks if t.name in tasks))
+    return spec
 
 
 def parse_spec(
@@ -186,7 +203,7 @@ def parse_spec(
     if not isinstance(tasks_raw, list) or not tasks_raw:
         raise ElicitError("needs at least one [[task]] table", source)
     task_over = _table(overrides, "task", source)
-    tasks = tuple(_task({**t, **task_over}, source) for t in tasks_raw)
+    tasks = tuple(_task(_task_table(t, task_over, profile, source), source) for t in tasks_raw)
     if len({t.name for t in tasks}) != len(tasks):
         raise ElicitError("a task is listed twice", source)
     methods = tuple(head.get("methods", ("base", "naive", "filtered")))
@@ -230,6 +247,22 @@ def _table(data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
     if not isinstance(value, Mapping):
         raise ElicitError(f"[{name}] must be a table", source)
     return dict(value)
+
+
+def _task_table(
+    raw: Any, profile_over: Mapping[str, Any], profile: str, source: str
+) -> dict[str, Any]:
+    """A [[task]] table with the profile's overrides for every task, then its own."""
+    if not isinstance(raw, Mapping):
+        raise ElicitError("each [[task]] must be a table", source)
+    own = raw.get("profiles", {})
+    if not isinstance(own, Mapping):
+        raise ElicitError(f"[[task]] {raw.get('name')}: profiles must be a table", source)
+    for prof in own:
+        if prof not in PROFILES:
+            raise ElicitError(f"[task.profiles.{prof}]: unknown profile name", source)
+    base = {k: v for k, v in raw.items() if k != "profiles"}
+    return {**base, **profile_over, **_table(own, profile, source)}
 
 
 def _task(raw: Mapping[str, Any], source: str) -> TaskSpec:
