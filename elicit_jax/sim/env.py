@@ -160,11 +160,15 @@ class Task:
 
         Uses the same JAX sampler as :meth:`reset`, so both backends start identically.
         """
+        qpos, mocap = self._sample_inits(np.asarray(seeds, np.uint32))
+        return np.asarray(qpos, np.float64), np.asarray(mocap, np.float64)
+
+    @functools.cached_property
+    def _sample_inits(self) -> Any:
+        """Jitted ``seeds (B,) uint32 -> (qpos (B, nq), mocap (B, nmocap, 3))``, built once."""
         import jax
 
-        keys = jax.vmap(jax.random.PRNGKey)(np.asarray(seeds, np.uint32))
-        qpos, mocap = jax.jit(jax.vmap(self.sample_init))(keys)
-        return np.asarray(qpos, np.float64), np.asarray(mocap, np.float64)
+        return jax.jit(lambda s: jax.vmap(self.sample_init)(jax.vmap(jax.random.PRNGKey)(s)))
 
     # --- MJX ----------------------------------------------------------------------------------
     def reset(self, rng: Any) -> EnvState:
