@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,8 @@ import numpy as np
 
 from elicit_jax.compat.measures import ScoreConfig, score_pair
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.sharding import batch_shardings, device_count, round_up
+from elicit_jax.pipeline.sharding import place as place_tree
 
 SCORES_KIND = "scores"
 EPISODES_KIND = "episode-scores"
@@ -179,8 +181,13 @@ def score_batches(
     config: ScoreConfig,
     source: str = "<demos>",
     n_rows: int | None = None,
+    n_devices: int | None = None,
 ) -> Iterator[dict[str, np.ndarray]]:
     """Score row batches of demonstrations, yielding per-pair score batches in input order.
+
+    With several devices each chunk is split across them along its rows
+    (:mod:`elicit_jax.pipeline.sharding`); the chunk size is then rounded up to a multiple of
+    the device count, so the whole dataset still compiles once. Scores do not depend on it.
 
     Args:
       policy: a ``Policy`` (``members``, ``spread``, static ``kind``).
@@ -190,6 +197,7 @@ def score_batches(
       source: name used in error messages.
       n_rows: total rows, if known: feed-forward chunks are then balanced
         (:func:`balanced_chunk`) so the padded last chunk wastes little.
+      n_devices: devices to shard each chunk over (default: all that JAX sees).
 
     Yields:
       The input columns except ``obs``/``action``, plus ``likelihood``, ``novelty``,
@@ -203,26 +211,49 @@ def score_batches(
     chunk = config.chunk_size
     if n_rows is not None and not recurrent:
         chunk = balanced_chunk(n_rows, chunk)
+    devices = device_count(n_devices)
+    place = _row_placer(devices)
+    if place is not None:
+        policy = place(policy, replicate=True)
+        chunk = round_up(chunk, devices)
     groups = _episode_groups(batches, chunk) if recurrent else _row_chunks(batches, chunk)
     for rows in groups:
         _check_finite(rows, source)
         n = len(rows["episode"])
         if recurrent:
-            scores = _score_episodes(policy, rows, lam, eta, static, config.chunk_size)
-        else:
-            c = chunk
-            out = _score_rows(
-                policy, _pad(rows["obs"], c), _pad(rows["action"], c), lam, eta, static
+            scores = _score_episodes(
+                policy, rows, lam, eta, static, config.chunk_size, devices, place
             )
-            scores = _to_numpy(out, n)
+        else:
+            obs, action = _pad(rows["obs"], chunk), _pad(rows["action"], chunk)
+            if place is not None:
+                obs, action = place(obs), place(action)
+            scores = _to_numpy(_score_rows(policy, obs, action, lam, eta, static), n)
         keep = {k: v for k, v in rows.items() if k not in ("obs", "action")}
         yield {**keep, **scores}
 
 
+def _row_placer(devices: int) -> Callable[..., Any] | None:
+    """``place(x, replicate=False)`` putting arrays on a 1-D mesh of ``devices`` devices
+    (rows split, or replicated), or ``None`` for one device (nothing is moved or copied)."""
+    if devices == 1:
+        return None
+    rows, replicated = batch_shardings(devices)
+    return lambda x, replicate=False: place_tree(x, replicated if replicate else rows)
+
+
 def _score_episodes(
-    policy: Any, rows: dict[str, np.ndarray], lam: Any, eta: Any, static: ScoreConfig, chunk: int
+    policy: Any,
+    rows: dict[str, np.ndarray],
+    lam: Any,
+    eta: Any,
+    static: ScoreConfig,
+    chunk: int,
+    devices: int = 1,
+    place: Callable[..., Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Score complete episodes with a recurrent policy, padded to power-of-two buckets."""
+    """Score complete episodes with a recurrent policy, padded to power-of-two buckets; with
+    ``place`` (several devices) the episode groups are split across the devices."""
     ep = rows["episode"]
     starts = np.concatenate([[0], np.flatnonzero(np.diff(ep)) + 1])
     stops = np.concatenate([starts[1:], [len(ep)]])
@@ -231,7 +262,7 @@ def _score_episodes(
     results: list[dict[str, np.ndarray] | None] = [None] * len(starts)
     for length in np.unique(buckets):
         idx = np.flatnonzero(buckets == length)
-        g = max(1, chunk // int(length))
+        g = round_up(max(1, chunk // int(length)), devices)
         for s in range(0, len(idx), g):
             part = idx[s : s + g]
             obs = np.zeros((g, length, rows["obs"].shape[1]), np.float32)
@@ -239,7 +270,11 @@ def _score_episodes(
             for j, i in enumerate(part):
                 obs[j, : lengths[i]] = rows["obs"][starts[i] : stops[i]]
                 act[j, : lengths[i]] = rows["action"][starts[i] : stops[i]]
+            if place is not None:
+                obs, act = place(obs), place(act)
             out = _score_sequences(policy, obs, act, lam, eta, static)
+            if place is not None:
+                out = jax.device_get(out)  # gather once, not once per episode
             for j, i in enumerate(part):
                 results[i] = _to_numpy(_index(out, j), int(lengths[i]))
     return _concat([r for r in results if r is not None])
@@ -290,12 +325,15 @@ def demos_batches(demos: Any) -> list[dict[str, np.ndarray]]:
     return [rows]
 
 
-def score_demos(policy: Any, demos: Any, config: ScoreConfig) -> dict[str, np.ndarray]:
+def score_demos(
+    policy: Any, demos: Any, config: ScoreConfig, n_devices: int | None = None
+) -> dict[str, np.ndarray]:
     """Score an in-memory ``Demos``; returns per-pair columns (see :func:`score_batches`)."""
     fields = tuple(f.name for f in demos.obs_fields)
     check_dims(policy, demos.obs_dim, demos.action_dim, "<demos>", fields)
     batches = demos_batches(demos)
-    return _concat(list(score_batches(policy, batches, config, n_rows=demos.n_steps)))
+    out = score_batches(policy, batches, config, n_rows=demos.n_steps, n_devices=n_devices)
+    return _concat(list(out))
 
 
 def config_dict(config: ScoreConfig) -> dict[str, Any]:

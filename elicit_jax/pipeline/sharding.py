@@ -1,10 +1,11 @@
 """Shard a batched function's leading axis across devices with ``jax.sharding``.
 
 Scoring and rollouts are batched over independent rows (state-action pairs, environments); on
-a machine with several accelerators the batch axis can simply be split across them. The helper
-pads the batch to a multiple of the device count, places the batched arguments with a
-``NamedSharding`` over a 1-D ``("batch",)`` mesh, replicates the other arguments (e.g. a
-policy's parameters), runs one jitted call and trims the padding.
+a machine with several accelerators the batch axis can simply be split across them. The
+batch is padded to a multiple of the device count (by repeating its last row, a valid input),
+the batched arguments are placed with a ``NamedSharding`` over a 1-D ``("batch",)`` mesh, the
+other arguments (e.g. a policy's parameters) are replicated, one jitted call runs on every
+device and the padding is trimmed. With one device nothing is placed or copied.
 
 Example:
     >>> act = shard_batch(lambda obs, policy: policy.act((), obs)[1], batch_argnums=(0,))
@@ -21,25 +22,61 @@ import numpy as np
 from elicit_jax.errors import ElicitError
 
 
+def device_count(n_devices: int | None = None) -> int:
+    """The number of devices to shard over: ``n_devices`` checked, or all that JAX sees."""
+    import jax
+
+    available = jax.device_count()
+    n = available if n_devices is None else int(n_devices)
+    if not 1 <= n <= available:
+        raise ElicitError(f"asked for {n} devices but JAX sees {available}")
+    return n
+
+
+def devices_for(batch: int, n_devices: int | None = None) -> int:
+    """Devices worth using for a batch of ``batch`` rows: at most one per row."""
+    return max(1, min(device_count(n_devices), int(batch)))
+
+
+def round_up(n: int, multiple: int) -> int:
+    """The smallest multiple of ``multiple`` that is at least ``n``."""
+    return -(-int(n) // int(multiple)) * int(multiple)
+
+
 def batch_mesh(n_devices: int | None = None) -> Any:
     """A 1-D mesh named ``batch`` over the first ``n_devices`` devices (default: all)."""
     import jax
     from jax.sharding import Mesh
 
-    devices = jax.devices()
-    n = len(devices) if n_devices is None else int(n_devices)
-    if not 1 <= n <= len(devices):
-        raise ElicitError(f"asked for {n} devices but JAX sees {len(devices)}")
-    return Mesh(np.asarray(devices[:n]), ("batch",))
+    n = device_count(n_devices)
+    return Mesh(np.asarray(jax.devices()[:n]), ("batch",))
 
 
-def _pad_rows(x: Any, pad: int) -> Any:
-    """Repeat the last row ``pad`` times along axis 0 (a valid input, unlike zeros)."""
-    import jax.numpy as jnp
+def batch_shardings(n_devices: int | None = None) -> tuple[Any, Any]:
+    """``(rows, replicated)``: shardings that split axis 0 across the mesh / copy to all."""
+    from jax.sharding import NamedSharding
+    from jax.sharding import PartitionSpec as P
 
+    mesh = batch_mesh(n_devices)
+    return NamedSharding(mesh, P("batch")), NamedSharding(mesh, P())
+
+
+def pad_rows(x: Any, pad: int) -> Any:
+    """Repeat the last row ``pad`` times along axis 0 (numpy stays numpy)."""
     if pad == 0:
         return x
+    if isinstance(x, np.ndarray):
+        return np.concatenate([x, np.repeat(x[-1:], pad, axis=0)], axis=0)
+    import jax.numpy as jnp
+
     return jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)], axis=0)
+
+
+def place(tree: Any, sharding: Any) -> Any:
+    """Put every array of ``tree`` on devices with ``sharding``."""
+    import jax
+
+    return jax.tree.map(lambda x: jax.device_put(x, sharding), tree)
 
 
 def shard_batch(
@@ -61,13 +98,9 @@ def shard_batch(
       ``wrapped(*args)`` with ``fn``'s outputs; ``B`` need not divide the device count.
     """
     import jax
-    from jax.sharding import NamedSharding
-    from jax.sharding import PartitionSpec as P
 
-    mesh = batch_mesh(n_devices)
-    n = mesh.devices.size
-    rows = NamedSharding(mesh, P("batch"))
-    replicated = NamedSharding(mesh, P())
+    n = device_count(n_devices)
+    rows, replicated = batch_shardings(n)
     jitted = jax.jit(fn)
     batch_argnums = tuple(batch_argnums)
 
@@ -82,9 +115,9 @@ def shard_batch(
         placed = []
         for i, arg in enumerate(args):
             if i in batch_argnums:
-                arg = jax.tree.map(lambda x: jax.device_put(_pad_rows(x, pad), rows), arg)
+                arg = place(jax.tree.map(lambda x: pad_rows(x, pad), arg), rows)
             else:
-                arg = jax.tree.map(lambda x: jax.device_put(x, replicated), arg)
+                arg = place(arg, replicated)
             placed.append(arg)
         out = jitted(*placed)
         return out if pad == 0 else jax.tree.map(lambda x: x[:size], out)

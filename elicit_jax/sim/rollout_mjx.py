@@ -4,6 +4,12 @@ The environments are ``jax.vmap``-ed over the task's single-environment ``reset_
 the policy acts on the whole batch ``(B, 23)`` once per control step (its ``act`` is batched by
 contract). A ``lax.while_loop`` runs the horizon and stops early once every rollout has
 succeeded; success is tracked per rollout and frozen at the first success.
+
+On a machine with several devices the environments are split across them along the batch
+axis (a ``NamedSharding`` over a 1-D mesh, :mod:`elicit_jax.pipeline.sharding`): the batch is
+padded to a multiple of the device count with copies of its last initial state (a copy
+finishes exactly when its original does, so the early stop is unchanged) and trimmed after.
+With one device nothing is placed or copied.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.pipeline.sharding import batch_shardings, devices_for, pad_rows, place
 from elicit_jax.sim.env import Task
 
 EXPORT_FORMAT = 1
@@ -72,26 +79,62 @@ def rollout_fn(task: Task, horizon: int) -> Any:
 
 
 def rollout_mjx(
-    task: Task, policy: Any, seeds: np.ndarray, horizon: int | None = None
+    task: Task,
+    policy: Any,
+    seeds: np.ndarray,
+    horizon: int | None = None,
+    n_devices: int | None = None,
 ) -> dict[str, np.ndarray]:
     """Roll out ``policy`` on MJX from the seeded initial states ``seeds (B,)``.
 
-    The rollout is traced once per (task, horizon, architecture, batch) and kept as a
-    serialised ``jax.export`` module next to JAX's compilation cache, so a later process
+    The rollout is traced once per (task, horizon, architecture, batch, devices) and kept as
+    a serialised ``jax.export`` module next to JAX's compilation cache, so a later process
     skips tracing (tens of seconds for MJX) as well as compiling.
+
+    Args:
+      task: the task.
+      policy: a ``Policy`` pytree.
+      seeds: (B,) initial-state seeds.
+      horizon: control steps (default: the task's).
+      n_devices: devices to split the environments across (default: all that JAX sees; at
+        most one per rollout).
 
     Returns:
       dict of numpy arrays (see :func:`rollout_fn`).
     """
+    b = len(np.asarray(seeds))
+    out = rollout_mjx_on_devices(task, policy, seeds, horizon, n_devices)
+    return {k: np.asarray(v)[:b] for k, v in out.items()}
+
+
+def rollout_mjx_on_devices(
+    task: Task,
+    policy: Any,
+    seeds: np.ndarray,
+    horizon: int | None = None,
+    n_devices: int | None = None,
+) -> dict[str, Any]:
+    """:func:`rollout_mjx` without the trimming: device arrays of the padded batch.
+
+    Returns:
+      dict of arrays ``(B', ...)`` where ``B'`` rounds ``B`` up to a multiple of the devices
+      used; with several devices each array is split across them along axis 0.
+    """
     import jax
 
-    qpos, mocap = task.init_states(np.asarray(seeds))
-    qpos, mocap = qpos.astype(np.float32), mocap.astype(np.float32)
+    seeds = np.asarray(seeds)
+    devices = devices_for(len(seeds), n_devices)
+    pad = (-len(seeds)) % devices
+    qpos, mocap = task.init_states(seeds)
+    qpos, mocap = pad_rows(qpos.astype(np.float32), pad), pad_rows(mocap.astype(np.float32), pad)
     leaves, treedef = jax.tree.flatten(policy)
     shapes = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
-    fn = exported_rollout(task, int(horizon or task.config.horizon), treedef, shapes, len(qpos))
-    out = fn(leaves, qpos, mocap)
-    return {k: np.asarray(v) for k, v in out.items()}
+    h = int(horizon or task.config.horizon)
+    fn = exported_rollout(task, h, treedef, shapes, len(qpos), devices)
+    if devices > 1:
+        rows, replicated = batch_shardings(devices)
+        qpos, mocap, leaves = place(qpos, rows), place(mocap, rows), place(leaves, replicated)
+    return fn(leaves, qpos, mocap)
 
 
 def export_dir() -> Path:
@@ -103,9 +146,15 @@ def export_dir() -> Path:
 
 @functools.lru_cache(maxsize=16)
 def exported_rollout(
-    task: Task, horizon: int, treedef: Any, shapes: tuple, batch: int
+    task: Task, horizon: int, treedef: Any, shapes: tuple, batch: int, devices: int = 1
 ) -> Callable[..., Any]:
-    """``fn(policy_leaves, qpos, mocap_pos)``: the rollout, from the export cache if present."""
+    """``fn(policy_leaves, qpos, mocap_pos)``: the rollout, from the export cache if present.
+
+    With ``devices > 1`` the module is exported for that many devices, the environments
+    (``qpos``, ``mocap_pos`` and every output) split along axis 0 and the policy replicated;
+    an exported module only runs on the device count it was exported for, so the count (and
+    the platform) is part of the cache key.
+    """
     import jax
     from jax import export
 
@@ -113,7 +162,7 @@ def exported_rollout(
 
     ident = repr(
         (EXPORT_FORMAT, task.name, task.xml(), task.config, horizon, str(treedef), shapes,
-         batch, sorted(library_versions().items()))
+         batch, devices, jax.default_backend(), sorted(library_versions().items()))
     )  # fmt: skip
     key = hashlib.sha256(ident.encode()).hexdigest()[:24]
     path = export_dir() / f"rollout-{task.name}-{key}.bin"
@@ -127,10 +176,16 @@ def exported_rollout(
         def flat(leaves: list, qpos: Any, mocap: Any) -> Any:
             return run(jax.tree.unflatten(treedef, leaves), qpos, mocap)
 
-        specs = [jax.ShapeDtypeStruct(s, d) for s, d in shapes]
-        qspec = jax.ShapeDtypeStruct((batch, task.nq), np.float32)
-        mspec = jax.ShapeDtypeStruct((batch, task.nmocap, 3), np.float32)
-        exp = export.export(jax.jit(flat))(specs, qspec, mspec)
+        rows = replicated = None
+        jitted = jax.jit(flat)
+        if devices > 1:
+            rows, replicated = batch_shardings(devices)
+            shardings = (replicated, rows, rows)
+            jitted = jax.jit(flat, in_shardings=shardings, out_shardings=rows)
+        specs = [jax.ShapeDtypeStruct(s, d, sharding=replicated) for s, d in shapes]
+        qspec = jax.ShapeDtypeStruct((batch, task.nq), np.float32, sharding=rows)
+        mspec = jax.ShapeDtypeStruct((batch, task.nmocap, 3), np.float32, sharding=rows)
+        exp = export.export(jitted)(specs, qspec, mspec)
         with contextlib.suppress(OSError):
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
