@@ -146,6 +146,32 @@ def test_mjx_and_c_backends_agree_with_the_policy_in_the_loop(work):
     assert np.abs(m["final_obs"][:, 0] - start[:, 0]).min() > 0.01  # the policy moved
 
 
+def test_mjx_and_c_success_rates_statistically_consistent(work):
+    """Same policy, 24 seeded initial states, full horizon on both backends: the exact McNemar
+    test on the paired outcomes does not reject equal success rates (p > 0.01); the same test
+    rejects a randomly initialised policy's C outcomes against the trained policy's."""
+    import jax
+
+    from elicit_jax.policy.base import init_policy
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.sim.compare import compare_backends, mcnemar_exact
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.evaluate import rollout_mujoco_policy
+
+    task = make_task("reach-pillar")
+    policy = load_policy(work / "runs", "best", seed=0)
+    seeds = eval_seeds(EvalConfig(rollouts=24, seed=1))
+    test, m, c = compare_backends(task, policy, seeds)
+    assert test.n == 24 and test.consistent(0.01), test
+    assert test.rate_a >= 0.6 and test.rate_b >= 0.6, test  # a policy that mostly succeeds
+    assert not m["unstable"].any() and not c["unstable"].any()
+    broken = init_policy(jax.random.key(5), kind="mlp", obs_dim=23, action_dim=7,
+                         n_members=2, hidden=(64, 64))  # fmt: skip
+    b = rollout_mujoco_policy(task, broken, seeds, task.config.horizon)
+    power = mcnemar_exact(m["success"], b["success"])
+    assert power.rate_b <= 0.2 and not power.consistent(0.01), power
+
+
 def test_evaluate_errors(work):
     with pytest.raises(ElicitError, match="unknown backend"):
         EvalConfig(backend="gpu")
