@@ -13,9 +13,20 @@ Reported: env-steps/s (control steps of all environments per second), physics st
 policy-FLOP bound (matmul GFLOP/s measured here / 10.8 MFLOP per policy step) and the fraction
 of it reached, the C backend's speed-up over the reference, the MJX compile time cold (empty
 cache, fresh process) and warm (persistent cache, fresh process), and scaling with the number
-of rollouts. The policy is freshly initialised (rollouts run the full horizon).
+of rollouts (16 -> 50 -> 200 -> 1000). The policy is freshly initialised, so no rollout
+succeeds and every rollout runs all its steps.
 
-Usage: python benchmarks/bench_rollouts.py [--quick]
+Steps per second do not need the task's full horizon (500 for square-nut): each contender runs
+a fixed number of control steps, and the scaling table uses ``--scaling-horizon`` steps per
+rollout (default 10) so that 1000 MJX rollouts finish in bounded time. Both are printed.
+
+MJX with 1000 environments used to hang at 0% CPU: jaxlib 0.10's batched LAPACK kernels (MJX's
+Cholesky solves) split big batches onto XLA's CPU thread pool and block waiting for them, and
+two concurrent solves exhausted the 2-thread pool of a 2-core machine.
+:func:`elicit_jax.runtime.configure` now gives the pool at least 4 threads (``PJRT_NPROC``).
+
+Usage: python benchmarks/bench_rollouts.py [--quick] [--sizes 16 50 200 1000]
+    [--scaling-horizon 10] [--task square-nut] [--no-compile-times] [--json out.json]
 """
 
 from __future__ import annotations
@@ -106,7 +117,7 @@ def bench_mjx(task, policy, n: int, horizon: int) -> tuple[float, float]:
     return n * horizon / (time.perf_counter() - t0), first
 
 
-def compile_times(horizon: int) -> dict[str, float]:
+def compile_times(task_name: str, horizon: int) -> dict[str, float]:
     """Seconds to the first MJX result in a fresh process (imports included), through the
     evaluation path (exported rollout + persistent compilation cache): empty cache, then warm.
     """
@@ -118,7 +129,7 @@ def compile_times(horizon: int) -> dict[str, float]:
             f"import sys; sys.path.insert(0, {here!r})",
             "import bench_rollouts as b, numpy as np, jax",
             "from elicit_jax.sim.rollout_mjx import rollout_mjx",
-            f"rollout_mjx(b.make_task('square-nut'), b.paper_policy(), np.arange(50), {horizon})",
+            f"rollout_mjx(b.make_task({task_name!r}), b.paper_policy(), np.arange(50), {horizon})",
             "print(time.perf_counter() - t0)",
         ]
     )
@@ -133,24 +144,57 @@ def compile_times(horizon: int) -> dict[str, float]:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="Fewer steps and sizes.")
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        description="Rollout speed with the policy in the loop: MJX, C MuJoCo, reference."
+    )
+    ap.add_argument("--quick", action="store_true", help="Fewer steps (and sizes 16 50).")
     ap.add_argument("--json", help="Also write the results here.")
+    ap.add_argument("--task", default="square-nut", help="Task to roll out.")
     ap.add_argument(
         "--sizes",
         type=int,
         nargs="+",
-        default=[16, 50, 200],
-        help="Rollout counts for the scaling table (1000 hung in MJX on CPU here; see README).",
+        default=None,
+        help="Rollout counts for the scaling table (default 16 50 200 1000; --quick: 16 50).",
     )
-    args = ap.parse_args()
-    task = make_task("square-nut")
+    ap.add_argument(
+        "--scaling-horizon",
+        type=int,
+        default=10,
+        help="Control steps per rollout in the scaling table (steps/s need no full horizon).",
+    )
+    ap.add_argument(
+        "--no-compile-times",
+        action="store_true",
+        help="Skip the cold/warm MJX start measurement (two fresh processes).",
+    )
+    return ap.parse_args(argv)
+
+
+def main() -> None:
+    args = parse_args()
+    task = make_task(args.task)
     sub = task.config.substeps
     policy = paper_policy()
     h_c, h_ref, h_mjx = (40, 10, 5) if args.quick else (100, 20, 10)
-    res: dict = {"threads": os.cpu_count(), "substeps": sub}
-
+    h_scale = args.scaling_horizon
+    h_scale_c = max(h_scale, h_c // 4)  # C set-up (MjData, reset) is timed too: not too short
+    sizes = tuple(args.sizes or ((16, 50) if args.quick else (16, 50, 200, 1000)))
+    res: dict = {
+        "task": args.task,
+        "threads": os.cpu_count(),
+        "pjrt_nproc": os.environ.get("PJRT_NPROC"),
+        "substeps": sub,
+        "steps": {
+            "mujoco": h_c,
+            "reference": h_ref * 5,
+            "mjx": h_mjx,
+            "scaling_mjx": h_scale,
+            "scaling_mujoco": h_scale_c,
+        },
+    }
+    log("config", res)
     res["matmul_gflops"] = matmul_gflops()
     res["bound_env_steps"] = res["matmul_gflops"] * 1e9 / FLOP_PER_STEP
     log("bound", res["bound_env_steps"])
@@ -160,15 +204,16 @@ def main() -> None:
     log("reference", res["reference"])
     res["mjx_50"], res["mjx_first_call_s"] = bench_mjx(task, policy, 50, h_mjx)
     log("mjx_50", res["mjx_50"])
-    sizes = (16, 50) if args.quick else tuple(args.sizes)
     res["scaling"] = {}
     for n in sizes:
+        mjx = res["mjx_50"] if (n, h_scale) == (50, h_mjx) else None
         res["scaling"][n] = {
-            "mujoco": bench_mujoco(task, policy, n, max(10, h_c // 4)),
-            "mjx": res["mjx_50"] if n == 50 else bench_mjx(task, policy, n, h_mjx)[0],
+            "mujoco": bench_mujoco(task, policy, n, h_scale_c),
+            "mjx": mjx or bench_mjx(task, policy, n, h_scale)[0],
         }
         log(f"scaling {n}", res["scaling"][n])
-    res["compile"] = compile_times(h_mjx)
+    if not args.no_compile_times:
+        res["compile"] = compile_times(args.task, h_mjx)
     report(res, sub)
     if args.json:
         with open(args.json, "w") as f:
@@ -181,6 +226,16 @@ def log(name: str, value: object) -> None:
 
 def report(res: dict, sub: int) -> None:
     bound = res["bound_env_steps"]
+    steps = res["steps"]
+    print(
+        f"task: {res['task']}, {sub} physics steps per env-step; XLA CPU threads "
+        f"PJRT_NPROC={res['pjrt_nproc']} on {res['threads']} CPUs"
+    )
+    print(
+        f"control steps per rollout (not the full horizon): mjx {steps['mjx']}, mujoco "
+        f"{steps['mujoco']}, reference {steps['reference']}; scaling table: mjx "
+        f"{steps['scaling_mjx']}, mujoco {steps['scaling_mujoco']}"
+    )
     print(f"policy: MLP 5 x (2 x 1024), {FLOP_PER_STEP / 1e6:.1f} MFLOP per env-step")
     print(
         f"matmul: {res['matmul_gflops']:.1f} GFLOP/s at batch 50 -> bound {bound:.0f} env-steps/s"
@@ -191,16 +246,17 @@ def report(res: dict, sub: int) -> None:
         v = res[key]
         print(f"{name:28s} {v:12.0f} {v * sub:12.0f} {v / bound:9.0%}")
     print(f"C backend vs reference: {res['mujoco_50'] / res['reference']:.1f}x")
-    print(
-        f"MJX compile+first run: cold {res['compile']['cold']:.1f} s, warm (persistent cache) "
-        f"{res['compile']['warm']:.1f} s"
-    )
+    if "compile" in res:
+        print(
+            f"MJX compile+first run: cold {res['compile']['cold']:.1f} s, warm (persistent "
+            f"cache) {res['compile']['warm']:.1f} s"
+        )
     print(
         f"{'rollouts':>8s} {'mujoco env-steps/s':>19s} {'mjx env-steps/s':>16s} "
         f"{'mjx ms/rollout-step':>20s}"
     )
     for n, r in res["scaling"].items():
-        print(f"{n:8d} {r['mujoco']:19.0f} {r['mjx']:16.0f} {1e3 / r['mjx'] * 1:20.2f}")
+        print(f"{n:8d} {r['mujoco']:19.0f} {r['mjx']:16.0f} {1e3 / r['mjx']:20.2f}")
 
 
 if __name__ == "__main__":
