@@ -142,6 +142,13 @@ def test_missing_file_names_the_shipped_ones(tmp_path):
     assert resolve_path("quickstart").name == "quickstart.toml"
 
 
+def test_readme_style_path_finds_the_shipped_definition_outside_a_checkout(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no pipelines/ folder here
+    assert resolve_path("pipelines/filtering.toml") == resolve_path("filtering")
+    with pytest.raises(ElicitError, match="no such pipeline file"):
+        resolve_path("elsewhere/filtering.toml")
+
+
 def test_graph_shape_and_disjoint_contrast_sets():
     spec = parse_spec(MINI)
     graph = build_graph(spec)

@@ -131,12 +131,15 @@ def builtin_names() -> list[str]:
 
 
 def resolve_path(name_or_path: str | Path) -> Path:
-    """A definition file: an existing path, or the name of a shipped definition."""
+    """A definition file: an existing path, or the name of a shipped definition (also written
+    ``pipelines/<name>.toml``, as in a checkout, so the same command works after a pip
+    install)."""
     path = Path(name_or_path)
     if path.exists():
         return path
     shipped = builtin_dir() / f"{Path(str(name_or_path)).stem}.toml"
-    if path.suffix in ("", ".toml") and path.parent == Path(".") and shipped.exists():
+    shipped_like = path.parent in (Path("."), Path("pipelines"))  # as the README writes it
+    if path.suffix in ("", ".toml") and shipped_like and shipped.exists():
         return shipped
     names = ", ".join(builtin_names())
     raise ElicitError(f"no such pipeline file (shipped definitions: {names})", path)

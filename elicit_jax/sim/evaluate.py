@@ -77,12 +77,11 @@ def resolve_backend(backend: str) -> str:
 
 
 def rollout_mujoco_policy(
-    task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int = 0, groups: int = 2
+    task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int = 0
 ) -> dict[str, np.ndarray]:
-    """Roll out ``policy`` on C MuJoCo: one batched policy call per control step and group.
+    """Roll out ``policy`` on C MuJoCo: one batched policy call per control step.
 
-    See :func:`elicit_jax.sim.rollout_mujoco.rollout_policy` (policy and physics of two
-    groups of environments overlap).
+    See :func:`elicit_jax.sim.rollout_mujoco.rollout_policy`.
 
     Returns:
       dict of ``success (B,)``, ``steps_to_success (B,)`` (horizon when never), ``ret (B,)``,
@@ -90,7 +89,7 @@ def rollout_mujoco_policy(
     """
     from elicit_jax.sim.rollout_mujoco import rollout_policy
 
-    return rollout_policy(task, _jitted_act(), policy, seeds, horizon, threads or None, groups)
+    return rollout_policy(task, _jitted_act(), policy, seeds, horizon, threads or None)
 
 
 @functools.cache

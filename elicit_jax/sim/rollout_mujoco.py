@@ -142,17 +142,17 @@ def rollout_policy(
     seeds: np.ndarray,
     horizon: int,
     threads: int | None = None,
-    groups: int = 2,
 ) -> dict[str, np.ndarray]:
-    """Roll a policy out on C MuJoCo from seeded initial states, policy and physics overlapped.
+    """Roll a policy out on C MuJoCo from seeded initial states: one batched policy call per
+    control step for every environment still running, then the physics in the thread pool.
 
-    The environments are split into ``groups`` (2 by default when there are at least 8): while
-    one group's batched policy call runs (JAX dispatches it asynchronously), the physics of
-    the other group steps in the thread pool, so neither the policy nor the stepping leaves
-    the cores idle. Every environment still gets one policy action per control step.
+    One call for the whole batch is deliberate: at the paper's size a policy call on CPU is
+    bound by streaming the ensemble's weights from memory, so splitting the batch to overlap
+    policy and physics made each control step slower (measured: 3.3k vs 4.1k env-steps/s on
+    50 square-nut rollouts, 2 cores).
 
     Args:
-      act: jitted ``act(policy, carry, obs (b, 23)) -> (carry, action (b, 7))``.
+      act: jitted ``act(policy, carry, obs (B, 23)) -> (carry, action (B, 7))``.
       seeds: (B,) initial-state seeds.
       horizon: control steps.
 
@@ -161,48 +161,24 @@ def rollout_policy(
       ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success).
     """
     seeds = np.asarray(seeds)
-    n = len(seeds)
-    parts = [p for p in np.array_split(np.arange(n), groups if n >= 8 else 1) if len(p)]
-    sims = [BatchSim(task, len(p), threads) for p in parts]
-    try:
-        obs = [sim.reset_seeds(seeds[p]) for sim, p in zip(sims, parts, strict=True)]
-        carry = [policy.init_carry(len(p)) for p in parts]
-        done = [sim.success.copy() for sim in sims]
-        steps = [np.full(len(p), horizon, np.int32) for p in parts]
-        pending: list[Any] = [None] * len(parts)
-
-        def dispatch(g: int) -> None:
-            if not done[g].all():
-                carry[g], pending[g] = act(policy, carry[g], obs[g].astype(np.float32))
-
-        def advance(g: int, t: int) -> None:
-            if pending[g] is None:
-                return
-            action = np.asarray(pending[g], np.float64)
-            pending[g] = None
-            obs[g] = sims[g].step(action, active=~done[g])
-            newly = sims[g].success & ~done[g]
-            steps[g][newly] = t + 1
-            done[g] |= sims[g].success
-
+    b = len(seeds)
+    with BatchSim(task, b, threads) as sim:
+        obs = sim.reset_seeds(seeds)
+        carry = policy.init_carry(b)
+        done = sim.success.copy()
+        steps = np.full(b, horizon, np.int32)
         for t in range(horizon):
-            if all(d.all() for d in done):
+            if done.all():
                 break
-            if t == 0:
-                for g in range(len(parts)):
-                    dispatch(g)
-            for g in range(len(parts)):
-                advance(g, t)
-                if t + 1 < horizon:
-                    dispatch(g)
-        out = {
-            "success": np.concatenate(done),
-            "steps_to_success": np.concatenate(steps),
-            "final_obs": np.concatenate(obs),
-            "unstable": np.concatenate([sim.unstable.copy() for sim in sims]),
+            carry, action = act(policy, carry, obs.astype(np.float32))
+            obs = sim.step(np.asarray(action, np.float64), active=~done)
+            newly = sim.success & ~done
+            steps[newly] = t + 1
+            done |= sim.success
+        return {
+            "success": done,
+            "steps_to_success": steps,
+            "ret": done.astype(np.float64),
+            "final_obs": obs,
+            "unstable": sim.unstable.copy(),
         }
-        out["ret"] = out["success"].astype(np.float64)
-        return out
-    finally:
-        for sim in sims:
-            sim.close()
