@@ -109,7 +109,9 @@ def write_png(
         ax.axvline(sign * lx, color="red", ls="--", lw=0.8)
         ax.axhline(eta, color="red", ls="--", lw=0.8)
         inc = float(((ell[sel] >= lambda_) & (nu[sel] < eta)).mean())
-        ax.set_title(f"{names[k]}: {int(sel.sum())} pairs, {100 * inc:.1f}% incompatible")
+        ax.set_title(
+            f"{names[k]}\n{int(sel.sum())} pairs, {100 * inc:.1f}% incompatible", fontsize=10
+        )
         fig.colorbar(mesh, ax=ax, label="pairs")
         ax.set_xlim(sorted((sign * x0, sign * x1)))
         ax.set_ylim(y0, y1)
