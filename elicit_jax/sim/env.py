@@ -135,6 +135,32 @@ class Task:
         """Whether ``obs (..., 23)`` is a solved state; ``xp`` is numpy or jax.numpy."""
         raise ElicitError(f"task {type(self).__name__} defines no success check")
 
+    def gripper_and_object_qpos(
+        self,
+        rng: Any,
+        x: tuple[float, float],
+        y: tuple[float, float],
+        yaw: tuple[float, float],
+        z: float,
+    ) -> Any:
+        """``qpos (nq,)`` with the gripper at its start (xy jittered by the config's
+        ``start_xy``, height ``start_z``, fingers open) and the task's first free body (qpos
+        6:13) resting at ``z`` with x, y and yaw uniform in the given ranges; other joints at
+        ``qpos0``. One uniform draw of (x, y, yaw, gripper dx, dy) from ``rng``."""
+        import jax
+        import jax.numpy as jnp
+
+        c = self.config
+        jitter = c.start_xy  # type: ignore[attr-defined]
+        lo = jnp.array([x[0], y[0], yaw[0], -jitter, -jitter])
+        hi = jnp.array([x[1], y[1], yaw[1], jitter, jitter])
+        u = jax.random.uniform(rng, (5,), minval=lo, maxval=hi)
+        qpos = jnp.asarray(self.qpos0)
+        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))  # type: ignore[attr-defined]
+        qpos = qpos.at[4:6].set(mjcf.FINGER_OPEN)
+        pos = jnp.stack([u[0], u[1], jnp.asarray(z)])
+        return qpos.at[6:13].set(jnp.concatenate([pos, yaw_quat(u[2], jnp)]))
+
     # --- shared kernels -----------------------------------------------------------------------
     def ctrl_from_action(self, qpos: Any, action: Any, xp: Any = np) -> Any:
         """Actuator targets ``(..., 6)`` from gripper joints ``qpos (..., >=4)`` and ``action``.

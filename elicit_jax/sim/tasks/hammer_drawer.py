@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig, register_task, yaw_quat
+from elicit_jax.sim.env import Task, TaskConfig, register_task
 
 INTERIOR_X = 0.2
 """x of the drawer interior's centre when closed."""
@@ -199,18 +199,10 @@ class HammerDrawer(Task):
         return mjcf.scene(self.name, self.config.timestep, world, mjcf.pairs(pairs), sensors())
 
     def sample_init(self, rng: Any) -> tuple[Any, Any]:
-        import jax
         import jax.numpy as jnp
 
         c = self.config
-        lo = jnp.array([c.hammer_x[0], c.hammer_y[0], c.hammer_yaw[0], -c.start_xy, -c.start_xy])
-        hi = jnp.array([c.hammer_x[1], c.hammer_y[1], c.hammer_yaw[1], c.start_xy, c.start_xy])
-        u = jax.random.uniform(rng, (5,), minval=lo, maxval=hi)
-        qpos = jnp.asarray(self.qpos0)
-        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))
-        qpos = qpos.at[4:6].set(mjcf.FINGER_OPEN)
-        hammer_pos = jnp.stack([u[0], u[1], jnp.asarray(HAMMER_Z)])
-        qpos = qpos.at[6:13].set(jnp.concatenate([hammer_pos, yaw_quat(u[2], jnp)]))
+        qpos = self.gripper_and_object_qpos(rng, c.hammer_x, c.hammer_y, c.hammer_yaw, HAMMER_Z)
         qpos = qpos.at[13].set(0.0)
         return qpos, jnp.zeros((0, 3))
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig, register_task, yaw_quat
+from elicit_jax.sim.env import Task, TaskConfig, register_task
 
 PEG_XY = (0.1, 0.1)
 PEG_HALF = 0.011
@@ -100,19 +100,10 @@ class SquareNut(Task):
         )
 
     def sample_init(self, rng: Any) -> tuple[Any, Any]:
-        import jax
         import jax.numpy as jnp
 
         c = self.config
-        lo = jnp.array([c.nut_x[0], c.nut_y[0], c.nut_yaw[0], -c.start_xy, -c.start_xy])
-        hi = jnp.array([c.nut_x[1], c.nut_y[1], c.nut_yaw[1], c.start_xy, c.start_xy])
-        u = jax.random.uniform(rng, (5,), minval=lo, maxval=hi)
-        qpos = jnp.asarray(self.qpos0)
-        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))
-        qpos = qpos.at[4:6].set(mjcf.FINGER_OPEN)
-        nut_pos = jnp.stack([u[0], u[1], jnp.asarray(self.nut_z)])
-        nut = jnp.concatenate([nut_pos, yaw_quat(u[2], jnp)])
-        qpos = qpos.at[6:13].set(nut)
+        qpos = self.gripper_and_object_qpos(rng, c.nut_x, c.nut_y, c.nut_yaw, self.nut_z)
         return qpos, jnp.zeros((0, 3))
 
     def success_from_obs(self, obs: Any, xp: Any = np) -> Any:
