@@ -13,6 +13,7 @@ import datetime as _dt
 import hashlib
 import json
 import os
+import platform
 import shutil
 import tempfile
 from collections.abc import Iterator, Mapping
@@ -54,6 +55,17 @@ def library_versions() -> dict[str, str]:
     return out
 
 
+def runtime_settings() -> dict[str, Any]:
+    """Settings outside the config that can change numerics: XLA flags, the XLA CPU thread
+    count (results are bit-identical only for the same machine and thread count), CPUs."""
+    return {
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", ""),
+        "PJRT_NPROC": os.environ.get("PJRT_NPROC", ""),
+        "cpus": os.cpu_count(),
+        "machine": platform.machine(),
+    }
+
+
 def make_header(
     kind: str,
     schema_version: int,
@@ -83,6 +95,7 @@ def make_header(
         },
         "seed": seed,
         "versions": library_versions(),
+        "runtime": runtime_settings(),
     }
     header.update(fields)
     return header

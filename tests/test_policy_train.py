@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import jax
@@ -111,6 +112,9 @@ def test_loss_curve_and_header(runs):
     assert header["best_val_loss"] == pytest.approx(table["val_loss"].min())
     assert table["val_loss"].iloc[best - 1] == pytest.approx(table["val_loss"].min())
     assert header["model"]["obs_fields"] == ["pos", "obj"]
+    # numerics depend on the XLA CPU thread count: the checkpoint records it
+    assert header["runtime"]["PJRT_NPROC"] == os.environ["PJRT_NPROC"]
+    assert "--xla_cpu_use_fusion_emitters=false" in header["runtime"]["XLA_FLAGS"]
     assert list_checkpoints(run) == {0: [30, 60, "best"], 1: [30, 60, "best"]}
     with np.load(run / "seed0" / "params" / "epoch_0060.npz") as f:
         assert f["Trunk_0/Dense_0/kernel"].shape == (3, OBS, 32)
