@@ -37,8 +37,8 @@ import numpy as np
 
 from elicit_jax.compat.measures import ScoreConfig, score_pair
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.sharding import batch_shardings, device_count, round_up
-from elicit_jax.pipeline.sharding import place as place_tree
+from elicit_jax.sharding import batch_shardings, device_count, round_up
+from elicit_jax.sharding import place as place_tree
 
 SCORES_KIND = "scores"
 EPISODES_KIND = "episode-scores"
@@ -186,7 +186,7 @@ def score_batches(
     """Score row batches of demonstrations, yielding per-pair score batches in input order.
 
     With several devices each chunk is split across them along its rows
-    (:mod:`elicit_jax.pipeline.sharding`); the chunk size is then rounded up to a multiple of
+    (:mod:`elicit_jax.sharding`); the chunk size is then rounded up to a multiple of
     the device count, so the whole dataset still compiles once. Scores do not depend on it.
 
     Args:

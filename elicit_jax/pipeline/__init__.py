@@ -3,5 +3,5 @@
 Modules: :mod:`spec` (definitions), :mod:`graph` (stages, DAG), :mod:`plan` (the filtering
 study's graph), :mod:`runner` (execution, skip/resume), :mod:`stages` (the real stage
 functions), :mod:`run` (plan + run + report, behind the CLI), :mod:`gather` and :mod:`tables`
-(a run's results), :mod:`report` (Markdown/HTML), :mod:`sharding` (batch-axis sharding).
+(a run's results), :mod:`report` (Markdown/HTML).
 """

@@ -6,7 +6,7 @@ contract). A ``lax.while_loop`` runs the horizon and stops early once every roll
 succeeded; success is tracked per rollout and frozen at the first success.
 
 On a machine with several devices the environments are split across them along the batch
-axis (a ``NamedSharding`` over a 1-D mesh, :mod:`elicit_jax.pipeline.sharding`): the batch is
+axis (a ``NamedSharding`` over a 1-D mesh, :mod:`elicit_jax.sharding`): the batch is
 padded to a multiple of the device count with copies of its last initial state (a copy
 finishes exactly when its original does, so the early stop is unchanged) and trimmed after.
 With one device nothing is placed or copied.
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.pipeline.sharding import batch_shardings, devices_for, pad_rows, place
+from elicit_jax.sharding import batch_shardings, devices_for, pad_rows, place
 from elicit_jax.sim.env import Task
 
 EXPORT_FORMAT = 1

@@ -11,7 +11,7 @@ import textwrap
 SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp, numpy as np
-    from elicit_jax.pipeline.sharding import shard_batch
+    from elicit_jax.sharding import shard_batch
 
     assert len(jax.devices()) == 2, jax.devices()
 
