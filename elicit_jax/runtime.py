@@ -36,7 +36,7 @@ def configure(cache_dir: Path | None = None) -> None:
       cache_dir: cache location; defaults to :func:`default_cache_dir`.
     """
     os.environ.setdefault("XLA_FLAGS", MJX_CPU_XLA_FLAGS)
-    os.environ.setdefault("PJRT_NPROC", str(max(MIN_CPU_THREADS, _cpus())))
+    os.environ.setdefault("PJRT_NPROC", str(max(MIN_CPU_THREADS, available_cpus())))
     if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
         path = cache_dir or default_cache_dir()
         try:
@@ -48,8 +48,9 @@ def configure(cache_dir: Path | None = None) -> None:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
 
 
-def _cpus() -> int:
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask, else the machine's count)."""
     try:
-        return len(os.sched_getaffinity(0))
+        return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:
-        return os.cpu_count() or 1
+        return max(1, os.cpu_count() or 1)

@@ -11,21 +11,18 @@ kernels as the MJX backend.
 from __future__ import annotations
 
 import itertools
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
+from elicit_jax.runtime import available_cpus
 from elicit_jax.sim.env import N_GRIPPER_Q, Task
 
 
 def default_threads() -> int:
     """Worker threads for C MuJoCo stepping: the CPUs this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
+    return available_cpus()
 
 
 class BatchSim:
