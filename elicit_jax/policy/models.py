@@ -21,13 +21,16 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from elicit_jax.policy.dropout import BitDropout
+
 MDN_MIN_STD = 1e-4
 Params = Any
 LSTMCarry = tuple[tuple[jax.Array, jax.Array], ...]
 
 
 class Trunk(nn.Module):
-    """Dense -> LayerNorm -> ReLU per hidden layer, dropout between hidden layers."""
+    """Dense -> LayerNorm -> ReLU per hidden layer, dropout between hidden layers
+    (:class:`~elicit_jax.policy.dropout.BitDropout`)."""
 
     hidden: Sequence[int]
     dropout: float
@@ -36,7 +39,7 @@ class Trunk(nn.Module):
     def __call__(self, x: jax.Array, train: bool) -> jax.Array:
         for i, size in enumerate(self.hidden):
             if i > 0 and self.dropout > 0.0:
-                x = nn.Dropout(self.dropout, deterministic=not train)(x)
+                x = BitDropout(self.dropout)(x, deterministic=not train)
             x = nn.relu(nn.LayerNorm()(nn.Dense(size)(x)))
         return x
 
