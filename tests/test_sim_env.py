@@ -105,3 +105,22 @@ def test_mjx_matches_c_mujoco_on_square_nut_grasp():
     np.testing.assert_allclose(mjx, c, atol=1e-2)
     again = fn(q.astype(np.float32), m.astype(np.float32), acts.astype(np.float32))
     np.testing.assert_array_equal(np.asarray(again), mjx)
+
+
+@pytest.mark.parametrize("at_step", [0, 3])
+def test_c_backend_flags_and_freezes_a_diverged_env(at_step):
+    """A non-finite velocity makes MuJoCo reset the data; the env is flagged and frozen, both
+    on the first control step (the clock alone cannot show that reset) and later."""
+    task = make_task("reach-pillar")
+    actions = np.tile([0.3, 0.0, 0.0, 0, 0, 0, -1.0], (3, 1))
+    with BatchSim(task, 3, threads=2) as sim:
+        sim.reset_seeds(np.array([1, 2, 3]))
+        for t in range(6):
+            if t == at_step:
+                sim.datas[1].qvel[0] = np.nan
+            sim.step(actions)
+            if t == at_step:
+                frozen = sim.qpos()[1]
+        assert sim.unstable.tolist() == [False, True, False]
+        assert not sim.success[1]
+        np.testing.assert_array_equal(sim.qpos()[1], frozen)
