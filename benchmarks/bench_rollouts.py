@@ -70,15 +70,16 @@ def paper_policy():
     )
 
 
-def matmul_gflops(batch: int = 50) -> float:
+_members = jax.jit(lambda p, o: p.members(o))
+
+
+def matmul_gflops(policy, batch: int = 50) -> float:
     """Measured GFLOP/s of the policy's own matmuls at this batch size (jitted, float32)."""
-    policy = paper_policy()
     obs = jnp.zeros((batch, OBS))
-    f = jax.jit(lambda p, o: p.members(o))
-    f(policy, obs).block_until_ready()
+    _members(policy, obs).block_until_ready()
     n, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < 2.0:
-        f(policy, obs).block_until_ready()
+        _members(policy, obs).block_until_ready()
         n += 1
     return n * batch * FLOP_PER_STEP / (time.perf_counter() - t0) / 1e9
 
@@ -205,12 +206,14 @@ def main() -> None:
     # back-to-back pairs and report the median pair (and every pair's fraction).
     pairs = []
     for _ in range(args.rounds):
-        gflops = matmul_gflops()
+        gflops = matmul_gflops(policy)
         pairs.append((gflops, bench_mujoco(task, policy, 50, h_c)))
         log("pair (matmul GFLOP/s, mujoco env-steps/s)", pairs[-1])
-    fracs = [c / (g * 1e9 / FLOP_PER_STEP) for g, c in pairs]
-    res["matmul_gflops"], res["mujoco_50"] = pairs[int(np.argsort(fracs)[len(fracs) // 2])]
-    res["bound_env_steps"] = res["matmul_gflops"] * 1e9 / FLOP_PER_STEP
+    bounds = [g * 1e9 / FLOP_PER_STEP for g, _ in pairs]
+    fracs = [c / bound for (_, c), bound in zip(pairs, bounds, strict=True)]
+    median = int(np.argsort(fracs)[len(fracs) // 2])
+    res["matmul_gflops"], res["mujoco_50"] = pairs[median]
+    res["bound_env_steps"] = bounds[median]
     res["mujoco_fraction_of_bound_rounds"] = fracs
     res["reference"] = bench_reference(task, policy, 3 if args.quick else 5, h_ref * 5)
     log("reference", res["reference"])

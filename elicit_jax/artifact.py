@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.runtime import available_cpus
 
 HEADER_KEY = b"elicit_jax"
 DIR_HEADER = "artifact.json"
@@ -61,7 +62,7 @@ def runtime_settings() -> dict[str, Any]:
     return {
         "XLA_FLAGS": os.environ.get("XLA_FLAGS", ""),
         "PJRT_NPROC": os.environ.get("PJRT_NPROC", ""),
-        "cpus": os.cpu_count(),
+        "cpus": available_cpus(),
         "machine": platform.machine(),
     }
 

@@ -10,6 +10,8 @@ of 1/65536 are exact too; any other rate falls back to ``jax.random.bernoulli``.
 
 from __future__ import annotations
 
+import math
+
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
@@ -40,9 +42,7 @@ def keep_mask(key: jax.Array, keep: float, shape: tuple[int, ...]) -> jax.Array:
     if b is None:
         return jax.random.bernoulli(key, keep, shape)
     per_word = 32 // b
-    n = 1
-    for d in shape:
-        n *= d
+    n = math.prod(shape)
     words = jax.random.bits(key, (-(-n // per_word),), jnp.uint32)
     shifts = jnp.arange(per_word, dtype=jnp.uint32) * b
     fields = (words[:, None] >> shifts) & jnp.uint32((1 << b) - 1)

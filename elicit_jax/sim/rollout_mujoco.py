@@ -30,11 +30,6 @@ def _bad_warnings(d: Any) -> int:
     )
 
 
-def default_threads() -> int:
-    """Worker threads for C MuJoCo stepping: the CPUs this process may use."""
-    return available_cpus()
-
-
 class BatchSim:
     """B environments of one task on C MuJoCo.
 
@@ -52,7 +47,7 @@ class BatchSim:
         self.batch = int(batch)
         self.model = task.mj_model
         self.datas = [mujoco.MjData(self.model) for _ in range(self.batch)]
-        self.threads = min(threads or default_threads(), self.batch)
+        self.threads = min(threads or available_cpus(), self.batch)
         bounds = np.linspace(0, self.batch, self.threads + 1).astype(int)
         self._chunks = [(int(a), int(b)) for a, b in itertools.pairwise(bounds) if b > a]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
@@ -129,9 +124,9 @@ class BatchSim:
                 first = t0 == 0.0
                 before = _bad_warnings(d) if first else 0
                 mujoco.mj_step(self.model, d, n)
-                # A diverged state makes MuJoCo reset the data, which restarts the clock: the
-                # cheap check (reading the warning counters costs ~4 us with the GIL held). Only
-                # a reset on the first substep from t = 0 leaves the clock where it would be.
+                # MuJoCo resets a diverged env, restarting its clock: reading the clock is cheap,
+                # the warning counters are not (~4 us each, GIL held). From t = 0 a reset on the
+                # first substep leaves the clock unchanged, so that step reads the counters.
                 if d.time < t0 + late or (first and _bad_warnings(d) != before):
                     self.unstable[i] = True
 
