@@ -168,7 +168,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument(
         "--rounds",
         type=int,
-        default=3,
+        default=5,
         help="Back-to-back (bound, C backend) pairs; the median pair is reported.",
     )
     ap.add_argument(

@@ -58,17 +58,20 @@ def test_initial_states_seeded_and_randomised():
     assert np.all((yaw >= cfg.nut_yaw[0] - 1e-6) & (yaw <= cfg.nut_yaw[1] + 1e-6))
 
 
-def test_c_backend_deterministic_and_masked():
+def test_c_backend_deterministic_across_thread_counts_and_masked():
     task = make_task("reach-pillar")
-    actions = np.tile([0.5, 0.2, 0.0, 0, 0, 0.3, -1.0], (3, 1))
+    actions = np.array([[0.5, 0.2, 0.0, 0, 0, 0.3, -1.0], [0.6, -0.4, 0.2, 0, 0, -0.5, 1.0]] * 2)[
+        :3
+    ]
     outs = []
-    for _ in range(2):
-        with BatchSim(task, 3, threads=2) as sim:
+    for threads in (2, 1, 3):  # one chunk per thread, the calling thread steps the last
+        with BatchSim(task, 3, threads=threads) as sim:
             sim.reset_seeds(np.array([4, 5, 6]))
             for _ in range(5):
                 obs = sim.step(actions, active=np.array([True, True, False]))
             outs.append(obs)
     np.testing.assert_array_equal(outs[0], outs[1])
+    np.testing.assert_array_equal(outs[0], outs[2])
     with BatchSim(task, 1) as sim:
         start = sim.reset_seeds(np.array([6]))
     np.testing.assert_array_equal(outs[0][2], start[0])  # the inactive env never moved

@@ -3,9 +3,12 @@
 :class:`BatchSim` runs B copies of a task on C MuJoCo. Each control step takes the whole
 batch's actions ``(B, 7)`` (one batched policy call upstream), sets the actuator targets with
 the task's shared kernel, and advances each environment ``substeps`` physics steps. The
-environments are split into one contiguous chunk per thread; ``mj_step`` releases the GIL, so
-chunks run in parallel. Observations and success come from the same sensor and success
-kernels as the MJX backend.
+environments are split into one contiguous chunk per thread; the calling thread steps the last
+chunk itself while pool threads step the others, and ``mj_step`` releases the GIL, so chunks
+run in parallel. Each thread also sets its environments' targets and copies their gripper
+joints and sensor data into shared buffers, so the per-environment Python runs beside the
+other threads' physics instead of in series before and after it. Observations and success
+come from the same sensor and success kernels as the MJX backend.
 """
 
 from __future__ import annotations
@@ -50,7 +53,9 @@ class BatchSim:
         self.threads = min(threads or available_cpus(), self.batch)
         bounds = np.linspace(0, self.batch, self.threads + 1).astype(int)
         self._chunks = [(int(a), int(b)) for a, b in itertools.pairwise(bounds) if b > a]
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        self._pool = ThreadPoolExecutor(self.threads - 1) if self.threads > 1 else None
+        self._gripper_q = np.zeros((self.batch, N_GRIPPER_Q))
+        self._sensordata = np.zeros((self.batch, self.model.nsensordata))
         self.obs = np.zeros((self.batch, 23))
         self.success = np.zeros(self.batch, bool)
         self.unstable = np.zeros(self.batch, bool)
@@ -84,6 +89,8 @@ class BatchSim:
                 d.mocap_pos[:] = mocap_pos[i]
             d.ctrl[:] = self.task.ctrl_from_action(qpos[i, :N_GRIPPER_Q], open_action)
             mujoco.mj_forward(self.model, d)
+            self._gripper_q[i] = d.qpos[:N_GRIPPER_Q]
+            self._sensordata[i] = d.sensordata
         self.unstable[:] = False
         return self._observe()
 
@@ -98,21 +105,19 @@ class BatchSim:
         Returns:
           (B, 23) observations after the step.
         """
-        qpos = np.stack([d.qpos[:N_GRIPPER_Q] for d in self.datas])
-        ctrl = self.task.ctrl_from_action(qpos, np.asarray(actions, np.float64))
-        for d, c in zip(self.datas, ctrl, strict=True):
-            d.ctrl[:] = c
+        ctrl = self.task.ctrl_from_action(self._gripper_q, np.asarray(actions, np.float64))
         mask = np.ones(self.batch, bool) if active is None else np.asarray(active, bool)
         mask = mask & ~self.unstable
-        if self._pool is None:
-            self._run(0, self.batch, mask)
-        else:
-            futures = [self._pool.submit(self._run, a, b, mask) for a, b in self._chunks]
+        *others, last = self._chunks
+        futures = [self._pool.submit(self._run, a, b, mask, ctrl) for a, b in others]
+        try:
+            self._run(*last, mask, ctrl)
+        finally:
             for f in futures:
                 f.result()
         return self._observe()
 
-    def _run(self, start: int, stop: int, mask: np.ndarray) -> None:
+    def _run(self, start: int, stop: int, mask: np.ndarray, ctrl: np.ndarray) -> None:
         import mujoco
 
         n = self.task.config.substeps
@@ -120,6 +125,7 @@ class BatchSim:
         for i in range(start, stop):
             if mask[i]:
                 d = self.datas[i]
+                d.ctrl[:] = ctrl[i]
                 t0 = d.time
                 first = t0 == 0.0
                 before = _bad_warnings(d) if first else 0
@@ -129,10 +135,11 @@ class BatchSim:
                 # first substep leaves the clock unchanged, so that step reads the counters.
                 if d.time < t0 + late or (first and _bad_warnings(d) != before):
                     self.unstable[i] = True
+                self._gripper_q[i] = d.qpos[:N_GRIPPER_Q]
+                self._sensordata[i] = d.sensordata
 
     def _observe(self) -> np.ndarray:
-        sd = np.stack([d.sensordata for d in self.datas])
-        self.obs = self.task.obs_from_sensordata(sd)
+        self.obs = self.task.obs_from_sensordata(self._sensordata.copy())
         self.success = np.asarray(self.task.success_from_obs(self.obs), bool) & ~self.unstable
         return self.obs
 
