@@ -60,9 +60,13 @@ def test_initial_states_seeded_and_randomised():
 
 def test_c_backend_deterministic_across_thread_counts_and_masked():
     task = make_task("reach-pillar")
-    actions = np.array([[0.5, 0.2, 0.0, 0, 0, 0.3, -1.0], [0.6, -0.4, 0.2, 0, 0, -0.5, 1.0]] * 2)[
-        :3
-    ]
+    actions = np.array(
+        [
+            [0.5, 0.2, 0.0, 0, 0, 0.3, -1.0],
+            [0.6, -0.4, 0.2, 0, 0, -0.5, 1.0],
+            [0.5, 0.2, 0.0, 0, 0, 0.3, -1.0],
+        ]
+    )
     outs = []
     for threads in (2, 1, 3):  # one chunk per thread, the calling thread steps the last
         with BatchSim(task, 3, threads=threads) as sim:

@@ -89,8 +89,7 @@ class BatchSim:
                 d.mocap_pos[:] = mocap_pos[i]
             d.ctrl[:] = self.task.ctrl_from_action(qpos[i, :N_GRIPPER_Q], open_action)
             mujoco.mj_forward(self.model, d)
-            self._gripper_q[i] = d.qpos[:N_GRIPPER_Q]
-            self._sensordata[i] = d.sensordata
+            self._record(i, d)
         self.unstable[:] = False
         return self._observe()
 
@@ -135,8 +134,12 @@ class BatchSim:
                 # first substep leaves the clock unchanged, so that step reads the counters.
                 if d.time < t0 + late or (first and _bad_warnings(d) != before):
                     self.unstable[i] = True
-                self._gripper_q[i] = d.qpos[:N_GRIPPER_Q]
-                self._sensordata[i] = d.sensordata
+                self._record(i, d)
+
+    def _record(self, i: int, d: Any) -> None:
+        """Copy env ``i``'s gripper joints (next targets) and sensor data (observation)."""
+        self._gripper_q[i] = d.qpos[:N_GRIPPER_Q]
+        self._sensordata[i] = d.sensordata
 
     def _observe(self) -> np.ndarray:
         self.obs = self.task.obs_from_sensordata(self._sensordata.copy())
