@@ -1,11 +1,24 @@
 """Builders of small datasets in the real on-disk layouts (robomimic HDF5, LeRobot v2.1/v3.0).
 
-Written independently of elicit_jax's own exporters, following the published layouts, so
-that import tests check our readers against the formats rather than against ourselves.
+Written independently of elicit_jax's own exporters, following the layouts the libraries
+write today, so that tests check our readers and writers against the formats rather than
+against ourselves:
+
+* robomimic 0.3 (as robosuite's conversion writes it): ``data/demo_i/{actions, rewards,
+  dones, states, obs/<key>, next_obs/<key>}`` with ``num_samples`` and ``model_file``;
+  ``data.attrs`` ``env_args`` and ``total``; ``mask/<key>`` byte strings.
+* LeRobot v3.0 as LeRobot 0.6.x records it: vectors as fixed-size float32 lists, one row
+  group per episode, per-episode ``stats/<feature>/<key>`` columns and ``meta/stats.json``
+  aggregated episode by episode (with the quantiles q01..q99 of LeRobot's histogram
+  estimator, :func:`lerobot_reference_stats`), optionally a video camera with its files,
+  locators and per-episode statistics.
+* LeRobot v2.1 as LeRobot 0.3.x records it: one Parquet per episode,
+  ``episodes_stats.jsonl`` (min/max/mean/std/count: 0.3.x computes no quantiles).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -44,6 +57,8 @@ def write_robomimic(
             g = data.create_group(name)
             g.create_dataset("actions", data=d["actions"])
             t = len(d["actions"])
+            g.create_dataset("states", data=np.arange(t * 5, dtype=np.float64).reshape(t, 5))
+            g.attrs["model_file"] = "<mujoco model='fixture'/>"
             if "rewards" in d:
                 g.create_dataset("rewards", data=d["rewards"])
             dones = np.zeros(t, np.int64)
@@ -53,6 +68,8 @@ def write_robomimic(
             for key, arr in d.items():
                 if key.startswith("obs/"):
                     g.create_dataset(key, data=arr)
+                    nxt = np.concatenate([arr[1:], arr[-1:]]) if t else arr
+                    g.create_dataset("next_" + key, data=nxt)
             g.attrs["num_samples"] = t
             total += t
         data.attrs["total"] = total
@@ -77,8 +94,94 @@ def robomimic_demo(rng: np.random.Generator, t: int, success: bool = True) -> di
     }
 
 
-def _frames_table(episodes: list[dict], start_index: int = 0):
-    """LeRobot frame rows as HF ``datasets`` writes them (vectors as list<float32>)."""
+QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
+CAMERA = "observation.images.top"
+
+
+def lerobot_reference_stats(values: np.ndarray, quantiles: bool = True) -> dict:
+    """One feature's statistics over one episode as LeRobot (0.4+) records them.
+
+    Population std from the mean of squares, in the data's dtype promoted to at least
+    float32; quantiles from a 5000-bin histogram over [min - 1e-10, max + 1e-10], read at the
+    first bin whose cumulative count reaches q * n and interpolated inside it.
+    """
+    x = np.asarray(values)
+    x = x.reshape(len(x), -1)
+    x = x.astype(np.result_type(x.dtype, np.float32))
+    mean = x.mean(axis=0)
+    out = {
+        "min": x.min(axis=0),
+        "max": x.max(axis=0),
+        "mean": mean,
+        "std": np.sqrt(np.maximum(0, (x * x).mean(axis=0) - mean * mean)),
+        "count": np.array([len(x)]),
+    }
+    if not quantiles:
+        return out
+    for q in QUANTILES:
+        row = []
+        for d in range(x.shape[1]):
+            if len(x) < 2:
+                row.append(float(mean[d]))
+                continue
+            col = x[:, d]
+            edges = np.linspace(col.min() - 1e-10, col.max() + 1e-10, 5001)
+            cum = np.cumsum(np.histogram(col, bins=edges)[0]).astype(float)
+            target = q * len(col)
+            reached = np.flatnonzero(cum >= target)
+            i = int(reached[0]) if len(reached) else len(cum)
+            if i == 0:
+                row.append(edges[0])
+            elif i == len(cum):
+                row.append(edges[-1])
+            elif cum[i] == cum[i - 1]:
+                row.append(edges[i])
+            else:
+                frac = (target - cum[i - 1]) / (cum[i] - cum[i - 1])
+                row.append(edges[i] + frac * (edges[i + 1] - edges[i]))
+        out[f"q{int(q * 100):02d}"] = np.array(row)
+    return out
+
+
+def lerobot_running_aggregate(total: dict | None, ep: dict) -> dict:
+    """The recorder's update of dataset statistics with one more episode's."""
+    if total is None:
+        return {k: np.asarray(v) for k, v in ep.items()}
+    n1, n2 = total["count"], ep["count"]
+    n = n1 + n2
+    mean = (total["mean"] * n1 + ep["mean"] * n2) / n
+    var = (
+        (total["std"] ** 2 + (total["mean"] - mean) ** 2) * n1
+        + (ep["std"] ** 2 + (ep["mean"] - mean) ** 2) * n2
+    ) / n
+    out = {
+        "min": np.minimum(total["min"], ep["min"]),
+        "max": np.maximum(total["max"], ep["max"]),
+        "mean": mean,
+        "std": np.sqrt(var),
+        "count": n,
+    }
+    for k in total:
+        if k.startswith("q") and k in ep:
+            out[k] = (total[k] * n1 + ep[k] * n2) / n
+    return out
+
+
+def _camera_stats(rng: np.random.Generator, t: int, quantiles: bool) -> dict:
+    """Per-channel stats (3, 1, 1) in [0, 1], as LeRobot computes from sampled frames."""
+    lo = rng.uniform(0, 0.2, size=(3, 1, 1))
+    hi = rng.uniform(0.8, 1.0, size=(3, 1, 1))
+    mean = (lo + hi) / 2
+    out = {"min": lo, "max": hi, "mean": mean, "std": (hi - lo) / 4, "count": np.array([t])}
+    if quantiles:
+        for q in QUANTILES:
+            out[f"q{int(q * 100):02d}"] = lo + q * (hi - lo)
+    return out
+
+
+def _frames_table(episodes: list[dict], start_index: int = 0, fixed: bool = True):
+    """LeRobot frame rows as HF ``datasets`` writes them: vectors as fixed-size float32 lists
+    (``fixed=False``: variable lists, as some older datasets hold them)."""
     import pyarrow as pa
 
     cols: dict[str, list] = {
@@ -86,14 +189,14 @@ def _frames_table(episodes: list[dict], start_index: int = 0):
         for k in (
             "observation.state",
             "action",
+            "next.reward",
+            "next.done",
+            "next.success",
             "timestamp",
             "frame_index",
             "episode_index",
             "index",
             "task_index",
-            "next.reward",
-            "next.done",
-            "next.success",
         )
     }
     index = start_index
@@ -101,7 +204,7 @@ def _frames_table(episodes: list[dict], start_index: int = 0):
         t = len(ep["state"])
         cols["observation.state"] += ep["state"].astype(np.float32).tolist()
         cols["action"] += ep["action"].astype(np.float32).tolist()
-        cols["timestamp"] += (np.arange(t, dtype=np.float32) / 10).tolist()
+        cols["timestamp"] += (np.arange(t) / 10).astype(np.float32).tolist()
         cols["frame_index"] += list(range(t))
         cols["episode_index"] += [ep["episode_index"]] * t
         cols["index"] += list(range(index, index + t))
@@ -110,7 +213,7 @@ def _frames_table(episodes: list[dict], start_index: int = 0):
         cols["next.done"] += [False] * (t - 1) + [True]
         cols["next.success"] += ep["success_flags"].tolist()
         index += t
-    vec = pa.list_(pa.float32())
+    vec = pa.list_(pa.float32(), 6) if fixed else pa.list_(pa.float32())
     types = {
         "observation.state": vec,
         "action": vec,
@@ -120,6 +223,18 @@ def _frames_table(episodes: list[dict], start_index: int = 0):
         "next.success": pa.bool_(),
     }
     return pa.table({k: pa.array(v, types.get(k, pa.int64())) for k, v in cols.items()})
+
+
+def _write_by_episode(path: Path, table) -> None:
+    """One row group per episode, as LeRobot's recorder appends them."""
+    import pyarrow.parquet as pq
+
+    ep = table.column("episode_index").to_numpy()
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(ep)) + 1, [len(ep)]])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with pq.ParquetWriter(path, table.schema, compression="snappy") as w:
+        for a, b in itertools.pairwise(starts):
+            w.write_table(table.slice(int(a), int(b - a)))
 
 
 def lerobot_episode(rng: np.random.Generator, index: int, t: int, success: bool = True) -> dict:
@@ -137,28 +252,68 @@ def lerobot_episode(rng: np.random.Generator, index: int, t: int, success: bool 
     }
 
 
-def _features() -> dict:
-    def f(dtype: str, shape: list[int]) -> dict:
-        return {"dtype": dtype, "shape": shape, "names": None}
+def _features(camera: bool = False) -> dict:
+    def f(dtype: str, shape: list[int], names=None) -> dict:
+        return {"dtype": dtype, "shape": shape, "names": names}
 
-    return {
-        "observation.state": f("float32", [6]),
-        "action": f("float32", [6]),
-        "timestamp": f("float32", [1]),
-        "frame_index": f("int64", [1]),
-        "episode_index": f("int64", [1]),
-        "index": f("int64", [1]),
-        "task_index": f("int64", [1]),
+    feats = {
+        "observation.state": f("float32", [6], [f"joint_{i}.pos" for i in range(6)]),
+        "action": f("float32", [6], [f"joint_{i}.pos" for i in range(6)]),
         "next.reward": f("float32", [1]),
         "next.done": f("bool", [1]),
         "next.success": f("bool", [1]),
     }
+    if camera:
+        feats[CAMERA] = {
+            "dtype": "video",
+            "shape": [8, 8, 3],
+            "names": ["height", "width", "channels"],
+            "info": {
+                "video.height": 8,
+                "video.width": 8,
+                "video.codec": "av1",
+                "video.pix_fmt": "yuv420p",
+                "video.is_depth_map": False,
+                "video.fps": 10,
+                "video.channels": 3,
+                "has_audio": False,
+            },
+        }
+    feats.update(
+        {
+            "timestamp": f("float32", [1]),
+            "frame_index": f("int64", [1]),
+            "episode_index": f("int64", [1]),
+            "index": f("int64", [1]),
+            "task_index": f("int64", [1]),
+        }
+    )
+    return feats
 
 
-def write_lerobot_v21(root: Path, episodes: list[dict], tasks: list[str], chunks_size=1000):
-    """LeRobot codebase v2.1 folder: one Parquet per episode + jsonl metadata."""
-    import pyarrow.parquet as pq
+def _numeric_stats(table, quantiles: bool) -> dict:
+    """Stats of every numeric frame column of one episode's rows."""
+    import pyarrow as pa
 
+    out = {}
+    for name in table.column_names:
+        col = table.column(name).combine_chunks()
+        if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type):
+            values = col.flatten().to_numpy().reshape(len(col), -1)
+        else:
+            values = col.to_numpy(zero_copy_only=False)
+        out[name] = lerobot_reference_stats(values, quantiles)
+    return out
+
+
+def _json(stats: dict) -> dict:
+    return {f: {k: np.asarray(v).tolist() for k, v in s.items()} for f, s in stats.items()}
+
+
+def write_lerobot_v21(
+    root: Path, episodes: list[dict], tasks: list[str], chunks_size=1000, camera: bool = False
+):
+    """LeRobot codebase v2.1 folder: one Parquet per episode + jsonl metadata (+ a camera)."""
     root.mkdir(parents=True)
     n_frames = sum(len(e["state"]) for e in episodes)
     info = {
@@ -167,35 +322,58 @@ def write_lerobot_v21(root: Path, episodes: list[dict], tasks: list[str], chunks
         "total_episodes": len(episodes),
         "total_frames": n_frames,
         "total_tasks": len(tasks),
-        "total_videos": 0,
+        "total_videos": len(episodes) if camera else 0,
         "total_chunks": 1,
         "chunks_size": chunks_size,
         "fps": 10,
         "splits": {"train": f"0:{len(episodes)}"},
         "data_path": "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
-        "video_path": None,
-        "features": _features(),
+        "video_path": (
+            "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
+            if camera
+            else None
+        ),
+        "features": _features(camera),
     }
     (root / "meta").mkdir()
     (root / "meta" / "info.json").write_text(json.dumps(info, indent=4))
-    index, lines = 0, []
+    rng = np.random.default_rng(1)
+    index, lines, stat_lines = 0, [], []
     for ep in episodes:
         e = ep["episode_index"]
         path = root / "data" / f"chunk-{e // chunks_size:03d}" / f"episode_{e:06d}.parquet"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(_frames_table([ep], index), path)
+        table = _frames_table([ep], index)
+        _write_by_episode(path, table)
         index += len(ep["state"])
         task = tasks[ep.get("task_index", 0)]
         lines.append({"episode_index": e, "tasks": [task], "length": len(ep["state"])})
+        stats = _numeric_stats(table, quantiles=False)
+        if camera:
+            stats[CAMERA] = _camera_stats(rng, len(ep["state"]), quantiles=False)
+            video = root / "videos" / f"chunk-{e // chunks_size:03d}" / CAMERA
+            video.mkdir(parents=True, exist_ok=True)
+            (video / f"episode_{e:06d}.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42 ep%d" % e)
+        stat_lines.append({"episode_index": e, "stats": _json(stats)})
     (root / "meta" / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+    (root / "meta" / "episodes_stats.jsonl").write_text(
+        "".join(json.dumps(r) + "\n" for r in stat_lines)
+    )
     (root / "meta" / "tasks.jsonl").write_text(
         "".join(json.dumps({"task_index": i, "task": t}) + "\n" for i, t in enumerate(tasks))
     )
     return root
 
 
-def write_lerobot_v30(root: Path, episodes: list[dict], tasks: list[str], per_file: int = 2):
-    """LeRobot codebase v3.0 folder: several episodes per data file, Parquet metadata."""
+def write_lerobot_v30(
+    root: Path,
+    episodes: list[dict],
+    tasks: list[str],
+    per_file: int = 2,
+    camera: bool = False,
+    fixed: bool = True,
+):
+    """LeRobot codebase v3.0 folder as LeRobot 0.6.x records it: several episodes per data
+    (and video) file, Parquet metadata with per-episode stats, ``meta/stats.json``."""
     import pandas as pd
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -213,38 +391,64 @@ def write_lerobot_v30(root: Path, episodes: list[dict], tasks: list[str], per_fi
         "fps": 10,
         "splits": {"train": f"0:{len(episodes)}"},
         "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
-        "video_path": None,
-        "features": _features(),
+        "video_path": (
+            "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
+            if camera
+            else None
+        ),
+        "features": _features(camera),
     }
     (root / "meta" / "episodes" / "chunk-000").mkdir(parents=True)
-    (root / "data" / "chunk-000").mkdir(parents=True)
     (root / "meta" / "info.json").write_text(json.dumps(info, indent=4))
-    records, index = [], 0
+    rng = np.random.default_rng(1)
+    records, index, total = [], 0, {}
     for file_index in range(0, len(episodes), per_file):
         group = episodes[file_index : file_index + per_file]
-        table = _frames_table(group, index)
-        pq.write_table(
-            table, root / "data" / "chunk-000" / f"file-{file_index // per_file:03d}.parquet"
+        table = _frames_table(group, index, fixed=fixed)
+        _write_by_episode(
+            root / "data" / "chunk-000" / f"file-{file_index // per_file:03d}.parquet", table
         )
+        if camera:
+            video = root / "videos" / CAMERA / "chunk-000"
+            video.mkdir(parents=True, exist_ok=True)
+            (video / f"file-{file_index // per_file:03d}.mp4").write_bytes(
+                b"\x00\x00\x00\x18ftypmp42 file%d" % (file_index // per_file)
+            )
+        offset, t_video = 0, 0.0
         for ep in group:
             t = len(ep["state"])
-            records.append(
-                {
-                    "episode_index": ep["episode_index"],
-                    "tasks": [tasks[ep.get("task_index", 0)]],
-                    "length": t,
-                    "data/chunk_index": 0,
-                    "data/file_index": file_index // per_file,
-                    "dataset_from_index": index,
-                    "dataset_to_index": index + t,
-                    "meta/episodes/chunk_index": 0,
-                    "meta/episodes/file_index": 0,
-                }
-            )
-            index += t
+            stats = _numeric_stats(table.slice(offset, t), quantiles=True)
+            if camera:
+                stats[CAMERA] = _camera_stats(rng, t, quantiles=True)
+            rec = {
+                "episode_index": ep["episode_index"],
+                "tasks": [tasks[ep.get("task_index", 0)]],
+                "length": t,
+                "data/chunk_index": 0,
+                "data/file_index": file_index // per_file,
+                "dataset_from_index": index,
+                "dataset_to_index": index + t,
+            }
+            if camera:
+                rec.update(
+                    {
+                        f"videos/{CAMERA}/chunk_index": 0,
+                        f"videos/{CAMERA}/file_index": file_index // per_file,
+                        f"videos/{CAMERA}/from_timestamp": t_video,
+                        f"videos/{CAMERA}/to_timestamp": t_video + t / 10,
+                    }
+                )
+            for f, st in _json(stats).items():
+                rec.update({f"stats/{f}/{k}": v for k, v in st.items()})
+            rec.update({"meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0})
+            records.append(rec)
+            for f, st in stats.items():
+                total[f] = lerobot_running_aggregate(total.get(f), st)
+            index, offset, t_video = index + t, offset + t, t_video + t / 10
     pq.write_table(
         pa.Table.from_pylist(records), root / "meta" / "episodes" / "chunk-000" / "file-000.parquet"
     )
     df = pd.DataFrame({"task_index": list(range(len(tasks)))}, index=pd.Index(tasks, name="task"))
     df.to_parquet(root / "meta" / "tasks.parquet")
+    (root / "meta" / "stats.json").write_text(json.dumps(_json(total), indent=4))
     return root

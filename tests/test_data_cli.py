@@ -96,12 +96,17 @@ def test_quickstart_make_example_import_info_export(cli, tmp_path):
     )
     assert code == 1 and err.count("\n") == 1
     assert "already has mask/train; pick another --mask-key or pass --overwrite" in err
-    code, _, _ = cli(
+    code, out, err = cli(
+        "export", demos, "-f", "robomimic", "--mask-key", "more", "--source", copy, "--in-place"
+    )
+    assert code == 0, err
+    assert f"wrote {copy} (robomimic, mask)" in out and "in place (nothing else" in out
+    with h5py.File(copy, "r") as f:
+        assert len(f["mask/more"]) == 8 and len(f["mask/kept"]) == 3
+    code, _, err = cli(
         "export", demos, "--format", "lerobot", "--episodes", "1", "-o", tmp_path / "sel.json"
     )
-    assert code == 0
-    code, out, _ = cli("info", tmp_path / "sel.json")
-    assert "episode list" in out and "demo_1" in out
+    assert code == 1 and "an episode list names episodes of a LeRobot dataset" in err
     code, _, _ = cli("export", demos, "--format", "npz", "-o", tmp_path / "d.npz")
     code, _, err = cli("import", tmp_path / "d.npz", "-o", tmp_path / "d2.parquet")
     assert code == 0, err
@@ -135,6 +140,13 @@ def test_lerobot_import_and_folder_export(cli, tmp_path):
     assert code == 0, err
     code, out, _ = cli("info", tmp_path / "out")
     assert "export" in out
+    code, out, err = cli(
+        "export", demos, "-f", "lerobot", "--episodes", "1,3", "-o", tmp_path / "l.json"
+    )
+    assert code == 0, err
+    assert "load in LeRobot: import json; from lerobot.datasets.lerobot_dataset import" in out
+    code, out, _ = cli("info", tmp_path / "l.json")
+    assert "episode list" in out and "1, 3" in out
     code, out, _ = cli("import", tmp_path / "out", "-o", tmp_path / "e.parquet")
     assert code == 0 and read_demos(tmp_path / "e.parquet").n_episodes == 2
     code, out, _ = cli("info", root)

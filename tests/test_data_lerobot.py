@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from fixtures_data import lerobot_episode, write_lerobot_v21, write_lerobot_v30
+from fixtures_data import CAMERA, lerobot_episode, write_lerobot_v21, write_lerobot_v30
 
 from elicit_jax.data.demos import SOURCE_EPISODE
 from elicit_jax.data.lerobot import import_lerobot
@@ -58,7 +58,7 @@ def test_export_selection_round_trip(dataset, tmp_path, version):
     root, eps = dataset
     out = tmp_path / f"out-{version}"
     written = export_lerobot(root, out, [4, 1, 3], version=version, header={"kind": "export"})
-    assert written == [1, 3, 4]
+    assert written["source_episodes"] == [1, 3, 4] and written["version"] == version
     info = json.loads((out / "meta" / "info.json").read_text())
     # kept episodes have 5, 7 and 8 frames
     assert info["codebase_version"] == version and info["total_episodes"] == 3
@@ -77,7 +77,7 @@ def test_export_selection_round_trip(dataset, tmp_path, version):
         ]
         state = stats[1]["stats"]["observation.state"]
         np.testing.assert_allclose(state["mean"], eps[3]["state"].mean(0), rtol=1e-5)
-        assert state["count"] == [7]
+        assert state["count"] == [7] and "q99" in state
         frames = pq.read_table(out / "data/chunk-000/episode_000002.parquet")
     else:
         meta = pq.read_table(out / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
@@ -106,8 +106,6 @@ def _break(root, what):
         info["codebase_version"] = "v1.6"
     elif what == "feature":
         del info["features"]["observation.state"]
-    elif what == "video":
-        info["features"]["observation.images.top"] = {"dtype": "video", "shape": [3, 8, 8]}
     info_path.write_text(json.dumps(info))
 
 
@@ -163,18 +161,88 @@ def test_frame_errors_v30(tmp_path):
         import_lerobot(root, episodes=[9])
 
 
-def test_export_refuses_videos_and_self(dataset, tmp_path):
+def test_export_refuses_self_and_unknown_versions(dataset, tmp_path):
     root, _ = dataset
     with pytest.raises(ElicitError, match="output must differ"):
         export_lerobot(root, root, [0])
     with pytest.raises(ElicitError, match=r"cannot write LeRobot codebase version 'v2\.0'"):
         export_lerobot(root, tmp_path / "o", [0], version="v2.0")
-    _break(root, "video")
-    with pytest.raises(ElicitError, match="has video features"):
-        export_lerobot(root, tmp_path / "o", [0])
-    assert not (tmp_path / "o").exists()
     with pytest.raises(ElicitError, match="not a LeRobot dataset folder"):
         import_lerobot(tmp_path / "nowhere")
+    # the default is the source's version
+    assert export_lerobot(root, tmp_path / "d", [0])["version"] == root.name.split("-")[1]
+
+
+@pytest.mark.parametrize("src, out", [("v3.0", "v3.0"), ("v2.1", "v2.1"), ("v2.1", "v3.0")])
+def test_export_with_a_camera_keeps_its_stats_and_videos(tmp_path, src, out):
+    eps = _episodes()
+    writer = write_lerobot_v21 if src == "v2.1" else write_lerobot_v30
+    root = writer(tmp_path / "src", eps, TASKS, camera=True)
+    dst = tmp_path / "out"
+    written = export_lerobot(root, dst, [1, 4], version=out)
+    assert written["cameras"] == [CAMERA]
+    info = json.loads((dst / "meta/info.json").read_text())
+    assert info["features"][CAMERA]["dtype"] == "video"
+    stats = json.loads((dst / "meta/stats.json").read_text())
+    if src == "v2.1":
+        src_stats = {
+            json.loads(x)["episode_index"]: json.loads(x)["stats"][CAMERA]
+            for x in (root / "meta/episodes_stats.jsonl").read_text().splitlines()
+        }
+    else:
+        rows = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+        src_stats = {
+            r["episode_index"]: {k: r[f"stats/{CAMERA}/{k}"] for k in ("mean", "count")}
+            for r in rows
+        }
+    # count-weighted mean of the two episodes' per-channel means, shape (3, 1, 1)
+    n1, n4 = src_stats[1]["count"][0], src_stats[4]["count"][0]
+    want = (n1 * np.array(src_stats[1]["mean"]) + n4 * np.array(src_stats[4]["mean"])) / (n1 + n4)
+    np.testing.assert_allclose(stats[CAMERA]["mean"], want, rtol=1e-9)
+    assert np.asarray(stats[CAMERA]["mean"]).shape == (3, 1, 1)
+    if out == "v3.0":
+        meta = pq.read_table(dst / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+        loc = [
+            (m[f"videos/{CAMERA}/file_index"], m[f"videos/{CAMERA}/from_timestamp"]) for m in meta
+        ]
+        if src == "v3.0":
+            # episodes 1 and 4 live in files 0 (at 0.4 s) and 2 (at 0 s): both files copied whole
+            assert loc == [(0, pytest.approx(0.4)), (2, 0.0)]
+            for f in (0, 2):
+                rel = f"videos/{CAMERA}/chunk-000/file-{f:03d}.mp4"
+                assert (dst / rel).read_bytes() == (root / rel).read_bytes()
+            assert not (dst / f"videos/{CAMERA}/chunk-000/file-001.mp4").exists()
+        else:
+            # each v2.1 episode file becomes a file of its own, starting at 0 s
+            assert loc == [(0, 0.0), (1, 0.0)]
+            assert meta[1][f"videos/{CAMERA}/to_timestamp"] == pytest.approx(0.8)
+            got = (dst / f"videos/{CAMERA}/chunk-000/file-001.mp4").read_bytes()
+            assert got == (root / f"videos/chunk-000/{CAMERA}/episode_000004.mp4").read_bytes()
+    else:
+        got = (dst / f"videos/chunk-000/{CAMERA}/episode_000001.mp4").read_bytes()
+        assert got == (root / f"videos/chunk-000/{CAMERA}/episode_000004.mp4").read_bytes()
+        assert info["total_videos"] == 2
+
+
+def test_export_refuses_what_it_cannot_write_faithfully(tmp_path):
+    eps = _episodes()
+    v3 = write_lerobot_v30(tmp_path / "v3", eps, TASKS, camera=True)
+    with pytest.raises(ElicitError, match=r"cannot be written as v2\.1"):
+        export_lerobot(v3, tmp_path / "o", [0], version="v2.1")
+    v2 = write_lerobot_v21(tmp_path / "v2", eps, TASKS, camera=True)
+    lines = (v2 / "meta/episodes_stats.jsonl").read_text().splitlines()
+    row = json.loads(lines[2])
+    del row["stats"][CAMERA]
+    lines[2] = json.dumps(row)
+    (v2 / "meta/episodes_stats.jsonl").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ElicitError) as err:
+        export_lerobot(v2, tmp_path / "o", [1, 2])
+    assert f"episode 2 has no min/max/mean/std/count statistics for camera '{CAMERA}'" in str(
+        err.value
+    )
+    assert "export an episode list" in str(err.value)
+    export_lerobot(v2, tmp_path / "o", [1, 3])  # episodes that have them are fine
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_v21_chunks(tmp_path):
@@ -190,3 +258,11 @@ def test_v21_chunks(tmp_path):
     assert json.loads((out / "meta/info.json").read_text())["total_chunks"] == 2
     back = import_lerobot(out)
     np.testing.assert_allclose(back.obs[-8:], eps[4]["state"], rtol=1e-6)
+
+
+def test_variable_length_list_columns_read_like_fixed_ones(tmp_path):
+    eps = _episodes()
+    fixed = import_lerobot(write_lerobot_v30(tmp_path / "a", eps, TASKS))
+    lists = import_lerobot(write_lerobot_v30(tmp_path / "b", eps, TASKS, fixed=False))
+    np.testing.assert_array_equal(fixed.obs, lists.obs)
+    np.testing.assert_array_equal(fixed.action, lists.action)

@@ -11,7 +11,8 @@ from fixtures_data import robomimic_demo, write_robomimic
 
 from elicit_jax.artifact import file_sha256
 from elicit_jax.data.demos import SOURCE_EPISODE, DemosWarning, read_demos
-from elicit_jax.data.robomimic import export_mask, import_robomimic
+from elicit_jax.data.robomimic import import_robomimic
+from elicit_jax.data.robomimic_export import add_mask
 from elicit_jax.data.synthetic import ToyConfig, make_toy_robomimic
 from elicit_jax.errors import ElicitError
 
@@ -124,7 +125,7 @@ def test_export_mask_into_a_copy_robomimic_can_read(mh_file, tmp_path):
     path, _ = mh_file
     before = file_sha256(path)
     out = tmp_path / "copy.hdf5"
-    chosen = export_mask(path, out, "compatible", ["demo_10", "demo_2", "demo_9"])
+    chosen = add_mask(path, out, "compatible", ["demo_10", "demo_2", "demo_9"])
     assert chosen == ["demo_2", "demo_9", "demo_10"]
     assert file_sha256(path) == before  # the source is untouched
     with h5py.File(out, "r") as f:
@@ -136,19 +137,17 @@ def test_export_mask_into_a_copy_robomimic_can_read(mh_file, tmp_path):
     again = import_robomimic(out, filter_key="compatible")
     assert list(dict.fromkeys(again.extra[SOURCE_EPISODE])) == chosen
     with pytest.raises(ElicitError, match="already has mask/train; pick another --mask-key"):
-        export_mask(path, tmp_path / "c2.hdf5", "train", ["demo_1"])
+        add_mask(path, tmp_path / "c2.hdf5", "train", ["demo_1"])
     assert not (tmp_path / "c2.hdf5").exists()
-    export_mask(path, tmp_path / "c2.hdf5", "train", ["demo_1"], overwrite=True)
+    add_mask(path, tmp_path / "c2.hdf5", "train", ["demo_1"], overwrite=True)
     with h5py.File(tmp_path / "c2.hdf5", "r") as f:
         assert [x.decode() for x in f["mask/train"][:]] == ["demo_1"]
     with pytest.raises(ElicitError, match="has no demo 'demo_99'"):
-        export_mask(path, tmp_path / "c3.hdf5", "k", ["demo_99"])
-    with pytest.raises(ElicitError, match="sha256 mismatch"):
-        export_mask(path, tmp_path / "c3.hdf5", "k", ["demo_1"], expected_sha256="0" * 64)
+        add_mask(path, tmp_path / "c3.hdf5", "k", ["demo_99"])
     with pytest.raises(ElicitError, match="output must differ"):
-        export_mask(path, path, "k", ["demo_1"])
+        add_mask(path, path, "k", ["demo_1"])
     with pytest.raises(ElicitError, match="empty mask"):
-        export_mask(path, tmp_path / "c3.hdf5", "k", [])
+        add_mask(path, tmp_path / "c3.hdf5", "k", [])
     assert not (tmp_path / "c3.hdf5").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 

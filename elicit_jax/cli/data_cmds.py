@@ -71,8 +71,8 @@ def import_cmd(
     operators_from_masks: str = typer.Option(
         None,
         "--operators-from-masks",
-        help="robomimic: label each demo by the mask key matching this glob that lists it, "
-        "e.g. '*_operator_*'.",
+        help="robomimic: label each demo by the mask key matching this glob (or any of "
+        "several, comma-separated) that lists it, e.g. '*_operator_*' or 'base,conflict'.",
     ),
     filter_key: str = typer.Option(
         None, "--filter-key", help="robomimic: import only the demos of mask/<KEY>."
@@ -125,10 +125,10 @@ def export_cmd(
     ),
     fmt: str = typer.Option(..., "--format", "-f", help="robomimic | lerobot | npz."),
     out: Path = typer.Option(
-        ...,
+        None,
         "-o",
         "--out",
-        help="robomimic: the .hdf5 copy; lerobot: a new folder, or a .json episode list; "
+        help="robomimic: the .hdf5 to write; lerobot: a new folder, or a .json episode list; "
         "npz: the .npz file.",
     ),
     episodes: str = typer.Option(
@@ -137,41 +137,139 @@ def export_cmd(
     source: Path = typer.Option(
         None, "--source", help="Original dataset (default: the one recorded at import)."
     ),
-    mask_key: str = typer.Option(None, "--mask-key", help="robomimic: the new filter key."),
-    overwrite: bool = typer.Option(
-        False, "--overwrite", help="robomimic: replace an existing mask/<KEY>."
+    mask_key: str = typer.Option(
+        None,
+        "--mask-key",
+        help="robomimic: mark the selected demos of the source file with this filter key "
+        "(without it: write the demos as a new file).",
     ),
-    version: str = typer.Option("v2.1", "--version", help="LeRobot codebase version: v2.1|v3.0."),
+    in_place: bool = typer.Option(
+        False,
+        "--in-place",
+        help="robomimic: add the mask to the source file itself instead of a copy (checks "
+        "that nothing else in it changed; not atomic: keep a backup of files you cannot "
+        "regenerate).",
+    ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace an existing output, or an existing mask/<KEY>."
+    ),
+    version: str = typer.Option(
+        None,
+        "--version",
+        help="LeRobot codebase version: v3.0 (LeRobot 0.4 and later; the default) or v2.1 "
+        "(LeRobot 0.1-0.3). A selection of a LeRobot dataset defaults to the source's.",
+    ),
+    fresh: bool = typer.Option(
+        False,
+        "--fresh",
+        help="lerobot: write the demos' own arrays as a new dataset even when they are whole "
+        "episodes of a LeRobot dataset (whose cameras and other features are then not kept).",
+    ),
+    fps: float = typer.Option(
+        None, "--fps", help="Frame rate of a new LeRobot dataset, when the demos do not tell it."
+    ),
+    valid_fraction: float = typer.Option(
+        0.1, "--valid-fraction", help="New robomimic file: share of demos in mask/valid."
+    ),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of the new robomimic file's train/valid split."
+    ),
 ) -> None:
-    """Export selected episodes back to their dataset format.
+    """Export selected episodes to robomimic, LeRobot or .npz.
 
-    Example: elicit-jax export kept.parquet --format robomimic --source low_dim.hdf5
-    --mask-key compatible -o low_dim_compatible.hdf5
+    robomimic: with --mask-key, a copy of the source file (or, with --in-place, the file
+    itself) gets mask/KEY listing the selected demos; without it, a new file holds the demos.
+    LeRobot: whole episodes of a LeRobot dataset are written as a selection of it (every
+    feature kept); any other demos (collected, filtered pair by pair, from robomimic) as a
+    new dataset; -o x.json writes an episode list for LeRobotDataset(episodes=...).
+
+    Example: elicit-jax export kept.parquet --format robomimic --mask-key compatible
+    -o low_dim_compatible.hdf5
     """
-    from rich.console import Console
-
-    from elicit_jax.data.convert import ExportConfig, export_dataset
+    from elicit_jax.data.export import ExportConfig, export_dataset
     from elicit_jax.data.selection import parse_episode_ids
 
     cfg = ExportConfig(
         selection=str(selection),
-        format=fmt,
-        out=str(out),
+        format=fmt,  # type: ignore[arg-type]
+        out=None if out is None else str(out),
         episodes=None if episodes is None else tuple(parse_episode_ids(episodes)),
         source=None if source is None else str(source),
         mask_key=mask_key,
+        in_place=in_place,
         overwrite=overwrite,
         version=version,
+        fresh=fresh,
+        fps=fps,
+        valid_fraction=valid_fraction,
+        seed=seed,
     )
-    summary = _echo_warnings(lambda: export_dataset(cfg))
-    console = Console()
-    console.print(f"wrote {summary['out']} ({summary['format']}): {summary['episodes']} episodes")
+    if in_place:
+        summary = _with_hash_progress(cfg, export_dataset)
+    else:
+        summary = _echo_warnings(lambda: export_dataset(cfg))
+    _print_export(summary)
+
+
+def _with_hash_progress(cfg: Any, export: Callable[..., dict]) -> dict:
+    """Run an in-place export with a progress bar over the bytes it hashes (twice)."""
+    from rich.progress import DownloadColumn, Progress, TextColumn
+
+    from elicit_jax.data.selection import read_selection, single_source
+
+    target = cfg.source
+    if target is None:
+        try:
+            target = single_source(read_selection(cfg.selection).provenance, cfg.selection)
+            target = target["source"]
+        except ElicitError:  # export_dataset reports it, with what to do instead
+            target = ""
+    total = 2 * Path(target).stat().st_size if Path(target).is_file() else None
+    with Progress(TextColumn("checking the file"), DownloadColumn(), transient=True) as bar:
+        task = bar.add_task("hash", total=total)
+        return _echo_warnings(lambda: export(cfg, progress=lambda n: bar.advance(task, n)))
+
+
+def _print_export(summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.markup import escape
+
+    console = Console(highlight=False)
+    mode = summary.get("mode", "")
+    version = f" v{summary['version'].lstrip('v')}" if summary.get("version") else ""
+    console.print(
+        f"wrote {summary['out']} ({summary['format']}{version}, {mode}): "
+        f"{summary['episodes']} episodes"
+    )
     if "mask_key" in summary:
+        where = " in place (nothing else in the file changed)" if summary["in_place"] else ""
         console.print(
-            f"robomimic filter key '{summary['mask_key']}' lists {len(summary['demos'])} demos; "
-            f"train with config.train.data={summary['out']} "
+            f"robomimic filter key '{summary['mask_key']}' lists {len(summary['demos'])} demos"
+            f"{where}; train with config.train.data={summary['out']} "
             f"config.train.hdf5_filter_key={summary['mask_key']}"
         )
+    if summary.get("masks"):
+        console.print(
+            "masks: " + ", ".join(f"{k} ({v} demos)" for k, v in summary["masks"].items())
+        )
+        console.print(
+            f"robomimic: config.train.data={summary['out']} "
+            f"config.observation.modalities.obs.low_dim={summary['obs_keys']}"
+        )
+    if summary.get("cameras"):
+        console.print(
+            f"camera statistics carried from the source: {', '.join(summary['cameras'])}; "
+            f"video files copied: {summary['videos']}"
+        )
+    if "load" in summary:
+        console.print(
+            "load in LeRobot: import json; from lerobot.datasets.lerobot_dataset import "
+            f"LeRobotDataset; ds = {summary['load']}"
+        )
+    for note in summary.get("notes", []):
+        console.print(f"note: {escape(note)}")
+    if "reimport" in summary:
+        console.print(f"read back: {summary['reimport']}")
 
 
 @app.command()

@@ -303,7 +303,7 @@ def filter_demos(
     )
     exported = None
     if export is not None:
-        from elicit_jax.data.convert import ExportConfig, export_dataset
+        from elicit_jax.data.export import ExportConfig, export_dataset
 
         exported = export_dataset(
             ExportConfig(

@@ -1,28 +1,18 @@
-"""``elicit-jax import`` / ``export``: configs and the one library call behind each command."""
+"""``elicit-jax import``: its config and the one library call behind it (export:
+:mod:`elicit_jax.data.export`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import warnings
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
-from elicit_jax.artifact import make_header, read_header
-from elicit_jax.data.demos import (
-    BoundsPolicy,
-    Demos,
-    DemosWarning,
-    read_demos,
-    validate,
-    write_demos,
-)
-from elicit_jax.data.selection import Selection, read_selection, write_episode_list
+from elicit_jax.data.demos import BoundsPolicy, Demos, DemosWarning, validate, write_demos
 from elicit_jax.errors import ElicitError
 
 Format = Literal["robomimic", "lerobot", "npz"]
 FORMATS = ("robomimic", "lerobot", "npz")
-EXPORT_KIND = "export"
-EXPORT_SCHEMA_VERSION = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,7 +25,8 @@ class ImportConfig:
       format: ``robomimic``, ``lerobot`` or ``npz``; ``None`` infers it from ``source``.
       obs_keys: observation keys (robomimic obs keys, LeRobot features); ``None``: defaults.
       operator: operator label (of every episode, or those no operator mask lists).
-      operators_from_masks: robomimic only: glob of mask keys naming operators.
+      operators_from_masks: robomimic only: glob of mask keys naming operators, or several
+        comma-separated.
       filter_key: robomimic only: import the demos of ``mask/<filter_key>``.
       task: task name override.
       bounds: out-of-bounds actions: ``error``, ``warn`` or ``clip``.
@@ -141,107 +132,3 @@ def import_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
         return write_demos(
             cfg.out, demos, config=config, inputs={"source": cfg.source}, bounds=cfg.bounds
         )
-
-
-@dataclasses.dataclass(frozen=True)
-class ExportConfig:
-    """How to export a selection of episodes back to a dataset format.
-
-    Attributes:
-      selection: a demos ``.parquet`` (its episodes are the selection) or an episode-list
-        ``.json``.
-      format: ``robomimic`` (a copy of the source with a new mask), ``lerobot`` (a new
-        dataset folder, or an episode-list ``.json`` when ``out`` ends in ``.json``) or ``npz``.
-      out: destination file or folder.
-      episodes: narrow the selection to these episode ids.
-      source: the original dataset; default the source recorded at import.
-      mask_key: robomimic: the new filter key.
-      overwrite: robomimic: replace an existing ``mask/<mask_key>``.
-      version: LeRobot codebase version to write (``v2.1`` or ``v3.0``).
-    """
-
-    selection: str
-    format: Format
-    out: str
-    episodes: tuple[int, ...] | None = None
-    source: str | None = None
-    mask_key: str | None = None
-    overwrite: bool = False
-    version: str = "v2.1"
-
-
-def _source(cfg: ExportConfig, sel: Selection, importer: str) -> tuple[str, str | None]:
-    """The original dataset and the sha256 it must have (``None``: unchecked)."""
-    recorded = sel.provenance.get("importer")
-    if recorded != importer:
-        raise ElicitError(
-            f"the selected demos were imported from {recorded or 'no dataset'}, not {importer}; "
-            f"cannot map them back to a {importer} dataset",
-            cfg.selection,
-        )
-    source = cfg.source or sel.provenance.get("source")
-    if not source:
-        raise ElicitError("no source dataset recorded; pass --source", cfg.selection)
-    return str(source), sel.provenance.get("sha256")
-
-
-def export_dataset(cfg: ExportConfig) -> dict[str, Any]:
-    """Export the selected episodes; returns a summary (what was written where)."""
-    sel = read_selection(cfg.selection, cfg.episodes)
-    config = dataclasses.asdict(cfg)
-    inputs = {"selection": cfg.selection}
-    summary: dict[str, Any] = {"format": cfg.format, "out": cfg.out, "episodes": len(sel.episodes)}
-    if cfg.format == "robomimic":
-        from elicit_jax.data.robomimic import export_mask
-
-        if not cfg.mask_key:
-            raise ElicitError("robomimic export needs --mask-key (the new filter key)")
-        source, sha = _source(cfg, sel, "robomimic")
-        header = make_header(EXPORT_KIND, EXPORT_SCHEMA_VERSION, config=config, inputs=inputs)
-        names = export_mask(
-            source,
-            cfg.out,
-            cfg.mask_key,
-            sel.source_episodes,
-            overwrite=cfg.overwrite,
-            expected_sha256=sha,
-            header=header,
-        )
-        summary.update(source=source, mask_key=cfg.mask_key, demos=names)
-    elif cfg.format == "lerobot" and Path(cfg.out).suffix == ".json":
-        write_episode_list(cfg.out, sel, config=config, inputs=inputs)
-        summary.update(source_episodes=list(sel.source_episodes))
-    elif cfg.format == "lerobot":
-        from elicit_jax.artifact import file_sha256
-        from elicit_jax.data.lerobot_export import export_lerobot
-
-        source, sha = _source(cfg, sel, "lerobot")
-        if sha and file_sha256(source) != sha:
-            raise ElicitError(
-                "content differs from the dataset the demonstrations were imported from "
-                "(sha256 mismatch); pass the original folder as --source",
-                source,
-            )
-        header = make_header(EXPORT_KIND, EXPORT_SCHEMA_VERSION, config=config, inputs=inputs)
-        written = export_lerobot(
-            source,
-            cfg.out,
-            [int(n) for n in sel.source_episodes],
-            version=cfg.version,
-            header=header,
-        )
-        summary.update(source=source, version=cfg.version, source_episodes=written)
-    elif cfg.format == "npz":
-        from elicit_jax.data.npz import export_npz
-
-        header = make_header(EXPORT_KIND, EXPORT_SCHEMA_VERSION, config=config, inputs=inputs)
-        if read_header(cfg.selection).get("kind") != "demos":
-            raise ElicitError(
-                "npz export needs a demos .parquet, not an episode list", cfg.selection
-            )
-        demos = read_demos(cfg.selection, bounds="warn").select_episodes(sel.episodes)
-        export_npz(demos, cfg.out, header=header)
-        summary.update(steps=demos.n_steps)
-    else:
-        raise ElicitError(f"unknown format {cfg.format!r}; choose one of {', '.join(FORMATS)}")
-    return summary

@@ -153,6 +153,24 @@ class Demos:
         return out
 
 
+def episode_digest(obs: np.ndarray, action: np.ndarray, reward: np.ndarray | None = None) -> str:
+    """Content hash of one imported episode: its float32 ``obs (T, O)``, ``action (T, A)`` and
+    ``reward (T,)`` (if any), shapes included.
+
+    Importers record it per source episode (``provenance['episode_sha256']``) so an export can
+    check that the demos it names are still the same in the source dataset, whatever else
+    changed in that file (e.g. masks added by robomimic's own scripts).
+    """
+    import hashlib
+
+    h = hashlib.sha256()
+    for arr in (obs, action) if reward is None else (obs, action, reward):
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+        h.update(repr(arr.shape).encode())
+        h.update(arr.tobytes())
+    return h.hexdigest()
+
+
 def make_provenance(source: str | Path, importer: str, **fields: Any) -> dict[str, Any]:
     """Provenance of imported data: source path, its sha256, importer, time, and ``fields``."""
     import datetime as _dt
@@ -395,6 +413,7 @@ __all__ = [
     "DemosWarning",
     "ObsField",
     "concat_demos",
+    "episode_digest",
     "fields_from_sizes",
     "from_episodes",
     "make_provenance",

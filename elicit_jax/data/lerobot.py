@@ -25,11 +25,13 @@ from elicit_jax.artifact import read_json
 from elicit_jax.data.demos import (
     SOURCE_EPISODE,
     Demos,
+    episode_digest,
     fields_from_sizes,
     from_episodes,
     make_provenance,
     validate,
 )
+from elicit_jax.data.lerobot_record import read_record
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -64,7 +66,7 @@ def _is_v3(info: dict[str, Any]) -> bool:
     return str(info["codebase_version"]).startswith("v3")
 
 
-def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+def read_jsonl(path: Path) -> list[dict[str, Any]]:
     if not path.is_file():
         raise ElicitError("missing file", path)
     rows = []
@@ -102,16 +104,14 @@ def read_tasks(root: str | Path, info: dict[str, Any]) -> dict[int, str]:
             raise ElicitError("has no 'task_index' column", path)
         texts = df["task"] if "task" in df.columns else df.index
         return {int(i): str(t) for i, t in zip(df["task_index"], texts, strict=True)}
-    return {
-        int(r["task_index"]): str(r["task"]) for r in _read_jsonl(root / "meta" / "tasks.jsonl")
-    }
+    return {int(r["task_index"]): str(r["task"]) for r in read_jsonl(root / "meta" / "tasks.jsonl")}
 
 
 def read_episodes(root: str | Path, info: dict[str, Any]) -> list[dict[str, Any]]:
     """Per-episode metadata rows (``episode_index``, ``length``, ``tasks``, v3 locators)."""
     root = Path(root)
     if not _is_v3(info):
-        rows = _read_jsonl(root / "meta" / "episodes.jsonl")
+        rows = read_jsonl(root / "meta" / "episodes.jsonl")
     else:
         files = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
         if not files:
@@ -262,7 +262,10 @@ def import_lerobot(
         the data (LeRobot actions are often joint targets, not in [-1, 1]).
 
     Episode outcome: any ``next.success`` if that column exists, else assumed successful.
-    Rewards: ``next.reward`` if present, else 0.
+    Rewards: ``next.reward`` if present, else 0. A folder written by ``elicit-jax export``
+    gives back its operators (unless ``operator`` is given), and, for a dataset written from
+    demonstrations, the observation fields and action bounds
+    (:func:`elicit_jax.data.lerobot_record.read_record`).
     """
     root = Path(root)
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
@@ -309,6 +312,18 @@ def import_lerobot(
     if any("reward" not in ep for ep in eps):
         for ep in eps:
             ep.pop("reward", None)
+    digests = {
+        str(r["episode_index"]): episode_digest(ep["obs"], ep["action"], ep.get("reward"))
+        for r, ep in zip(rows, eps, strict=True)
+    }
+    labels = read_record(root, rows, obs_keys)
+    bounds_from = "data min/max" if action_bounds is None else "given"
+    if labels is not None:
+        if operator == "unknown":
+            operator = [labels["operators"][int(r["episode_index"])] for r in rows]
+        if action_bounds is None and "action_low" in labels:
+            action_bounds = (labels["action_low"], labels["action_high"])
+            bounds_from = "artifact.json (elicit-jax export)"
     sizes = [eps[0]["obs"].shape[1]] if len(obs_keys) == 1 else None
     if sizes is None:
         part = by_episode[int(rows[0]["episode_index"])][1]
@@ -319,23 +334,28 @@ def import_lerobot(
         if action_bounds is None
         else action_bounds
     )
+    fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
+    if labels is not None and "obs_fields" in labels:
+        fields = labels["obs_fields"]
     unique_tasks = list(dict.fromkeys(task_names))
     demos = from_episodes(
         eps,
         operators=operator,
         successes=successes,
         task=task or " | ".join(unique_tasks),
-        obs_fields=fields_from_sizes(list(zip(obs_keys, sizes, strict=True))),
-        action_low=tuple(low) if isinstance(low, list) else float(low),
-        action_high=tuple(high) if isinstance(high, list) else float(high),
+        obs_fields=fields,
+        action_low=tuple(low) if isinstance(low, list | tuple) else float(low),
+        action_high=tuple(high) if isinstance(high, list | tuple) else float(high),
         provenance=make_provenance(
             root,
             "lerobot",
             codebase_version=info["codebase_version"],
             fps=info.get("fps"),
             obs_keys=list(obs_keys),
-            action_bounds_from="data min/max" if action_bounds is None else "given",
+            action_bounds_from=bounds_from,
             success_from="next.success" if has_success else "assumed (no next.success)",
+            labels_from="artifact.json (elicit-jax export)" if labels is not None else None,
+            episode_sha256=digests,
         ),
     )
     return validate(demos, str(root), bounds=None)

@@ -1,15 +1,19 @@
 """Write a selection of a local LeRobot dataset's episodes as a new dataset folder.
 
-The new folder keeps every tabular frame column of the source, renumbers the chosen episodes
-0..k-1 (in source order) and the global ``index`` 0..N-1, and rebuilds the metadata for the
-requested codebase version (v2.1 or v3.0): ``info.json``, episodes, tasks and statistics.
-Datasets with video features are refused (their mp4 files would need re-cutting).
+The new folder keeps every frame column of the source, renumbers the chosen episodes 0..k-1
+(in source order) and the global ``index`` 0..N-1, and rebuilds the metadata for the
+requested codebase version (:mod:`elicit_jax.data.lerobot_layout`), with statistics as
+LeRobot computes them, quantiles included. Camera features keep the source's per-episode
+statistics (LeRobot computes them from sampled frames; they cannot be recomputed from the
+numbers alone); a source without them is refused. Videos are copied, never re-encoded: from
+v3.0, each referenced ``file-XXX.mp4`` whole, with the episodes' timestamps unchanged; from
+v2.x, each episode's file. A v3.0 video dataset cannot be written as v2.1 (that would need
+cutting the shared video files).
 """
 
 from __future__ import annotations
 
-import json
-import math
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,46 +22,31 @@ import numpy as np
 
 from elicit_jax.artifact import atomic_path, dumps
 from elicit_jax.data.lerobot import (
-    V2_DATA_PATH,
-    V3_DATA_PATH,
-    V3_EPISODES_PATH,
     load_frames,
     read_episodes,
     read_info,
+    read_jsonl,
     read_tasks,
     select_rows,
     split_episodes,
 )
+from elicit_jax.data.lerobot_layout import (
+    CURRENT_VERSION,
+    EXPORT_VERSIONS,
+    V2_VIDEO_PATH,
+    V3_VIDEO_PATH,
+    camera_keys,
+    finish_info,
+    video_keys,
+    write_folder,
+)
+from elicit_jax.data.lerobot_stats import Stats, from_json
 from elicit_jax.errors import ElicitError
 
-EXPORT_VERSIONS = ("v2.1", "v3.0")
 
-
-def _numeric_features(info: dict[str, Any], table: Any) -> list[str]:
-    return [
-        k
-        for k, ft in info["features"].items()
-        if k in table.column_names and ft.get("dtype") not in ("video", "image", "string")
-    ]
-
-
-def _stats(table: Any, name: str) -> dict[str, list[float]]:
-    """LeRobot-style per-feature stats over a table's rows: min, max, mean, std, count."""
-    import pyarrow as pa
-
-    col = table.column(name).combine_chunks()
-    if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
-        arr = col.flatten().to_numpy(zero_copy_only=False).astype(np.float64)
-        arr = arr.reshape(len(col), -1)
-    else:
-        arr = col.to_numpy(zero_copy_only=False).astype(np.float64).reshape(-1, 1)
-    return {
-        "min": arr.min(0).tolist(),
-        "max": arr.max(0).tolist(),
-        "mean": arr.mean(0).tolist(),
-        "std": arr.std(0).tolist(),
-        "count": [len(arr)],
-    }
+def default_version(source_version: str) -> str:
+    """The version a selection of a ``source_version`` dataset is written in by default."""
+    return CURRENT_VERSION if str(source_version).startswith("v3") else "v2.1"
 
 
 def _gather(source: Path, info: dict[str, Any], episodes: Sequence[int]) -> tuple[Any, list]:
@@ -98,96 +87,111 @@ def _gather(source: Path, info: dict[str, Any], episodes: Sequence[int]) -> tupl
     return pa.concat_tables([p.cast(parts[0].schema) for p in parts]), meta
 
 
-def _info(
-    source_info: dict[str, Any], version: str, n_eps: int, n_frames: int, n_tasks: int
-) -> dict:
-    info = {k: v for k, v in source_info.items() if k not in ("total_chunks", "total_videos")}
-    chunks = int(source_info.get("chunks_size", 1000))
-    info.update(
-        codebase_version=version,
-        total_episodes=n_eps,
-        total_frames=n_frames,
-        total_tasks=n_tasks,
-        chunks_size=chunks,
-        splits={"train": f"0:{n_eps}"},
-        data_path=V3_DATA_PATH if version == "v3.0" else V2_DATA_PATH,
-        video_path=None,
-    )
-    if version == "v3.0":
-        info.setdefault("data_files_size_in_mb", 100)
-        info.setdefault("video_files_size_in_mb", 200)
-    else:
-        info.pop("data_files_size_in_mb", None)
-        info.pop("video_files_size_in_mb", None)
-        info.update(total_chunks=math.ceil(n_eps / chunks), total_videos=0)
-    return info
-
-
-def _jsonl(path: Path, rows: list[dict[str, Any]]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
-
-
-def _write_v21(out: Path, table: Any, meta: list, tasks: dict[int, str], info: dict) -> None:
-    import pyarrow.parquet as pq
-
-    feats = _numeric_features(info, table)
-    ep_rows, stat_rows = [], []
-    for m in meta:
-        part = table.slice(m["from"], m["length"])
-        path = out / V2_DATA_PATH.format(
-            episode_chunk=m["episode_index"] // info["chunks_size"],
-            episode_index=m["episode_index"],
-        )
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(part, path)
-        ep_rows.append({k: m[k] for k in ("episode_index", "tasks", "length")})
-        stat_rows.append(
-            {"episode_index": m["episode_index"], "stats": {f: _stats(part, f) for f in feats}}
-        )
-    _jsonl(out / "meta" / "episodes.jsonl", ep_rows)
-    _jsonl(out / "meta" / "episodes_stats.jsonl", stat_rows)
-    _jsonl(
-        out / "meta" / "tasks.jsonl",
-        [{"task_index": i, "task": t} for i, t in sorted(tasks.items())],
-    )
-
-
-def _write_v30(out: Path, table: Any, meta: list, tasks: dict[int, str], info: dict) -> None:
-    import pandas as pd
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    feats = _numeric_features(info, table)
-    path = out / V3_DATA_PATH.format(chunk_index=0, file_index=0)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(table, path)
-    records = []
-    for m in meta:
-        part = table.slice(m["from"], m["length"])
-        rec: dict[str, Any] = {
-            "episode_index": m["episode_index"],
-            "tasks": m["tasks"],
-            "length": m["length"],
-            "data/chunk_index": 0,
-            "data/file_index": 0,
-            "dataset_from_index": m["from"],
-            "dataset_to_index": m["to"],
-            "meta/episodes/chunk_index": 0,
-            "meta/episodes/file_index": 0,
+def _camera_stats(
+    source: Path, info: dict[str, Any], rows: list[dict[str, Any]], cameras: list[str]
+) -> list[dict[str, Stats]]:
+    """Each chosen episode's statistics of each camera feature, from the source metadata."""
+    if not cameras:
+        return [{} for _ in rows]
+    if str(info["codebase_version"]).startswith("v3"):
+        per_ep = {
+            int(r["episode_index"]): {
+                cam: {
+                    k.removeprefix(f"stats/{cam}/"): v
+                    for k, v in r.items()
+                    if k.startswith(f"stats/{cam}/") and v is not None
+                }
+                for cam in cameras
+            }
+            for r in rows
         }
-        for f in feats:
-            for metric, value in _stats(part, f).items():
-                rec[f"stats/{f}/{metric}"] = value
-        records.append(rec)
-    ep_path = out / V3_EPISODES_PATH.format(chunk_index=0, file_index=0)
-    ep_path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(pa.Table.from_pylist(records), ep_path)
-    order = sorted(tasks)
-    df = pd.DataFrame({"task_index": order}, index=pd.Index([tasks[i] for i in order], name="task"))
-    df.to_parquet(out / "meta" / "tasks.parquet")
-    stats = {f: _stats(table, f) for f in feats}
-    (out / "meta" / "stats.json").write_text(json.dumps(stats, indent=1) + "\n")
+        where = "meta/episodes"
+    else:
+        path = source / "meta" / "episodes_stats.jsonl"
+        listed = (
+            {int(r["episode_index"]): r.get("stats", {}) for r in read_jsonl(path)}
+            if path.is_file()
+            else {}
+        )
+        per_ep = {
+            e: {c: listed.get(e, {}).get(c, {}) for c in cameras}
+            for e in (int(r["episode_index"]) for r in rows)
+        }
+        where = "meta/episodes_stats.jsonl"
+    out = []
+    for r in rows:
+        e = int(r["episode_index"])
+        for cam, st in per_ep[e].items():
+            missing = [k for k in ("min", "max", "mean", "std", "count") if k not in st]
+            if missing:
+                raise ElicitError(
+                    f"episode {e} has no {'/'.join(missing)} statistics for camera '{cam}' in "
+                    f"{where}; LeRobot's training normalises cameras with them, so a new folder "
+                    "cannot be written: export an episode list (-o selection.json) instead",
+                    source,
+                )
+        out.append({cam: from_json({cam: st})[cam] for cam, st in per_ep[e].items()})
+    return out
+
+
+def _copy_videos(
+    source: Path,
+    info: dict[str, Any],
+    new_info: dict[str, Any],
+    rows: list[dict[str, Any]],
+    meta: list[dict[str, Any]],
+    tmp: Path,
+) -> int:
+    """Copy the chosen episodes' video files into ``tmp``; adds v3.0 locators to ``meta``."""
+    keys = video_keys(info)
+    if not keys:
+        return 0
+    src_v3 = str(info["codebase_version"]).startswith("v3")
+    out_v3 = new_info["codebase_version"] == "v3.0"
+    if src_v3 and not out_v3:
+        raise ElicitError(
+            "a v3.0 dataset with videos cannot be written as v2.1 (its episodes share video "
+            "files that would need cutting); write v3.0, or export an episode list",
+            source,
+        )
+    template = info.get("video_path") or (V3_VIDEO_PATH if src_v3 else V2_VIDEO_PATH)
+    src_chunks = int(info.get("chunks_size") or 1000)
+    chunks = int(new_info["chunks_size"])
+    copies: dict[Path, Path] = {}
+    for r, m in zip(rows, meta, strict=True):
+        e, new = int(r["episode_index"]), int(m["episode_index"])
+        for key in keys:
+            if src_v3:
+                loc = {f: r.get(f"videos/{key}/{f}") for f in ("chunk_index", "file_index")}
+                if None in loc.values():
+                    raise ElicitError(f"episode {e} has no video locator for '{key}'", source)
+                rel = template.format(video_key=key, **loc)
+                m.update({k: r[k] for k in r if k.startswith(f"videos/{key}/")})
+            else:
+                rel = template.format(video_key=key, episode_chunk=e // src_chunks, episode_index=e)
+                if out_v3:
+                    m.update(
+                        {
+                            f"videos/{key}/chunk_index": new // chunks,
+                            f"videos/{key}/file_index": new % chunks,
+                            f"videos/{key}/from_timestamp": 0.0,
+                            f"videos/{key}/to_timestamp": m["length"] / float(info["fps"]),
+                        }
+                    )
+                    dst = V3_VIDEO_PATH.format(
+                        video_key=key, chunk_index=new // chunks, file_index=new % chunks
+                    )
+                else:
+                    dst = V2_VIDEO_PATH.format(
+                        video_key=key, episode_chunk=new // chunks, episode_index=new
+                    )
+            copies[source / rel] = tmp / (rel if src_v3 else dst)
+    for src, dst in copies.items():
+        if not src.is_file():
+            raise ElicitError("missing video file", src)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dst)
+    return len(copies)
 
 
 def export_lerobot(
@@ -195,43 +199,45 @@ def export_lerobot(
     out: str | Path,
     episodes: Sequence[int],
     *,
-    version: str = "v2.1",
+    version: str | None = None,
     header: dict[str, Any] | None = None,
-) -> list[int]:
+) -> dict[str, Any]:
     """Write the chosen episodes of the dataset at ``source`` as a new folder ``out``.
 
     Args:
       source: a LeRobot dataset folder (v2.x or v3.0).
       out: the new folder (written atomically; replaced if it exists).
       episodes: source ``episode_index`` values to keep.
-      version: codebase version of the new folder, ``v2.1`` or ``v3.0``.
+      version: codebase version of the new folder, ``v2.1`` or ``v3.0``; default
+        :func:`default_version` of the source's.
       header: elicit-jax artifact header, stored as ``artifact.json`` at the folder's root.
 
     Returns:
-      The source episode indices written, in order (new index = position).
+      ``version`` written, ``source_episodes`` (in order; new index = position),
+      ``cameras`` (features whose statistics were carried over) and ``videos`` (files copied).
     """
     source, out = Path(source), Path(out)
-    if version not in EXPORT_VERSIONS:
-        raise ElicitError(f"cannot write LeRobot codebase version {version!r} ({EXPORT_VERSIONS})")
     if out.resolve() == source.resolve():
         raise ElicitError("output must differ from the source dataset folder", out)
     info = read_info(source)
-    videos = [k for k, ft in info["features"].items() if ft.get("dtype") == "video"]
-    if videos:
-        raise ElicitError(
-            f"has video features ({', '.join(videos)}); export an episode list "
-            "(-o selection.json) instead of a new folder",
-            source,
-        )
+    version = version or default_version(info["codebase_version"])
+    if version not in EXPORT_VERSIONS:
+        raise ElicitError(f"cannot write LeRobot codebase version {version!r} ({EXPORT_VERSIONS})")
     tasks = read_tasks(source, info)
+    rows = select_rows(source, read_episodes(source, info), episodes)
+    cameras = camera_keys(info)
+    cam_stats = _camera_stats(source, info, rows, cameras)
     table, meta = _gather(source, info, episodes)
-    new_info = _info(info, version, len(meta), table.num_rows, len(tasks))
+    new_info = finish_info(info, version, len(meta), table.num_rows, len(tasks))
     with atomic_path(out) as tmp:
         tmp.mkdir()
-        (tmp / "meta").mkdir()
-        (tmp / "meta" / "info.json").write_text(json.dumps(new_info, indent=4) + "\n")
-        writer = _write_v30 if version == "v3.0" else _write_v21
-        writer(tmp, table, meta, tasks, new_info)
+        n_videos = _copy_videos(source, info, new_info, rows, meta, tmp)
+        write_folder(tmp, table, meta, tasks, new_info, cam_stats)
         if header is not None:
             (tmp / "artifact.json").write_text(dumps(header) + "\n")
-    return [m["source_episode_index"] for m in meta]
+    return {
+        "version": version,
+        "source_episodes": [m["source_episode_index"] for m in meta],
+        "cameras": cameras,
+        "videos": n_videos,
+    }

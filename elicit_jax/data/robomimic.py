@@ -1,4 +1,4 @@
-"""robomimic HDF5 datasets: import to :class:`Demos`, export a selection as a ``mask/<key>``.
+"""robomimic HDF5 datasets: read them into :class:`Demos` (writing: :mod:`robomimic_export`).
 
 Layout (robomimic v0.x): ``data/demo_N/{actions (T, A), rewards (T,), dones (T,),
 obs/<key> (T, ...)}`` with ``data/demo_N.attrs['num_samples']``; ``data.attrs['env_args']``
@@ -12,7 +12,6 @@ import contextlib
 import fnmatch
 import json
 import re
-import shutil
 import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -24,6 +23,7 @@ from elicit_jax.data.demos import (
     SOURCE_EPISODE,
     Demos,
     DemosWarning,
+    episode_digest,
     fields_from_sizes,
     from_episodes,
     make_provenance,
@@ -74,23 +74,32 @@ def read_mask(f: Any, key: str, path: str | Path) -> list[str]:
     return [x.decode() if isinstance(x, bytes) else str(x) for x in np.asarray(f["mask"][key][:])]
 
 
-def task_name(f: Any, path: str | Path) -> str:
-    """The task (``env_name`` of ``data.attrs['env_args']``), or ``unknown``."""
+def env_args(f: Any, path: str | Path) -> dict[str, Any] | None:
+    """``data.attrs['env_args']`` parsed (robomimic's environment metadata), or ``None``."""
     raw = f["data"].attrs.get("env_args")
     if raw is None:
-        return "unknown"
+        return None
     try:
         args = json.loads(raw.decode() if isinstance(raw, bytes) else str(raw))
     except json.JSONDecodeError as e:
         raise ElicitError(f"data.attrs['env_args'] is not valid JSON ({e.msg})", path) from e
-    return str(args.get("env_name", "unknown")) if isinstance(args, dict) else "unknown"
+    return args if isinstance(args, dict) else None
+
+
+def task_name(f: Any, path: str | Path) -> str:
+    """The task (``env_name`` of ``data.attrs['env_args']``), or ``unknown``."""
+    args = env_args(f, path)
+    return str(args.get("env_name", "unknown")) if args else "unknown"
 
 
 def _operator_labels(
     f: Any, path: str | Path, names: Sequence[str], pattern: str, default: str
 ) -> list[str]:
+    patterns = [p.strip() for p in pattern.split(",") if p.strip()]
     keys = sorted(
-        k for k in (f["mask"].keys() if "mask" in f else []) if fnmatch.fnmatch(k, pattern)
+        k
+        for k in (f["mask"].keys() if "mask" in f else [])
+        if any(fnmatch.fnmatch(k, p) for p in patterns)
     )
     if not keys:
         raise ElicitError(f"no mask key matches '{pattern}'", path)
@@ -113,9 +122,11 @@ def _operator_labels(
     return [label.get(n, default) for n in names]
 
 
-def _read_demo(
+def read_demo(
     f: Any, path: str | Path, name: str, obs_keys: Sequence[str]
 ) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
+    """One demo as ``{"obs" (T, O) float32, "action" (T, A), "reward" (T,) if any}`` and the
+    width of each obs key."""
     g = f["data"][name]
     if "actions" not in g:
         raise ElicitError(f"data/{name} has no 'actions'", path)
@@ -172,8 +183,9 @@ def import_robomimic(
       obs_keys: observation keys concatenated in this order; default the standard low-dim
         set :data:`DEFAULT_OBS_KEYS`.
       operator: operator label of every demo (or of demos no matching mask lists).
-      operators_from_masks: glob over mask keys, e.g. ``*_operator_*``; each demo is labelled
-        by the (single) matching mask that lists it.
+      operators_from_masks: glob over mask keys, e.g. ``*_operator_*``, or several
+        comma-separated (``base,conflict``); each demo is labelled by the (single) matching
+        mask that lists it.
       filter_key: import only the demos listed by ``mask/<filter_key>``.
       task: task name; default the ``env_name`` in ``data.attrs['env_args']``.
       action_bounds: declared action bounds (robomimic actions lie in [-1, 1]).
@@ -203,9 +215,10 @@ def import_robomimic(
             from rich.progress import track
 
             iterator = track(names, description=f"reading {Path(path).name}", transient=True)
-        episodes, sizes = [], None
+        episodes, sizes, digests = [], None, {}
         for name in iterator:
-            ep, widths = _read_demo(f, path, name, obs_keys)
+            ep, widths = read_demo(f, path, name, obs_keys)
+            digests[name] = episode_digest(ep["obs"], ep["action"], ep.get("reward"))
             if sizes is not None and widths != sizes:
                 raise ElicitError(
                     f"data/{name}: obs key sizes {widths} differ from {names[0]}'s {sizes}", path
@@ -213,6 +226,7 @@ def import_robomimic(
             episodes.append(ep)
             sizes = widths
         env_task = task_name(f, path)
+        env = env_args(f, path)
     has_rewards = all("reward" in ep for ep in episodes)
     if not has_rewards:
         for ep in episodes:
@@ -233,72 +247,8 @@ def import_robomimic(
             filter_key=filter_key,
             operators_from_masks=operators_from_masks,
             success_from="max(rewards) >= 1" if has_rewards else "assumed (no rewards)",
+            env_args=env,
+            episode_sha256=digests,
         ),
     )
     return validate(demos, str(path), bounds=None)
-
-
-def export_mask(
-    source: str | Path,
-    out: str | Path,
-    mask_key: str,
-    demos: Sequence[str],
-    *,
-    overwrite: bool = False,
-    expected_sha256: str | None = None,
-    header: dict[str, Any] | None = None,
-) -> list[str]:
-    """Copy ``source`` to ``out`` and add ``mask/<mask_key>`` listing ``demos``.
-
-    robomimic then trains on the selection unchanged (``train.hdf5_filter_key``).
-
-    Args:
-      source: the original robomimic file (left untouched).
-      out: the copy to write (atomically).
-      mask_key: the new filter key.
-      demos: demo names, e.g. ``["demo_0", "demo_12"]``.
-      overwrite: replace an existing ``mask/<mask_key>``.
-      expected_sha256: if given, the content hash ``source`` must have (the file the
-        demonstrations were imported from).
-      header: elicit-jax artifact header, stored as JSON in the new mask's ``elicit_jax``
-        attribute (robomimic ignores it).
-
-    Returns:
-      The demo names written, in robomimic's numeric order.
-    """
-    from elicit_jax.artifact import atomic_path, dumps, file_sha256
-
-    source, out = Path(source), Path(out)
-    if not mask_key or "/" in mask_key:
-        raise ElicitError(f"invalid mask key {mask_key!r}")
-    if out.resolve() == source.resolve():
-        raise ElicitError("output must differ from the source file (the source is kept)", out)
-    if expected_sha256 and file_sha256(source) != expected_sha256:
-        raise ElicitError(
-            "content differs from the file the demonstrations were imported from (sha256 "
-            "mismatch); pass the original file as --source",
-            source,
-        )
-    chosen = sorted(set(demos), key=lambda n: int(n[5:]) if _DEMO_RE.match(n) else -1)
-    if not chosen:
-        raise ElicitError("no demonstrations selected: refusing to write an empty mask")
-    with open_hdf5(source) as f:
-        present = set(demo_names(f, source))
-        missing = [n for n in chosen if n not in present]
-        if missing:
-            raise ElicitError(f"has no demo '{missing[0]}' to put in mask/{mask_key}", source)
-        if "mask" in f and mask_key in f["mask"] and not overwrite:
-            raise ElicitError(
-                f"already has mask/{mask_key}; pick another --mask-key or pass --overwrite",
-                source,
-            )
-    with atomic_path(out) as tmp:
-        shutil.copyfile(source, tmp)
-        with open_hdf5(tmp, "r+") as f:
-            group = f.require_group("mask")
-            if mask_key in group:
-                del group[mask_key]
-            dset = group.create_dataset(mask_key, data=np.array(chosen, dtype="S"))
-            if header is not None:
-                dset.attrs["elicit_jax"] = dumps(header)
-    return chosen

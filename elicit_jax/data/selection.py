@@ -34,12 +34,15 @@ class Selection:
       source_episodes: the same episodes' names in the source dataset.
       operators: operator of each selected episode.
       provenance: the demonstrations' provenance (source path, sha256, importer, ...).
+      lengths: steps of each selected episode in the demonstrations (``None`` for an
+        episode list, which holds no steps).
     """
 
     episodes: tuple[int, ...]
     source_episodes: tuple[str, ...]
     operators: tuple[str, ...]
     provenance: Mapping[str, Any]
+    lengths: tuple[int, ...] | None = None
 
 
 def parse_episode_ids(text: str) -> list[int]:
@@ -75,6 +78,7 @@ def selection_from_demos(
         source_episodes=tuple(str(names[s]) if names is not None else str(e) for e, s, _ in bounds),
         operators=tuple(str(demos.operator[s]) for _, s, _ in bounds),
         provenance=dict(demos.provenance),
+        lengths=tuple(e - s for _, s, e in bounds),
     )
 
 
@@ -118,16 +122,71 @@ def write_episode_list(
     config: Mapping[str, Any] | None = None,
     inputs: Mapping[str, str | Path] | None = None,
 ) -> None:
-    """Atomically write ``selection`` as an ``episode-list`` JSON artifact."""
+    """Atomically write ``selection`` as an ``episode-list`` JSON artifact.
+
+    ``source_episodes`` are written as integers when they all are (LeRobot's
+    ``episode_index``), so ``LeRobotDataset(..., episodes=...)`` takes the list as it is.
+    """
+    names = list(selection.source_episodes)
+    if all(re.fullmatch(r"\d+", n) for n in names):
+        names = [int(n) for n in names]
     header = make_header(
         EPISODE_LIST_KIND,
         EPISODE_LIST_SCHEMA_VERSION,
         config=config,
         inputs=inputs,
         episodes=list(selection.episodes),
-        source_episodes=list(selection.source_episodes),
+        source_episodes=names,
         operators=list(selection.operators),
         n_episodes=len(selection.episodes),
         source=dict(selection.provenance),
     )
     write_json(path, header)
+
+
+def provenance_leaves(provenance: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """The provenance of each imported (or collected) part of concatenated demonstrations."""
+    parts = provenance.get("parts")
+    if not parts:
+        return [provenance]
+    return [leaf for p in parts for leaf in provenance_leaves(p)]
+
+
+def single_source(provenance: Mapping[str, Any], path: str | Path) -> dict[str, Any]:
+    """The one dataset the demonstrations were imported from.
+
+    Demos concatenated from several imports of the same file (``filter --base``, ``demos
+    concat``) count as one source: their per-episode content hashes are merged.
+
+    Raises:
+      ElicitError: the demos were not imported, or come from several datasets.
+    """
+    leaves = provenance_leaves(provenance)
+    sources = sorted({(str(p.get("importer")), str(p.get("source"))) for p in leaves})
+    if any(not p.get("importer") for p in leaves):
+        raise ElicitError(
+            f"holds demonstrations that were not imported from a dataset "
+            f"({leaves[0].get('source') or 'no recorded source'})",
+            path,
+        )
+    if len(sources) > 1:
+        raise ElicitError(
+            f"holds demonstrations from {len(sources)} datasets "
+            f"({', '.join(s for _, s in sources)})",
+            path,
+        )
+    merged = dict(leaves[0])
+    digests: dict[str, str] = {}
+    for p in leaves:
+        for name, h in (p.get("episode_sha256") or {}).items():
+            if digests.setdefault(name, h) != h:
+                raise ElicitError(
+                    f"its parts were imported from different versions of {merged['source']} "
+                    f"(episode {name} differs)",
+                    path,
+                )
+    if all("episode_sha256" in p for p in leaves):
+        merged["episode_sha256"] = digests
+    else:
+        merged.pop("episode_sha256", None)
+    return merged

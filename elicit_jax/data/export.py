@@ -1,0 +1,400 @@
+"""``elicit-jax export``: hand demonstrations back to robomimic, LeRobot or ``.npz``.
+
+What is written depends on what is asked and where the demonstrations came from:
+
+============  ==============================  =================================================
+format        asked                           writes
+============  ==============================  =================================================
+robomimic     ``--mask-key K``                a copy of the source file with ``mask/K`` listing
+                                              the selected demos (``--in-place``: the mask goes
+                                              into the source file itself)
+robomimic     no mask key                     a new file holding the demos' own arrays
+lerobot       ``-o DIR``, whole episodes of   those episodes of the source, every feature kept
+              one LeRobot dataset             (cameras, videos)
+lerobot       ``-o DIR`` otherwise, or        a new dataset holding the demos' own arrays
+              ``--fresh``
+lerobot       ``-o list.json``                an episode list for ``LeRobotDataset(episodes=)``
+npz           —                               the demos as an ``.npz`` archive
+============  ==============================  =================================================
+
+A selection of the source (mask, LeRobot subset, episode list) must consist of whole source
+episodes, each still in the source as imported: each one's length and content hash (recorded
+at import) are checked, not the file's bytes, so masks added by other tools (robomimic's
+``split_train_val.py``) or by an earlier export do not get in the way. Demos with dropped
+pairs (``filter --level pair``) or from several datasets cannot be a selection: they are
+written as a new file instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, Literal
+
+from elicit_jax.artifact import file_sha256, make_header, read_header
+from elicit_jax.data.demos import Demos, read_demos
+from elicit_jax.data.selection import (
+    Selection,
+    provenance_leaves,
+    read_selection,
+    single_source,
+    write_episode_list,
+)
+from elicit_jax.errors import ElicitError
+
+Format = Literal["robomimic", "lerobot", "npz"]
+FORMATS = ("robomimic", "lerobot", "npz")
+EXPORT_KIND = "export"
+EXPORT_SCHEMA_VERSION = 2
+LOAD_LIST = (
+    'LeRobotDataset(REPO_ID, root=ROOT, episodes=json.load(open("{path}"))["source_episodes"])'
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class ExportConfig:
+    """How to export a selection of episodes (see the module docstring for what is written).
+
+    Attributes:
+      selection: a demos ``.parquet`` (its episodes are the selection) or an episode-list
+        ``.json``.
+      format: ``robomimic``, ``lerobot`` or ``npz``.
+      out: destination file or folder (``None`` with ``in_place``).
+      episodes: narrow the selection to these episode ids.
+      source: the original dataset; default the source recorded at import.
+      mask_key: robomimic: mark the selected demos of the source file with this filter key.
+      in_place: robomimic: write the mask into the source file itself.
+      overwrite: replace an existing output, or an existing ``mask/<mask_key>``.
+      version: LeRobot codebase version (``v2.1`` or ``v3.0``); default v3.0, or the
+        source's for a selection of a LeRobot dataset.
+      fresh: lerobot: write the demos' own arrays even for whole episodes of a LeRobot source.
+      fps: frame rate of a new LeRobot dataset when the demos do not tell it.
+      valid_fraction: new robomimic file: share of demos in ``mask/valid``.
+      seed: seed of that train/valid split.
+    """
+
+    selection: str
+    format: Format
+    out: str | None = None
+    episodes: tuple[int, ...] | None = None
+    source: str | None = None
+    mask_key: str | None = None
+    in_place: bool = False
+    overwrite: bool = False
+    version: str | None = None
+    fresh: bool = False
+    fps: float | None = None
+    valid_fraction: float = 0.1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.format not in FORMATS:
+            raise ElicitError(f"unknown format {self.format!r}; choose one of {', '.join(FORMATS)}")
+        if self.in_place and (self.format != "robomimic" or not self.mask_key):
+            raise ElicitError(
+                "--in-place adds a robomimic mask: it needs --format robomimic and --mask-key"
+            )
+        if self.in_place and self.out is not None:
+            raise ElicitError("give -o/--out or --in-place, not both")
+        if not self.in_place and self.out is None:
+            raise ElicitError("export needs -o/--out (or --in-place for a robomimic mask)")
+        if self.version not in (None, "v2.1", "v3.0"):
+            raise ElicitError(f"--version must be v2.1 or v3.0, not {self.version!r}")
+        if self.fps is not None and not self.fps > 0:
+            raise ElicitError(f"--fps must be positive, not {self.fps}")
+        if not 0 <= self.valid_fraction < 1:
+            raise ElicitError(f"--valid-fraction must lie in [0, 1), not {self.valid_fraction}")
+        if self.mask_key and self.format != "robomimic":
+            raise ElicitError("--mask-key applies to --format robomimic only")
+
+
+def _check_out(cfg: ExportConfig) -> None:
+    out = Path(cfg.out or "")
+    if out.resolve() == Path(cfg.selection).resolve():
+        raise ElicitError("output would overwrite the selection it is made from", out)
+    if out.exists() and not cfg.overwrite:
+        raise ElicitError("already exists; pass --overwrite to replace it", out)
+
+
+def _selected_demos(cfg: ExportConfig, sel: Selection) -> Demos:
+    if read_header(cfg.selection).get("kind") != "demos":
+        raise ElicitError(
+            "writing a new file needs a demos .parquet (its arrays), not an episode list",
+            cfg.selection,
+        )
+    return read_demos(cfg.selection, bounds="warn").select_episodes(sel.episodes)
+
+
+def check_selection(
+    sel: Selection, prov: dict[str, Any], source: str, importer: str, hint: str
+) -> list[int]:
+    """Check that each selected episode is a whole source episode, unchanged since import.
+
+    Args:
+      sel: the selection.
+      prov: its single source's provenance (obs keys, per-episode hashes).
+      source: the dataset to check against.
+      importer: ``robomimic`` or ``lerobot``.
+      hint: what to do instead when episodes are not whole (appended to the error).
+
+    Returns:
+      The source length of each selected episode.
+    """
+    names = list(sel.source_episodes)
+    keys = prov.get("obs_keys") or None
+    if importer == "robomimic":
+        from elicit_jax.data.robomimic import DEFAULT_OBS_KEYS
+        from elicit_jax.data.robomimic_export import read_demo_digests
+
+        found = read_demo_digests(source, list(dict.fromkeys(names)), keys or DEFAULT_OBS_KEYS)
+    else:
+        from elicit_jax.data.lerobot import import_lerobot
+
+        back = import_lerobot(source, obs_keys=keys, episodes=[int(n) for n in set(names)])
+        digests = back.provenance["episode_sha256"]
+        found = {
+            str(back.extra["source_episode"][s]): (
+                e - s,
+                digests[str(back.extra["source_episode"][s])],
+            )
+            for _, s, e in back.episode_bounds()
+        }
+    recorded = prov.get("episode_sha256")
+    for i, name in enumerate(names):
+        length, digest = found[name]
+        if names.count(name) > 1:
+            raise ElicitError(
+                f"source episode {name} is split over {names.count(name)} episodes of the "
+                f"selection (filter --pair-mode split?), and a selection of the source lists "
+                f"whole episodes; {hint}",
+                source,
+            )
+        if sel.lengths is not None and sel.lengths[i] != length:
+            raise ElicitError(
+                f"episode {sel.episodes[i]} holds {sel.lengths[i]} of source episode {name}'s "
+                f"{length} steps (pairs dropped by filter --level pair?), and a selection of the "
+                f"source lists whole episodes; {hint}",
+                source,
+            )
+        if recorded is not None and recorded.get(name) != digest:
+            raise ElicitError(
+                f"episode {name} differs from the one imported (its obs, actions or rewards "
+                "changed); pass the original dataset as --source",
+                source,
+            )
+    if recorded is None and prov.get("sha256") and file_sha256(source) != prov["sha256"]:
+        raise ElicitError(
+            "content differs from the dataset the demonstrations were imported from (sha256 "
+            "mismatch; they were imported before per-episode hashes were recorded: re-import "
+            "to check episodes, not bytes); pass the original as --source",
+            source,
+        )
+    return [found[n][0] for n in names]
+
+
+def _source(cfg: ExportConfig, sel: Selection, importer: str, instead: str) -> tuple[dict, str]:
+    try:
+        prov = single_source(sel.provenance, cfg.selection)
+    except ElicitError as e:
+        raise ElicitError(f"{e}; {instead}") from e
+    if prov.get("importer") != importer:
+        raise ElicitError(
+            f"the demonstrations were imported from {prov.get('importer')} data "
+            f"({prov.get('source')}), not {importer}; {instead}",
+            cfg.selection,
+        )
+    return prov, str(cfg.source or prov["source"])
+
+
+def _fps(cfg: ExportConfig, demos: Demos) -> tuple[int, str]:
+    """Frame rate of a new LeRobot dataset and where it came from."""
+    if cfg.fps is not None:
+        rate, why = cfg.fps, "--fps"
+    else:
+        rate, why = None, ""
+        for p in provenance_leaves(demos.provenance):
+            tc, env = p.get("task_config") or {}, (p.get("env_args") or {}).get("env_kwargs") or {}
+            if p.get("fps"):
+                rate, why = p["fps"], f"the source dataset {p.get('source')}"
+            elif tc.get("substeps") and tc.get("timestep"):
+                rate, why = 1.0 / (tc["substeps"] * tc["timestep"]), "the task's control period"
+            elif env.get("control_freq"):
+                rate, why = env["control_freq"], "robomimic env_args control_freq"
+            if rate:
+                break
+        if rate is None:
+            raise ElicitError(
+                "cannot tell the demonstrations' frame rate (LeRobot records one); pass --fps",
+                cfg.selection,
+            )
+    if abs(rate - round(rate)) > 1e-6:
+        raise ElicitError(f"LeRobot needs an integer frame rate, got {rate:g} from {why}")
+    return round(rate), why
+
+
+def export_dataset(cfg: ExportConfig, progress: Any = None) -> dict[str, Any]:
+    """Export the selected episodes; returns a summary (what was written where, and notes).
+
+    Args:
+      cfg: what to export and how.
+      progress: optional callable ``progress(bytes)``, advanced while an in-place mask
+        export hashes the file.
+    """
+    sel = read_selection(cfg.selection, cfg.episodes)
+    if not cfg.in_place:
+        _check_out(cfg)
+    config = dataclasses.asdict(cfg)
+    header = make_header(
+        EXPORT_KIND, EXPORT_SCHEMA_VERSION, config=config, inputs={"selection": cfg.selection}
+    )
+    summary: dict[str, Any] = {"format": cfg.format, "out": cfg.out, "episodes": len(sel.episodes)}
+    if cfg.format == "robomimic" and cfg.mask_key:
+        summary.update(_mask(cfg, sel, header, progress))
+    elif cfg.format == "robomimic":
+        summary.update(_fresh_robomimic(cfg, sel, header))
+    elif cfg.format == "lerobot" and Path(cfg.out or "").suffix == ".json":
+        summary.update(_episode_list(cfg, sel))
+    elif cfg.format == "lerobot":
+        summary.update(_lerobot(cfg, sel, header))
+    else:
+        from elicit_jax.data.npz import export_npz
+
+        demos = _selected_demos(cfg, sel)
+        export_npz(demos, str(cfg.out), header=header)
+        summary.update(steps=demos.n_steps)
+    return summary
+
+
+def _mask(cfg: ExportConfig, sel: Selection, header: dict, progress: Any) -> dict[str, Any]:
+    from elicit_jax.data.robomimic_export import add_mask
+
+    instead = "drop --mask-key to write them as a new robomimic file"
+    prov, source = _source(cfg, sel, "robomimic", instead)
+    check_selection(sel, prov, source, "robomimic", instead + " with only the kept steps")
+    names = add_mask(
+        source,
+        None if cfg.in_place else cfg.out,
+        cfg.mask_key or "",
+        sel.source_episodes,
+        overwrite=cfg.overwrite,
+        header=header,
+        progress=progress,
+    )
+    return {
+        "mode": "mask",
+        "out": source if cfg.in_place else cfg.out,
+        "source": source,
+        "mask_key": cfg.mask_key,
+        "demos": names,
+        "in_place": cfg.in_place,
+    }
+
+
+def _fresh_robomimic(cfg: ExportConfig, sel: Selection, header: dict) -> dict[str, Any]:
+    from elicit_jax.data.robomimic_export import write_fresh
+
+    demos = _selected_demos(cfg, sel)
+    try:
+        prov = single_source(demos.provenance, cfg.selection)
+    except ElicitError:
+        prov = {}
+    env = prov.get("env_args") if prov.get("importer") == "robomimic" else None
+    written = write_fresh(
+        demos,
+        str(cfg.out),
+        env_args=env,
+        valid_fraction=cfg.valid_fraction,
+        seed=cfg.seed,
+        header=header,
+    )
+    ops = [k for k in written["masks"] if k not in ("train", "valid")]
+    unit = all(float(x) >= -1 for x in _flat(demos.action_low)) and all(
+        float(x) <= 1 for x in _flat(demos.action_high)
+    )
+    reimport = (
+        f"elicit-jax import {cfg.out} --obs-keys {','.join(written['obs_keys'])} "
+        f"--operators-from-masks {','.join(ops)}"
+        + ("" if unit else " --action-bounds data")
+        + " -o demos.parquet"
+    )
+    written["notes"] += _imported_note(demos, "robomimic")
+    return {"mode": "new file", **written, "reimport": reimport}
+
+
+def _imported_note(demos: Demos, fmt: str) -> list[str]:
+    """Say that a new file holds only what was imported, when the demos came from a dataset."""
+    leaves = [p for p in provenance_leaves(demos.provenance) if p.get("importer")]
+    if not leaves:
+        return []
+    keys = sorted({k for p in leaves for k in p.get("obs_keys") or []})
+    keep = {
+        "robomimic": "a --mask-key export marks the demos in the whole source file instead",
+        "lerobot": "a selection of the source (without --fresh) keeps every feature",
+    }
+    ways = keep[fmt] if fmt in {str(p["importer"]) for p in leaves} else ""
+    return [
+        f"only what was imported is written (observation {', '.join(keys) or 'obs'}, actions, "
+        f"rewards): other keys of the source (cameras, states) are not"
+        + (f"; {ways}" if ways else "")
+    ]
+
+
+def _flat(bound: Any) -> list[float]:
+    return list(bound) if isinstance(bound, tuple | list) else [bound]
+
+
+def _episode_list(cfg: ExportConfig, sel: Selection) -> dict[str, Any]:
+    instead = "an episode list names episodes of a LeRobot dataset; write a folder instead"
+    prov, source = _source(cfg, sel, "lerobot", instead)
+    check_selection(sel, prov, source, "lerobot", "write a folder with --fresh instead")
+    write_episode_list(
+        str(cfg.out), sel, config=dataclasses.asdict(cfg), inputs={"selection": cfg.selection}
+    )
+    return {
+        "mode": "episode list",
+        "source": source,
+        "source_episodes": [int(n) for n in sel.source_episodes],
+        "load": LOAD_LIST.format(path=cfg.out),
+    }
+
+
+def _lerobot(cfg: ExportConfig, sel: Selection, header: dict) -> dict[str, Any]:
+    from elicit_jax.data.lerobot_fresh import write_fresh
+
+    subset = not cfg.fresh
+    if subset:
+        try:
+            prov = single_source(sel.provenance, cfg.selection)
+        except ElicitError:
+            prov = {}
+        subset = prov.get("importer") == "lerobot"
+    if not subset:
+        demos = _selected_demos(cfg, sel)
+        fps, why = _fps(cfg, demos)
+        written = write_fresh(
+            demos, str(cfg.out), fps=fps, version=cfg.version or "v3.0", header=header
+        )
+        written["notes"].insert(0, f"frame rate {fps} fps (from {why})")
+        written["notes"] += _imported_note(demos, "lerobot")
+        return {"mode": "new dataset", "fps": fps, **written}
+    from elicit_jax.data.lerobot_export import export_lerobot
+
+    source = str(cfg.source or prov["source"])
+    lengths = check_selection(
+        sel, prov, source, "lerobot", "pass --fresh to write the kept steps as a new dataset"
+    )
+    chosen = sorted(
+        zip(sel.source_episodes, lengths, sel.operators, strict=True), key=lambda x: int(x[0])
+    )
+    header["episodes"] = [
+        {"episode_index": i, "length": n, "operator": op, "source_episode": name}
+        for i, (name, n, op) in enumerate(chosen)
+    ]
+    written = export_lerobot(
+        source,
+        str(cfg.out),
+        [int(n) for n in sel.source_episodes],
+        version=cfg.version,
+        header=header,
+    )
+    return {"mode": "selection of the source", "source": source, **written}
