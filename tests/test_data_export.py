@@ -254,9 +254,9 @@ def test_lerobot_version_written_by_default(tmp_path, writer, version):
 
 def test_collected_demos_round_trip_bit_equal(tmp_path, monkeypatch, capsys):
     import shlex
-    import sys
 
-    from elicit_jax.cli import main
+    from test_data_cli import run
+
     from elicit_jax.sim.collect import CollectConfig, collect
 
     parts = []
@@ -270,14 +270,7 @@ def test_collected_demos_round_trip_bit_equal(tmp_path, monkeypatch, capsys):
     collected = read_demos(tmp_path / "c.parquet")
 
     def cli(*args):
-        monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
-        monkeypatch.setenv("COLUMNS", "400")
-        code = 0
-        try:
-            main()
-        except SystemExit as e:
-            code = e.code or 0
-        out, err = capsys.readouterr()
+        code, out, err = run(monkeypatch, capsys, *args)
         assert code == 0, err
         return out
 

@@ -234,7 +234,7 @@ def _print_export(summary: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.markup import escape
 
-    console = Console(highlight=False)
+    console = Console(highlight=False, soft_wrap=True)  # commands stay copy-pastable
     mode = summary.get("mode", "")
     version = f" v{summary['version'].lstrip('v')}" if summary.get("version") else ""
     console.print(

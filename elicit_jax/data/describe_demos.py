@@ -212,3 +212,23 @@ def describe_lerobot_folder(path: Path) -> None:
     for name, ft in info["features"].items():
         feats.add_row(name, str(ft.get("dtype")), str(ft.get("shape")))
     console.print(feats)
+
+
+@register("export")
+def describe_export(path: Path, header: dict[str, Any]) -> None:
+    """A LeRobot folder written by ``export``: the dataset, then what it came from."""
+    if path.is_dir() and (path / "meta" / "info.json").is_file():
+        describe_lerobot_folder(path)
+    selection = header.get("inputs", {}).get("selection", {})
+    ops = [str(e.get("operator")) for e in header.get("episodes", [])]
+    counts = {o: ops.count(o) for o in sorted(set(ops))}
+    rows = [
+        (
+            "written from",
+            f"{selection.get('path')} (sha256 {str(selection.get('sha256'))[:12]}...)",
+        ),
+        ("created", header.get("created")),
+        ("per operator", ", ".join(f"{k}: {v}" for k, v in counts.items()) or None),
+    ]
+    rows += [("note", n) for n in header.get("notes", [])]
+    _console().print(_kv_table("export", rows))

@@ -40,7 +40,7 @@ from elicit_jax.data.lerobot_layout import (
     video_keys,
     write_folder,
 )
-from elicit_jax.data.lerobot_stats import Stats, from_json
+from elicit_jax.data.lerobot_stats import QUANTILE_KEYS, Stats, from_json
 from elicit_jax.errors import ElicitError
 
 
@@ -214,7 +214,8 @@ def export_lerobot(
 
     Returns:
       ``version`` written, ``source_episodes`` (in order; new index = position),
-      ``cameras`` (features whose statistics were carried over) and ``videos`` (files copied).
+      ``cameras`` (features whose statistics were carried over), ``videos`` (files copied)
+      and ``notes``.
     """
     source, out = Path(source), Path(out)
     if out.resolve() == source.resolve():
@@ -235,9 +236,20 @@ def export_lerobot(
         write_folder(tmp, table, meta, tasks, new_info, cam_stats)
         if header is not None:
             (tmp / "artifact.json").write_text(dumps(header) + "\n")
+    bare = sorted({c for st in cam_stats for c, s in st.items() if QUANTILE_KEYS[0] not in s})
+    notes = (
+        [
+            f"the source's statistics of {', '.join(bare)} have no quantiles (the LeRobot that "
+            "recorded it computed none, and they cannot be recomputed without decoding frames): "
+            "normalise cameras by MEAN_STD, LeRobot's default for images"
+        ]
+        if bare
+        else []
+    )
     return {
         "version": version,
         "source_episodes": [m["source_episode_index"] for m in meta],
         "cameras": cameras,
         "videos": n_videos,
+        "notes": notes,
     }
