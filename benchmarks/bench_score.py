@@ -23,7 +23,7 @@ the machine's attainable GFLOP/s (best single call of 5 per repeat, so the peak 
 underestimated on a shared machine). FLOPs per pair = 5 members × 2 × (23·1024 + 1024·1024 +
 1024·7) ≈ 10.8 MFLOP (LayerNorm, activations and the score arithmetic are not counted).
 
-Run: ``/work/venv/bin/python benchmarks/bench_score.py [--quick] [--out results/score.md]``
+Run: ``.venv/bin/python benchmarks/bench_score.py [--quick] [--out results/score.md]``
 (needs the ``bench`` extra: ``pip install 'elicit-jax[bench]'``).
 """
 

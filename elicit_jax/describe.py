@@ -1,11 +1,13 @@
 """``elicit-jax info``: describe any artifact by its header's ``kind``.
 
-Each artifact kind registers a describer with :func:`register`; unknown kinds fall back to
-printing the header.
+Each artifact kind maps to a describer ``fn(path, header)`` in the module that knows the
+kind (:data:`DESCRIBERS`), imported only when needed, so describers never import this module
+(no import cycle); unknown kinds fall back to printing the header.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -13,33 +15,28 @@ from typing import Any
 from elicit_jax.artifact import read_header
 
 Describer = Callable[[Path, dict[str, Any]], None]
-_DESCRIBERS: dict[str, Describer] = {}
+
+# kind -> (module, function) of its describer.
+DESCRIBERS: dict[str, tuple[str, str]] = {
+    "demos": ("elicit_jax.data.describe_demos", "describe_demos"),
+    "episode-list": ("elicit_jax.data.describe_demos", "describe_episode_list"),
+    "export": ("elicit_jax.data.describe_demos", "describe_export"),
+    "scores": ("elicit_jax.compat.describe_compat", "describe_scores"),
+    "episode-scores": ("elicit_jax.compat.describe_compat", "describe_episode_scores"),
+    "thresholds": ("elicit_jax.compat.describe_compat", "describe_thresholds"),
+    "filter-log": ("elicit_jax.compat.describe_compat", "describe_filter_log"),
+    "rollouts": ("elicit_jax.sim.describe_rollouts", "describe_rollouts"),
+    "checkpoint": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
+    "training_run": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
+}
 
 
-def register(kind: str) -> Callable[[Describer], Describer]:
-    """Decorator registering ``fn(path, header)`` as the describer of ``kind``."""
-
-    def deco(fn: Describer) -> Describer:
-        _DESCRIBERS[kind] = fn
-        return fn
-
-    return deco
-
-
-def _load_describers() -> None:
-    import importlib
-
-    for mod in (
-        "elicit_jax.data.describe_demos",
-        "elicit_jax.compat.describe_compat",
-        "elicit_jax.sim.describe_rollouts",
-        "elicit_jax.policy.describe_checkpoint",
-    ):
-        try:
-            importlib.import_module(mod)
-        except ModuleNotFoundError as e:
-            if e.name != mod:
-                raise
+def describer(kind: str) -> Describer | None:
+    """The describer of an artifact ``kind``, or ``None`` for kinds without one."""
+    if kind not in DESCRIBERS:
+        return None
+    module, name = DESCRIBERS[kind]
+    return getattr(importlib.import_module(module), name)
 
 
 def _describe_raw_source(path: Path) -> bool:
@@ -71,7 +68,7 @@ def _short(value: Any, limit: int = 160) -> str:
 def describe(path: str | Path) -> None:
     """Print a description of the artifact at ``path``.
 
-    Known kinds use their registered describer; raw robomimic files and LeRobot folders get a
+    Known kinds use their describer (:data:`DESCRIBERS`); raw robomimic files and LeRobot folders get a
     summary of what an import would see; any other artifact lists its header fields.
     """
     from rich.console import Console
@@ -81,8 +78,7 @@ def describe(path: str | Path) -> None:
     if _describe_raw_source(path):
         return
     header = read_header(path)
-    _load_describers()
-    fn = _DESCRIBERS.get(header.get("kind", ""))
+    fn = describer(str(header.get("kind", "")))
     if fn is not None:
         fn(path, header)
         return

@@ -7,8 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.describe import register
-
 
 def _kv(title: str, rows: list[tuple[str, Any]]) -> None:
     from rich.console import Console
@@ -29,7 +27,6 @@ def _inputs(header: dict[str, Any]) -> list[tuple[str, Any]]:
     ]
 
 
-@register("scores")
 def describe_scores(path: Path, header: dict[str, Any]) -> None:
     """Thresholds, config, dims and inputs, then the per-operator table of its episodes."""
     from elicit_jax.compat.score import episodes_path
@@ -53,7 +50,6 @@ def describe_scores(path: Path, header: dict[str, Any]) -> None:
         describe_episode_scores(ep, None)
 
 
-@register("episode-scores")
 def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
     """Per-operator summary of the per-episode scores."""
     import pyarrow.parquet as pq
@@ -72,7 +68,6 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
     print_operator_table(cols, title=f"{path.name}: episodes per operator")
 
 
-@register("thresholds")
 def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
     """The thresholds, how they were obtained, and their report."""
     from elicit_jax.compat.fit import print_report
@@ -91,7 +86,6 @@ def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
         print_report(header)
 
 
-@register("filter-log")
 def describe_filter_log(path: Path, header: dict[str, Any]) -> None:
     """Dropped pairs per operator and reason."""
     import pyarrow.parquet as pq

@@ -1,6 +1,6 @@
 """Compatibility measures for ONE state-action pair: likelihood error, novelty, compatibility.
 
-Definitions (``/work/shared/METHOD.md``, Gandhi et al. 2022). For members ``π_1..π_K`` with
+Definitions (Gandhi et al. 2022; ``docs/method.md``). For members ``π_1..π_K`` with
 predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action ``a`` ``(A,)``:
 
 * likelihood error ``ℓ``:

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from elicit_jax.data.demo_set import Demos
 from elicit_jax.errors import ElicitError
-
-if TYPE_CHECKING:
-    from elicit_jax.data.demos import Demos
 
 
 def demos_to_table(demos: Demos) -> Any:

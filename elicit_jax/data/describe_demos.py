@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.describe import register
 from elicit_jax.errors import ElicitError
 
 
@@ -67,7 +66,6 @@ def operator_stats(path: str | Path) -> list[dict[str, Any]]:
     return rows
 
 
-@register("demos")
 def describe_demos(path: Path, header: dict[str, Any]) -> None:
     """Overview, observation fields, per-operator statistics and provenance of a demos file."""
     from rich.table import Table
@@ -118,7 +116,6 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
     console.print(_kv_table("provenance", sorted(prov.items())))
 
 
-@register("episode-list")
 def describe_episode_list(path: Path, header: dict[str, Any]) -> None:
     """Size, source and operators of an episode-list selection."""
     console = _console()
@@ -214,7 +211,6 @@ def describe_lerobot_folder(path: Path) -> None:
     console.print(feats)
 
 
-@register("export")
 def describe_export(path: Path, header: dict[str, Any]) -> None:
     """A LeRobot folder written by ``export``: the dataset, then what it came from."""
     if path.is_dir() and (path / "meta" / "info.json").is_file():

@@ -8,18 +8,14 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 
+from elicit_jax.data.demo_set import ARRAY_FIELDS, SOURCE_EPISODE, Demos
 from elicit_jax.errors import ElicitError
 
-if TYPE_CHECKING:
-    from elicit_jax.data.demos import Demos
-
 BoundsPolicy = Literal["error", "warn", "clip"]
-SOURCE_EPISODE = "source_episode"
-ARRAY_FIELDS = ("obs", "action", "episode", "operator", "step", "reward", "success")
 
 
 class DemosWarning(UserWarning):

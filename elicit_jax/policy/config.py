@@ -1,7 +1,8 @@
 """Training configuration: a frozen dataclass with the paper's defaults, and named profiles.
 
-Defaults follow METHOD.md: an MLP ensemble of 5 members, 2 x 1024 hidden units, dropout 0.5,
-Adam lr 1e-3 (MDN: 1e-4), batch 512, 1000 epochs, checkpoints every 200 epochs, 3 seeds.
+Defaults follow the paper (``docs/method.md``): an MLP ensemble of 5 members, 2 x 1024 hidden
+units, dropout 0.5, Adam lr 1e-3 (MDN: 1e-4), batch 512, 1000 epochs, checkpoints every 200
+epochs, 3 seeds.
 Fields left ``None`` take their model-specific default when the config is built
 (:meth:`TrainConfig.__post_init__`), so a stored config is always explicit.
 

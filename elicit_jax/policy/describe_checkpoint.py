@@ -5,8 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.describe import register
-from elicit_jax.policy.checkpoint import CHECKPOINT_KIND, RUN_KIND, list_checkpoints, seed_dirs
+from elicit_jax.policy.checkpoint import CHECKPOINT_KIND, list_checkpoints, seed_dirs
 
 
 def _fmt(x: Any) -> str:
@@ -30,8 +29,6 @@ def _epochs_text(epochs: list[int]) -> str:
     return f"{epochs[0]}, {epochs[1]}, ..., {epochs[-1]}"
 
 
-@register(CHECKPOINT_KIND)
-@register(RUN_KIND)
 def describe_run(path: Path, header: dict[str, Any]) -> None:
     """Print config, dims, seeds and per-seed best epoch / losses of a run or checkpoint."""
     from rich.console import Console

@@ -4,7 +4,7 @@ Every model maps *normalised* observations to actions in [-1, 1]. An ensemble is
 parameter pytree whose leaves carry a leading member axis ``K``; :func:`init_members` builds it
 and the ``*_members`` functions run all members with ``jax.vmap`` in a single call.
 
-Architectures (paper defaults, METHOD.md):
+Architectures (paper defaults, ``docs/method.md``):
   * ``mlp``: ``hidden`` Dense layers, each followed by LayerNorm and ReLU, dropout between
     hidden layers, a Dense head and ``tanh``.
   * ``mdn``: the same trunk; heads for ``n_components`` mixture logits, tanh-bounded means and

@@ -5,10 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.describe import register
 
-
-@register("rollouts")
 def describe_rollouts(path: Path, header: dict[str, Any]) -> None:
     """Print an evaluation's settings and its summary table."""
     import pandas as pd
