@@ -49,7 +49,7 @@ def test_novelty_both_std_conventions_by_hand():
 def test_compatibility_by_hand():
     # familiar (nu < eta): M = 1 - min(l / lambda, 1)
     assert float(compatibility(0.1, 0.01, 0.4, 0.05)) == pytest.approx(0.75)  # 1 - 0.25
-    assert float(compatibility(0.4, 0.01, 0.4, 0.05)) == 0.0  # l = lambda -> incompatible
+    assert float(compatibility(0.4, 0.01, 0.4, 0.05)) == 0.0  # l = lambda: M = 0 (not flagged)
     assert float(compatibility(0.9, 0.01, 0.4, 0.05)) == 0.0  # capped at 0
     # novel (nu >= eta): M = 1 whatever l
     assert float(compatibility(0.9, 0.05, 0.4, 0.05)) == 1.0

@@ -7,13 +7,82 @@ inside the commands, so that ``elicit-jax --help`` starts fast.
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
 
 from elicit_jax.errors import ElicitError
 
+# Help panels, in the order of the workflow; each command names its panel when it registers.
+DATA = "1. Bring demonstrations"
+POLICY = "2. Base policy"
+COMPAT = "3. Compatibility"
+HAND_BACK = "4. Hand back and evaluate"
+PIPELINES = "Pipelines"
+INSPECT = "Inspect"
+COMMAND_ORDER = (
+    "import",
+    "make-example",
+    "collect",
+    "demos",
+    "train",
+    "score",
+    "fit-thresholds",
+    "filter",
+    "map",
+    "export",
+    "evaluate",
+    "quickstart",
+    "pipeline",
+    "report",
+    "info",
+    "tasks",
+)
+
+
+def repeated_options(command: Any, args: list[str]) -> list[tuple[str, int]]:
+    """Single-valued options of ``command`` that ``args`` give more than once, as
+    ``(option, times)``: Click would silently keep the last value."""
+    owner: dict[str, str] = {}
+    for p in command.params:
+        if getattr(p, "param_type_name", "") == "option" and not (p.multiple or p.count):
+            for opt in (*p.opts, *p.secondary_opts):
+                owner[opt] = p.name
+    seen: dict[str, list[str]] = {}
+    for a in args:
+        if a == "--":
+            break
+        key = a.split("=", 1)[0] if a.startswith("--") else a
+        if key in owner:
+            seen.setdefault(owner[key], []).append(key)
+    return [(used[0], len(used)) for used in seen.values() if len(used) > 1]
+
+
+class OrderedGroup(TyperGroup):
+    """A command group that lists commands in workflow order and refuses an option given
+    twice (e.g. ``--scores a --scores b``) instead of silently keeping the last one."""
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        rank = {n: i for i, n in enumerate(COMMAND_ORDER)}
+        return sorted(super().list_commands(ctx), key=lambda n: rank.get(n, len(rank)))
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        name = next((a for a in args if not a.startswith("-")), None)
+        command = self.get_command(ctx, name) if name else None
+        if command is not None and not hasattr(command, "commands"):
+            for opt, times in repeated_options(command, args[args.index(name) + 1 :]):
+                raise typer.BadParameter(
+                    f"given {times} times; give it once (only the last would count)",
+                    ctx=ctx,
+                    param_hint=f"'{opt}' of '{name}'",
+                )
+        return super().parse_args(ctx, args)
+
+
 app = typer.Typer(
     name="elicit-jax",
+    cls=OrderedGroup,
     help=(
         "Measure and elicit demonstrations compatible with a base policy.\n\n"
         "Stages pass Parquet artifacts: import/collect -> train -> score -> fit-thresholds "

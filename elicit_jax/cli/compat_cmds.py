@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import COMPAT, app
 from elicit_jax.errors import ElicitError
 
 _THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
@@ -26,10 +26,19 @@ def _resolve(
     if thresholds is not None:
         from elicit_jax.compat.thresholds import read_thresholds
 
-        lam_, eta_, _ = read_thresholds(thresholds)
+        lam_, eta_, header = read_thresholds(thresholds)
+        trust = header.get("report", {}).get("trust") or {}
+        if trust.get("trustworthy") is False:
+            typer.echo(
+                f"warning: {thresholds}: these thresholds were judged not trustworthy when "
+                f"fitted: {'; '.join(trust.get('problems', []))}",
+                err=True,
+            )
         return lam_, eta_
     if lam is not None and eta is not None:
-        return float(lam), float(eta)
+        from elicit_jax.compat.measures import check_thresholds
+
+        return check_thresholds(lam, eta)
     if preset is not None:
         from elicit_jax.compat.measures import PRESETS
 
@@ -39,7 +48,7 @@ def _resolve(
     return None
 
 
-@app.command()
+@app.command(rich_help_panel=COMPAT)
 def score(
     policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
     demos: Path = typer.Option(..., "--demos", help="Demonstrations to score (demos artifact)."),
@@ -87,27 +96,44 @@ def score(
     score_checkpoint(policy, demos, out, config, which=which_, seed=seed)
 
 
-@app.command("fit-thresholds")
+@app.command("fit-thresholds", rich_help_panel=COMPAT)
 def fit_thresholds_cmd(
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
-    compatible: str = typer.Option(
-        ..., "--compatible", help="operator:NAME[,..] | episodes:ID[,..] | label:COL=VALUE"
+    compatible: str | None = typer.Option(
+        None,
+        "--compatible",
+        help="operator:NAME[,..] | episodes:ID[,..] (ranges: 0-4) | label:COL=VALUE",
     ),
-    incompatible: str = typer.Option(..., "--incompatible", help="Same forms as --compatible."),
+    incompatible: str | None = typer.Option(
+        None, "--incompatible", help="Same forms as --compatible."
+    ),
     out: Path = typer.Option(..., "-o", "--out", help="thresholds.json to write."),
-    lambda_: float | None = typer.Option(None, "--lambda", help="Manual λ (skips fitting)."),
-    eta: float | None = typer.Option(None, "--eta", help="Manual η (with --lambda)."),
+    lambda_: float | None = typer.Option(
+        None,
+        "--lambda",
+        help="Hand-set λ instead of fitting (with --eta); contrast sets, if given, only "
+        "evaluate it.",
+    ),
+    eta: float | None = typer.Option(None, "--eta", help="Hand-set η (with --lambda)."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
     grid_size: int = typer.Option(64, "--grid-size", help="Quantile levels per axis."),
+    force: bool = typer.Option(
+        False, "--force", help="Write a fit judged meaningless anyway (marked untrustworthy)."
+    ),
 ) -> None:
     """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
 
     Maximises balanced accuracy over a quantile grid, ties broken by the widest margin
-    (docs/thresholds.md). Reports balanced accuracy, margin, leave-one-out accuracy and the
-    rejections per operator.
+    (docs/thresholds.md). Reports balanced accuracy, margin, leave-one-out accuracy, the
+    rejections per operator and whether the fit can be trusted; a meaningless fit (held-out
+    decisions at chance, or rejecting most of the compatible operators' own demos) is refused
+    without --force.
 
     Example: elicit-jax fit-thresholds --scores scores.parquet --compatible operator:base
     --incompatible operator:op4 -o thresholds.json
+
+    Example (hand-set): elicit-jax fit-thresholds --scores scores.parquet --lambda 0.4 --eta
+    0.05 -o thresholds.json
     """
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.thresholds import FitConfig
@@ -118,11 +144,12 @@ def fit_thresholds_cmd(
         fit=FitConfig(accept_fraction=accept_fraction, grid_size=grid_size),
         lambda_=lambda_,
         eta=eta,
+        force=force,
     )
     fit_scores_file(scores, out, job)
 
 
-@app.command("filter")
+@app.command("filter", rich_help_panel=COMPAT)
 def filter_cmd(
     scores: Path = typer.Option(..., "--scores", help="Scores of --demos."),
     demos: Path = typer.Option(..., "--demos", help="New demonstrations D_new."),
@@ -150,7 +177,7 @@ def filter_cmd(
         None, "--source", help="Original dataset for --export (default: recorded at import)."
     ),
 ) -> None:
-    """Drop incompatible pairs (M = 0) or rejected demos from D_new; or a baseline filter.
+    """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.
 
     Baselines drop as many pairs/episodes as the M filter would. Dropped rows and reasons
     go to OUT.dropped.parquet.
@@ -194,7 +221,7 @@ def filter_cmd(
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
 
 
-@app.command("map")
+@app.command("map", rich_help_panel=COMPAT)
 def map_cmd(
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
     out: Path = typer.Option(..., "-o", "--out", help="map.png or map.html (interactive)."),

@@ -9,7 +9,7 @@ from typing import Any
 
 import typer
 
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app
 from elicit_jax.errors import ElicitError
 
 
@@ -54,7 +54,7 @@ def _operator_table(path: Path) -> None:
     Console().print(table)
 
 
-@app.command("import")
+@app.command("import", rich_help_panel=DATA)
 def import_cmd(
     source: Path = typer.Argument(..., help="robomimic .hdf5, LeRobot folder or .npz."),
     out: Path = typer.Option(..., "-o", "--out", help="Demonstrations artifact to write."),
@@ -118,7 +118,7 @@ def import_cmd(
     _operator_table(out)
 
 
-@app.command("export")
+@app.command("export", rich_help_panel=HAND_BACK)
 def export_cmd(
     selection: Path = typer.Argument(
         ..., help="Demos .parquet (its episodes are the selection) or an episode-list .json."
@@ -272,7 +272,7 @@ def _print_export(summary: dict[str, Any]) -> None:
         console.print(f"read back: {summary['reimport']}")
 
 
-@app.command()
+@app.command(rich_help_panel=INSPECT)
 def info(
     artifact: Path = typer.Argument(
         ..., help="Any elicit-jax artifact, or a raw robomimic .hdf5 / LeRobot folder."
@@ -287,7 +287,7 @@ def info(
     describe(artifact)
 
 
-@app.command("make-example")
+@app.command("make-example", rich_help_panel=DATA)
 def make_example(
     out: Path = typer.Option(Path("example.hdf5"), "-o", "--out", help="HDF5 file to write."),
     demos_per_operator: int = typer.Option(25, "--demos-per-operator", min=1),

@@ -6,13 +6,14 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import PIPELINES, OrderedGroup, app
 
 pipeline_app = typer.Typer(
     help="Run a pipeline definition (collect → train → score → fit → filter → train → evaluate).",
     no_args_is_help=True,
+    cls=OrderedGroup,
 )
-app.add_typer(pipeline_app, name="pipeline")
+app.add_typer(pipeline_app, name="pipeline", rich_help_panel=PIPELINES)
 
 _PROFILE_HELP = "paper (the paper's sizes) or cpu (shrunk to fit a 2-core machine)."
 _TASKS_HELP = "Comma-separated tasks of the definition to run [all]."
@@ -80,7 +81,7 @@ def pipeline_status(
     )
 
 
-@app.command("report")
+@app.command("report", rich_help_panel=PIPELINES)
 def report(
     run_dir: Path = typer.Argument(..., help="A pipeline run directory."),
     out: Path = typer.Option(None, "--out", "-o", help="Report directory [RUN_DIR/report]."),
@@ -95,7 +96,7 @@ def report(
     typer.echo(f"wrote {md} and {page}")
 
 
-@app.command("quickstart")
+@app.command("quickstart", rich_help_panel=PIPELINES)
 def quickstart(
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/quickstart-cpu]."),
 ) -> None:

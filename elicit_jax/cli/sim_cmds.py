@@ -6,10 +6,10 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app
 
 
-@app.command()
+@app.command(rich_help_panel=INSPECT)
 def tasks() -> None:
     """List the simulated tasks, their horizons and scripted operators.
 
@@ -31,7 +31,7 @@ def tasks() -> None:
     Console().print(table)
 
 
-@app.command()
+@app.command(rich_help_panel=DATA)
 def collect(
     task: str = typer.Option("square-nut", "--task", help="Task name (see `elicit-jax tasks`)."),
     operator: str = typer.Option("base", "--operator", help="Scripted operator name."),
@@ -73,7 +73,7 @@ def collect(
     )
 
 
-@app.command()
+@app.command(rich_help_panel=HAND_BACK)
 def evaluate(
     policy: list[str] = typer.Option(
         ..., "--policy", help="Run directory, or LABEL=DIR (same label = seeds); repeatable."

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import POLICY, app
 
 
 def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
@@ -20,7 +20,7 @@ def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
         raise ElicitError(f"{flag} expects comma-separated integers, got {text!r}") from e
 
 
-@app.command()
+@app.command(rich_help_panel=POLICY)
 def train(
     demos: Path = typer.Option(..., "--demos", help="Training demonstrations (Parquet)."),
     out: Path = typer.Option(..., "--out", help="Run directory to write (one seed<k>/ per seed)."),

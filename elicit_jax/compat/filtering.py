@@ -12,7 +12,7 @@ Levels:
 
 Methods (every baseline drops the same number of pairs/episodes as ``m`` would, so results
 compare at an equal data budget):
-  * ``m``: pairs with ``M = 0`` (``ℓ ≥ λ`` and ``ν < η``); episodes rejected by the 5% rule;
+  * ``m``: incompatible pairs (``ℓ > λ`` and ``ν < η``); episodes rejected by the 5% rule;
   * ``random``: that many pairs / episodes uniformly at random (seeded);
   * ``shortest`` / ``longest``: whole episodes by length, until the budget is reached (at pair
     level, until at least as many pairs are dropped);
@@ -44,6 +44,7 @@ from typing import Any, Literal
 import numpy as np
 
 from elicit_jax.artifact import file_sha256, make_header, write_parquet
+from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
 
 METHODS = ("m", "random", "shortest", "longest", "likelihood", "novelty")
@@ -83,6 +84,9 @@ class FilterConfig:
             raise ElicitError(f"unknown pair mode '{self.pair_mode}' (choose renumber or split)")
         if (self.lambda_ is None) != (self.eta is None):
             raise ElicitError("give both lambda and eta, or neither")
+        if self.lambda_ is not None:
+            check_thresholds(self.lambda_, self.eta)
+        check_accept_fraction(self.accept_fraction)
 
 
 def _episode_index(episode: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,7 +106,7 @@ def drop_mask(scores: dict[str, np.ndarray], config: FilterConfig) -> tuple[np.n
     """
     ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
     if config.lambda_ is not None:
-        inc = (ell >= config.lambda_) & (nu < config.eta)
+        inc = is_incompatible(ell, nu, config.lambda_, config.eta)
     else:
         inc = np.asarray(scores["incompatible"], bool)
     ids, index = _episode_index(np.asarray(scores["episode"]))
@@ -113,7 +117,7 @@ def drop_mask(scores: dict[str, np.ndarray], config: FilterConfig) -> tuple[np.n
     if config.level == "pair":
         budget = int(inc.sum())
         if config.method == "m":
-            return inc, "M = 0 (likelihood error >= lambda in a familiar state)"
+            return inc, "incompatible (likelihood error > lambda in a familiar state)"
         if config.method == "random":
             drop = np.zeros(len(ell), bool)
             rng = np.random.default_rng(config.seed)

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.compat.measures import check_thresholds, is_incompatible
 from elicit_jax.compat.selection import parse_selection, select_episodes
 from elicit_jax.compat.thresholds import (
     FitConfig,
@@ -23,6 +24,7 @@ from elicit_jax.compat.thresholds import (
     operator_rejections,
     write_thresholds,
 )
+from elicit_jax.compat.trust import assess_fit, operator_decisions
 from elicit_jax.errors import ElicitError
 
 
@@ -32,18 +34,35 @@ class FitJob:
 
     Attributes:
       compatible: selection text of the compatible set (``operator:…``, ``episodes:…``,
-        ``label:col=value``).
+        ``label:col=value``); optional with manual thresholds.
       incompatible: selection text of the incompatible set.
       fit: fitting settings.
-      lambda_: manual λ (with ``eta``): skip fitting, only evaluate and record.
+      lambda_: manual λ (with ``eta``): skip fitting, only evaluate (if sets are given) and
+        record.
       eta: manual η.
+      force: write a fit judged meaningless (:mod:`elicit_jax.compat.trust`) anyway, marked
+        untrustworthy, instead of refusing.
     """
 
-    compatible: str
-    incompatible: str
+    compatible: str | None = None
+    incompatible: str | None = None
     fit: FitConfig = dataclasses.field(default_factory=FitConfig)
     lambda_: float | None = None
     eta: float | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        if (self.lambda_ is None) != (self.eta is None):
+            raise ElicitError("give both --lambda and --eta for a manual override, or neither")
+        if self.lambda_ is not None:
+            check_thresholds(self.lambda_, self.eta)
+        if (self.compatible is None) != (self.incompatible is None):
+            raise ElicitError("give both --compatible and --incompatible, or neither")
+        if self.compatible is None and self.lambda_ is None:
+            raise ElicitError(
+                "fitting needs contrast sets: give --compatible and --incompatible (or --lambda "
+                "and --eta to record hand-set thresholds)"
+            )
 
 
 def contrast_labels(
@@ -60,27 +79,8 @@ def contrast_labels(
     return {**{int(e): True for e in comp}, **{int(e): False for e in inc}}
 
 
-def fit_scores_file(
-    scores_path: str | Path, out_path: str | Path, job: FitJob, *, show: bool = True
-) -> dict[str, Any]:
-    """Fit or evaluate thresholds on a scores file and write ``thresholds.json``.
-
-    Args:
-      scores_path: a ``scores`` artifact.
-      out_path: the ``thresholds`` artifact to write.
-      job: the contrast sets and settings.
-      show: print the report as rich tables.
-
-    Returns:
-      The written header (``lambda``, ``eta``, ``report``, ...).
-    """
-    from elicit_jax.compat.score_file import read_scores
-
-    if (job.lambda_ is None) != (job.eta is None):
-        raise ElicitError("give both --lambda and --eta for a manual override, or neither")
-    cols = [c for c in _needed(job) if c not in ("episode", "operator", "likelihood", "novelty")]
-    _, s = read_scores(scores_path, columns=["episode", "operator", "likelihood", "novelty", *cols])
-    labels = contrast_labels(s, job.compatible, job.incompatible)
+def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) -> dict:
+    """λ, η, method and the contrast part of the report (fit, or manual thresholds)."""
     ell, nu, ep = s["likelihood"], s["novelty"], s["episode"]
     f = job.fit.accept_fraction
     if job.lambda_ is None:
@@ -97,41 +97,122 @@ def fit_scores_file(
         }
     else:
         lam, eta, method = float(job.lambda_), float(job.eta), "manual"
+        if not labels:
+            return {"lambda": lam, "eta": eta, "method": method, "report": {}}
         ba, decisions = evaluate_thresholds(ell, nu, ep, labels, lam, eta, f)
         extra = {}
-    per_op = operator_rejections(ell, nu, ep, s["operator"], lam, eta, f)
+    names = s.get("source_episode")
+    first = {int(e): i for i, e in reversed(list(enumerate(ep)))} if names is not None else {}
+    contrast = []
+    for e, c, fr, r in zip(
+        decisions["episode"],
+        decisions["compatible"],
+        decisions["fraction_incompatible"],
+        decisions["rejected"],
+        strict=True,
+    ):
+        row = {
+            "episode": int(e),
+            "compatible": bool(c),
+            "fraction_incompatible": float(fr),
+            "rejected": bool(r),
+        }
+        if names is not None:
+            row["source_episode"] = str(names[first[int(e)]])
+        contrast.append(row)
     report = {
         "balanced_accuracy": ba,
         **extra,
         "n_compatible": int(np.sum(decisions["compatible"])),
         "n_incompatible": int(np.sum(~decisions["compatible"])),
-        "contrast": [
-            {
-                "episode": int(e),
-                "compatible": bool(c),
-                "fraction_incompatible": float(fr),
-                "rejected": bool(r),
-            }
-            for e, c, fr, r in zip(
-                decisions["episode"],
-                decisions["compatible"],
-                decisions["fraction_incompatible"],
-                decisions["rejected"],
-                strict=True,
-            )
-        ],
-        "per_operator": per_op,
+        "contrast": contrast,
     }
+    return {"lambda": lam, "eta": eta, "method": method, "report": report}
+
+
+def _trust(
+    s: dict[str, np.ndarray], labels: dict[int, bool], out: dict[str, Any], f: float
+) -> dict[str, Any]:
+    """Trust assessment of a fit (see :mod:`elicit_jax.compat.trust`)."""
+    ell, nu, ep, ops = s["likelihood"], s["novelty"], s["episode"], s["operator"]
+    inc = is_incompatible(ell, nu, out["lambda"], out["eta"])
+    ids, index = np.unique(ep, return_inverse=True)
+    n_inc = np.bincount(index, weights=inc, minlength=len(ids))
+    rejected = ids[n_inc > f * np.bincount(index, minlength=len(ids))]
+    comp = [e for e, c in labels.items() if c]
+    bad = [e for e, c in labels.items() if not c]
+    comp_ops = set(np.asarray(ops)[np.isin(ep, comp)].astype(str).tolist())
+    return assess_fit(
+        out["report"],
+        compatible_operators=comp_ops,
+        operator_decisions=operator_decisions(ep, ops, rejected.tolist(), bad),
+        pairs_per_set=(int(np.isin(ep, comp).sum()), int(np.isin(ep, bad).sum())),
+    )
+
+
+def fit_scores_file(
+    scores_path: str | Path, out_path: str | Path, job: FitJob, *, show: bool = True
+) -> dict[str, Any]:
+    """Fit or evaluate thresholds on a scores file and write ``thresholds.json``.
+
+    The fit's trustworthiness is assessed (:mod:`elicit_jax.compat.trust`), recorded under
+    ``report.trust`` and printed; a meaningless fit is refused unless ``job.force``.
+
+    Args:
+      scores_path: a ``scores`` artifact.
+      out_path: the ``thresholds`` artifact to write.
+      job: the contrast sets and settings.
+      show: print the report as rich tables.
+
+    Returns:
+      The written header (``lambda``, ``eta``, ``report``, ...).
+
+    Raises:
+      ElicitError: bad sets, a failed fit, or a meaningless fit without ``force``.
+    """
+    from elicit_jax.compat.score_file import read_scores
+
+    cols = [c for c in _needed(job) if c not in ("episode", "operator", "likelihood", "novelty")]
+    _, s = read_scores(
+        scores_path,
+        columns=["episode", "operator", "likelihood", "novelty", *cols],
+        optional=["source_episode"],
+    )
+    labels = (
+        contrast_labels(s, job.compatible, job.incompatible)
+        if job.compatible is not None and job.incompatible is not None
+        else {}
+    )
+    f = job.fit.accept_fraction
+    out = _fit_report(s, labels, job)
+    report = out["report"]
+    if labels:
+        report["trust"] = _trust(s, labels, out, f)
+        report["trust"]["forced"] = bool(job.force and report["trust"]["meaningless"])
+    report["per_operator"] = operator_rejections(
+        s["likelihood"], s["novelty"], s["episode"], s["operator"], out["lambda"], out["eta"], f
+    )
     config = {
         "compatible": job.compatible,
         "incompatible": job.incompatible,
+        "force": job.force,
         **dataclasses.asdict(job.fit),
     }
+    trust = report.get("trust", {})
+    header = {"lambda": out["lambda"], "eta": out["eta"], "method": out["method"]}
+    if trust.get("meaningless") and out["method"] == "fit" and not job.force:
+        if show:
+            print_report({**header, "report": report})
+        raise ElicitError(
+            "the threshold fit is meaningless (" + "; ".join(trust["severe"]) + "); nothing "
+            "written — use other contrast sets, or pass --force to write it marked untrustworthy",
+            scores_path,
+        )
     header = write_thresholds(
         out_path,
-        lambda_=lam,
-        eta=eta,
-        method=method,
+        lambda_=out["lambda"],
+        eta=out["eta"],
+        method=out["method"],
         scores_path=scores_path,
         config=config,
         report=report,
@@ -144,6 +225,8 @@ def fit_scores_file(
 def _needed(job: FitJob) -> list[str]:
     out = []
     for text in (job.compatible, job.incompatible):
+        if text is None:
+            continue
         sel = parse_selection(text)
         if sel.kind == "label":
             out.append(sel.values[0])
@@ -196,3 +279,36 @@ def print_report(header: dict[str, Any]) -> None:
             str(r["rejected_episodes"]),
         )
     console.print(ops)
+    print_trust(rep, console)
+
+
+def print_trust(report: dict[str, Any], console: Any) -> None:
+    """The contrast decisions (with source names) and the trust verdict, loudly when bad."""
+    from rich.panel import Panel
+    from rich.table import Table
+
+    contrast = report.get("contrast", [])
+    if 0 < len(contrast) <= 30:
+        t = Table(title="contrast demonstrations")
+        for col in ("episode", "source episode", "set", "incompatible %", "decision"):
+            t.add_column(col, justify="left" if col in ("set", "decision") else "right")
+        for c in contrast:
+            ok = c["rejected"] != c["compatible"]
+            t.add_row(
+                str(c["episode"]),
+                str(c.get("source_episode", "-")),
+                "compatible" if c["compatible"] else "incompatible",
+                f"{100 * c['fraction_incompatible']:.1f}",
+                ("rejected" if c["rejected"] else "accepted") + ("" if ok else " (wrong)"),
+            )
+        console.print(t)
+    trust = report.get("trust")
+    if not trust:
+        return
+    if trust["trustworthy"]:
+        console.print("[green]trust: no problems found[/] (margin, held-out check, pair counts)")
+        return
+    verdict = "MEANINGLESS" if trust["meaningless"] else "NOT TRUSTWORTHY"
+    forced = " (written because of --force)" if trust.get("forced") else ""
+    body = "\n".join(f"• {p}" for p in trust["problems"])
+    console.print(Panel(body, title=f"[bold]this fit is {verdict}{forced}", border_style="red"))

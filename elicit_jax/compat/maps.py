@@ -2,7 +2,7 @@
 
 The x axis is ℓ on a log scale (``x="likelihood-error"``) or, as in the paper's figures,
 likelihood as ``−ℓ`` (``x="neg-likelihood-error"``: the same log-magnitude axis reversed, so
-more likely is to the right). The incompatible region ``ℓ ≥ λ, ν < η`` is drawn as a red box;
+more likely is to the right). The incompatible region ``ℓ > λ, ν < η`` is drawn as a red box;
 density is a 2-D histogram (log counts) so overlapping points stay readable. Outputs a PNG
 (matplotlib, Agg) and, for ``.html`` paths, a self-contained interactive page (inline SVG and
 JavaScript, no network): hover a point for its episode, step, ℓ, ν and M; click an operator in
@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import atomic_path
+from elicit_jax.compat.measures import check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
 
 AXES = ("likelihood-error", "neg-likelihood-error")
@@ -108,7 +109,7 @@ def write_png(
         ax.add_patch(Rectangle((sign * lx, 0), width, eta, fill=False, ec="red", lw=1.5))
         ax.axvline(sign * lx, color="red", ls="--", lw=0.8)
         ax.axhline(eta, color="red", ls="--", lw=0.8)
-        inc = float(((ell[sel] >= lambda_) & (nu[sel] < eta)).mean())
+        inc = float(is_incompatible(ell[sel], nu[sel], lambda_, eta).mean())
         ax.set_title(
             f"{names[k]}\n{int(sel.sum())} pairs, {100 * inc:.1f}% incompatible", fontsize=10
         )
@@ -232,7 +233,7 @@ _PAGE = """<!DOCTYPE html>
 <style>body{{font:13px sans-serif;margin:16px}}text{{font:11px sans-serif}}
 #tip{{position:fixed;background:#fff;border:1px solid #888;padding:4px;display:none}}
 label{{margin-right:12px;cursor:pointer}}</style></head>
-<body><h3>{title}</h3><p>Red box: incompatible pairs (M = 0). Grey: density of all pairs.
+<body><h3>{title}</h3><p>Red box: incompatible pairs (ℓ > λ, ν < η). Grey: density of all pairs.
 Hover a point for details; untick an operator to hide it.</p><div>{legend}</div>{svg}
 <div id="tip"></div>
 <script>
@@ -288,7 +289,8 @@ def map_scores_file(
         scores_path,
         columns=["episode", "operator", "step", "likelihood", "novelty", "compatibility"],
     )
-    lam = float(header["thresholds"]["lambda"]) if lambda_ is None else float(lambda_)
-    et = float(header["thresholds"]["eta"]) if eta is None else float(eta)
+    lam = header["thresholds"]["lambda"] if lambda_ is None else lambda_
+    et = header["thresholds"]["eta"] if eta is None else eta
+    lam, et = check_thresholds(lam, et)
     write_map(scores, lam, et, out, axis)
     return lam, et

@@ -11,7 +11,9 @@ predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action
   population std of the paper's text; ``ddof=1``, the sample std the original code uses). A
   model with its own spread (MDN) uses the mean over dims of that spread instead;
 * compatibility ``M = 1 − min(ℓ/λ, 1)`` if ``ν < η`` else ``1``; a pair is *incompatible* when
-  ``M == 0`` (``ℓ ≥ λ`` in a familiar state).
+  its likelihood error *exceeds* λ in a familiar state: ``ℓ > λ`` and ``ν < η``
+  (:func:`is_incompatible`, strict as in the paper's text and the original code; at the tie
+  ``ℓ = λ`` M is 0 but the pair is not flagged).
 
 Every function here handles one example; callers ``jax.vmap`` them.
 """
@@ -19,7 +21,8 @@ Every function here handles one example; callers ``jax.vmap`` them.
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+import math
+from typing import Any, Literal
 
 import jax.numpy as jnp
 from flax import struct
@@ -35,6 +38,38 @@ PRESETS: dict[str, tuple[float, float]] = {
     "round-nut": (0.35, 0.05),
     "hammer-drawer": (0.35, 0.06),
 }
+
+
+def check_thresholds(lambda_: float, eta: float, source: str | None = None) -> tuple[float, float]:
+    """The one validation of (λ, η) every command applies: both finite and > 0.
+
+    Returns:
+      ``(float(lambda_), float(eta))``.
+
+    Raises:
+      ElicitError: naming ``source`` (a thresholds file) when given.
+    """
+    try:
+        lam, et = float(lambda_), float(eta)
+    except (TypeError, ValueError) as e:
+        raise ElicitError(f"thresholds must be numbers, got lambda={lambda_!r}, eta={eta!r}") from e
+    for name, v in (("lambda", lam), ("eta", et)):
+        if not (math.isfinite(v) and v > 0):
+            raise ElicitError(f"{name} must be a finite number > 0, got {v:g}", source)
+    return lam, et
+
+
+def check_accept_fraction(fraction: float) -> float:
+    """The one validation of the accept/reject rule's fraction: in [0, 1)."""
+    f = float(fraction)
+    if not 0 <= f < 1:
+        raise ElicitError(f"accept fraction must be in [0, 1), got {f:g}")
+    return f
+
+
+def is_incompatible(ell: Any, nu: Any, lambda_: Any, eta: Any) -> Any:
+    """The incompatible test on scalars or arrays (NumPy or JAX): ``ℓ > λ`` and ``ν < η``."""
+    return (ell > lambda_) & (nu < eta)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,12 +102,8 @@ class ScoreConfig:
             )
         if self.ddof not in (0, 1):
             raise ElicitError(f"ddof must be 0 or 1, got {self.ddof}")
-        if not self.lambda_ > 0:
-            raise ElicitError(f"lambda must be > 0, got {self.lambda_}")
-        if not self.eta > 0:
-            raise ElicitError(f"eta must be > 0, got {self.eta}")
-        if not 0 <= self.accept_fraction < 1:
-            raise ElicitError(f"accept fraction must be in [0, 1), got {self.accept_fraction}")
+        check_thresholds(self.lambda_, self.eta)
+        check_accept_fraction(self.accept_fraction)
         if self.chunk_size < 1:
             raise ElicitError(f"chunk size must be >= 1, got {self.chunk_size}")
 
@@ -93,7 +124,7 @@ class PairScores:
       likelihood: ℓ, scalar.
       novelty: ν, scalar.
       compatibility: M in [0, 1], scalar.
-      incompatible: ``M == 0``, scalar bool.
+      incompatible: ``ℓ > λ`` and ``ν < η``, scalar bool.
       mean: ensemble-mean prediction π̄(s), ``(A,)``.
     """
 
@@ -171,7 +202,7 @@ def score_pair(
     ell = likelihood_error(members, action, config.likelihood, config.clip)
     nu = jnp.mean(spread) if spread is not None else novelty(members, config.ddof)
     m = compatibility(ell, nu, lambda_, eta)
-    return PairScores(ell, nu, m, m <= 0.0, jnp.mean(members, axis=0))
+    return PairScores(ell, nu, m, is_incompatible(ell, nu, lambda_, eta), jnp.mean(members, axis=0))
 
 
 def rejects(n_incompatible: int, length: int, accept_fraction: float = 0.05) -> bool:

@@ -16,7 +16,7 @@ bounded by the chunk size whatever the dataset size.
 
 Outputs: ``scores.parquet`` (kind ``scores``), one row per pair — ``episode``, ``operator``,
 ``step``, ``likelihood`` (ℓ), ``novelty`` (ν), ``compatibility`` (M), ``incompatible``
-(M == 0), ``prediction`` (the ensemble-mean action, fixed-size list<float32>[A]) and the
+(ℓ > λ and ν < η), ``prediction`` (the ensemble-mean action, fixed-size list<float32>[A]) and the
 demonstrations' ``success`` and scalar extra columns (usable as labels by ``fit-thresholds``);
 and a sibling ``scores.episodes.parquet`` (kind ``episode-scores``) with one row per episode —
 operator, length, incompatible pairs, fraction incompatible, mean M, mean ℓ, mean ν and the

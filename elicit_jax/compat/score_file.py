@@ -298,14 +298,23 @@ def episodes_table(episodes: Mapping[str, np.ndarray]) -> Any:
 
 
 def read_scores(
-    path: str | Path, columns: Sequence[str] | None = None
+    path: str | Path, columns: Sequence[str] | None = None, optional: Sequence[str] = ()
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Header and columns (numpy; ``prediction`` as (N, A)) of a scores artifact."""
+    """Header and columns (numpy; ``prediction`` as (N, A)) of a scores artifact.
+
+    Args:
+      path: the scores file.
+      columns: columns to read (default all).
+      optional: more columns to read when the file has them.
+    """
     import pyarrow.parquet as pq
 
     header = read_header(path)
     if header.get("kind") != SCORES_KIND:
         raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", path)
+    if columns:
+        have = pq.read_schema(path).names
+        columns = [*columns, *(c for c in optional if c in have and c not in columns)]
     table = pq.read_table(path, columns=list(columns) if columns else None)
     out: dict[str, np.ndarray] = {}
     for name in table.column_names:

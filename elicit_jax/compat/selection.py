@@ -1,5 +1,5 @@
 """Episode selections written on the command line: ``operator:NAME[,NAME]``,
-``episodes:ID[,ID]`` or ``label:COLUMN=VALUE``.
+``episodes:ID[,ID]`` (with ranges, ``episodes:0-4,7``) or ``label:COLUMN=VALUE``.
 
 ``label`` reads a per-pair column of the scores file (``success`` and the demonstrations'
 scalar extra columns are copied there by ``score``); an episode is selected when every one of
@@ -17,6 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from elicit_jax.data.selection import parse_episode_ids
 from elicit_jax.errors import ElicitError
 
 KINDS = ("operator", "episodes", "label")
@@ -32,25 +33,28 @@ class Selection:
 
 
 def parse_selection(text: str) -> Selection:
-    """Parse ``operator:a,b``, ``episodes:1,2`` or ``label:col=value``."""
+    """Parse ``operator:a,b``, ``episodes:1,2,5-8`` or ``label:col=value``."""
     kind, sep, rest = text.partition(":")
     kind = kind.strip().lower()
     if not sep or kind not in KINDS or not rest.strip():
         raise ElicitError(
-            f"bad selection '{text}': use operator:NAME[,NAME], episodes:ID[,ID] or "
-            "label:COLUMN=VALUE"
+            f"bad selection '{text}': use operator:NAME[,NAME], episodes:ID[,ID] (ranges like "
+            "0-4) or label:COLUMN=VALUE"
         )
     if kind == "label":
         col, eq, val = rest.partition("=")
         if not eq or not col.strip():
             raise ElicitError(f"bad selection '{text}': label needs COLUMN=VALUE")
         return Selection(kind, (col.strip(), val.strip()), text)
-    values = tuple(v.strip() for v in rest.split(",") if v.strip())
     if kind == "episodes":
         try:
-            [int(v) for v in values]
-        except ValueError as e:
-            raise ElicitError(f"bad selection '{text}': episode ids must be integers") from e
+            ids = parse_episode_ids(rest)
+        except ElicitError as e:
+            raise ElicitError(
+                f"bad selection '{text}': episode ids must be integers or ranges like 0-4"
+            ) from e
+        return Selection(kind, tuple(str(i) for i in ids), text)
+    values = tuple(v.strip() for v in rest.split(",") if v.strip())
     return Selection(kind, values, text)
 
 

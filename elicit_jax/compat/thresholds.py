@@ -3,10 +3,12 @@
 The paper assumes a few trajectories labelled *a priori* as compatible and incompatible and
 "regresses" (λ, η) from the 2-D map without saying how. Our objective works on the decisions
 that matter, one per demonstration: a demonstration is rejected when more than
-``accept_fraction`` (5%) of its pairs are incompatible (``ℓ ≥ λ`` and ``ν < η``). Candidate
-thresholds form a grid: λ takes the ``(i + ½)/G`` quantiles of the contrast pairs' ℓ values and
-η the same quantiles of their ν values (``G = grid_size``, duplicates removed), so every
-candidate sits between observed values. For each candidate we compute the **balanced
+``accept_fraction`` (5%) of its pairs are incompatible (``ℓ > λ`` and ``ν < η``). Candidate
+thresholds form a grid (:func:`candidates`): for the ``(i + ½)/G`` quantiles of the contrast
+pairs' ℓ values (``G = grid_size``) λ takes the midpoint between the observed values on either
+side of the quantile, never an observed value itself (pairs repeated by a paused operator would
+otherwise flip at once with the tie rule); η the same on the ν values; duplicates removed. For
+each candidate we compute the **balanced
 accuracy** of the decisions — the mean of the fraction of compatible demonstrations accepted
 and the fraction of incompatible ones rejected — and keep the candidates that maximise it.
 Among those, we pick the one with the **widest margin**: the largest ``r`` such that every
@@ -18,7 +20,7 @@ deterministic: no randomness, a fixed grid, a fixed tie order. It fails with a c
 a set is empty, the sets overlap, or no candidate does better than chance (balanced accuracy
 0.5). With more than one demonstration in a set we also report leave-one-out accuracy: each
 such demonstration is held out, the thresholds refitted on the rest, and the held-out decision
-checked.
+checked. Whether the result can be trusted at all is judged in :mod:`elicit_jax.compat.trust`.
 
 Example:
     >>> fit = fit_thresholds(ell, nu, episode, labels)   # labels: episode id -> True/False
@@ -35,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import make_header, read_json, write_json
+from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
 
 THRESHOLDS_KIND = "thresholds"
@@ -56,8 +59,7 @@ class FitConfig:
     def __post_init__(self) -> None:
         if self.grid_size < 2:
             raise ElicitError(f"grid size must be >= 2, got {self.grid_size}")
-        if not 0 <= self.accept_fraction < 1:
-            raise ElicitError(f"accept fraction must be in [0, 1), got {self.accept_fraction}")
+        check_accept_fraction(self.accept_fraction)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,9 +91,26 @@ class FitResult:
     episodes: Mapping[str, np.ndarray]
 
 
-def _grid(values: np.ndarray, size: int) -> np.ndarray:
-    levels = (np.arange(size) + 0.5) / size
-    return np.unique(np.quantile(values.astype(np.float64), levels))
+def candidates(values: np.ndarray, size: int, upper: bool = False) -> np.ndarray:
+    """Sorted candidate thresholds between the observed ``values`` (N,), about ``size`` of them.
+
+    For each ``(i + ½)/size`` quantile ``q`` with observed neighbours ``a ≤ q < b`` the
+    candidate is the midpoint of ``a`` and ``b`` (above the largest value when ``q`` is the
+    maximum). Candidates are float32-representable, so scores stored as float32 compare with
+    them exactly as here; when ``a`` and ``b`` are adjacent float32 numbers and no midpoint
+    exists, the candidate is ``a`` for a ``>`` test (``upper=False``, λ) or ``b`` for a ``<``
+    test (``upper=True``, η), which decides every pair the same way as a midpoint would.
+    """
+    v = np.asarray(values, np.float32)
+    u = np.unique(v)
+    q = np.quantile(v.astype(np.float64), (np.arange(size) + 0.5) / size)
+    k = np.searchsorted(u.astype(np.float64), q, side="right")  # u[k-1] <= q < u[k]
+    a = u[k - 1]
+    top = np.nextafter(u[-1], np.float32(np.inf))
+    b = np.where(k < len(u), u[np.minimum(k, len(u) - 1)], top)
+    mid = ((a.astype(np.float64) + b.astype(np.float64)) / 2).astype(np.float32)
+    mid = np.where((mid > a) & (mid < b), mid, b if upper else a)
+    return np.unique(np.where(k < len(u), mid, top)).astype(np.float64)
 
 
 def incompatible_counts(
@@ -104,9 +123,9 @@ def incompatible_counts(
 ) -> np.ndarray:
     """Incompatible pairs per episode for every candidate: ``(E, len(lams), len(etas))``.
 
-    A pair counts for ``(λ_i, η_j)`` when ``ℓ ≥ λ_i`` and ``ν < η_j``.
+    A pair counts for ``(λ_i, η_j)`` when ``ℓ > λ_i`` and ``ν < η_j``.
     """
-    li = np.searchsorted(lams, ell, side="right")  # pair counts for λ indices < li
+    li = np.searchsorted(lams, ell, side="left")  # pair counts for λ indices < li
     ej = np.searchsorted(etas, nu, side="right")  # pair familiar for η indices >= ej
     hist = np.zeros((n_ep, len(lams) + 1, len(etas) + 1), np.int32)
     np.add.at(hist, (index, li, ej), 1)
@@ -137,7 +156,8 @@ def _prepare(
     ids, index = np.unique(episode[keep], return_inverse=True)
     y = np.array([bool(labels[int(i)]) for i in ids])
     lengths = np.bincount(index, minlength=len(ids))
-    return ell[keep], nu[keep], index, ids, y, lengths
+    # scores are stored as float32; candidates are float32 numbers, so compare in float32
+    return ell[keep].astype(np.float32), nu[keep].astype(np.float32), index, ids, y, lengths
 
 
 def _check_sets(y: np.ndarray) -> None:
@@ -181,7 +201,8 @@ def fit_thresholds(
         np.asarray(ell), np.asarray(nu), np.asarray(episode), labels
     )
     _check_sets(y)
-    lams, etas = _grid(ell, config.grid_size), _grid(nu, config.grid_size)
+    lams = candidates(ell, config.grid_size)
+    etas = candidates(nu, config.grid_size, upper=True)
     counts = incompatible_counts(ell, nu, index, len(ids), lams, etas)
     reject = counts > config.accept_fraction * lengths[:, None, None]
     ba = _balanced_accuracy(reject, y)
@@ -237,7 +258,7 @@ def _leave_one_out(
         except ElicitError:
             continue
         sel = index == k
-        n_inc = int(((ell[sel] >= fit.lambda_) & (nu[sel] < fit.eta)).sum())
+        n_inc = int(is_incompatible(ell[sel], nu[sel], fit.lambda_, fit.eta).sum())
         rejected = n_inc > config.accept_fraction * int(sel.sum())
         correct += int(rejected != y[k])
     return correct / len(held), len(held)
@@ -257,7 +278,7 @@ def evaluate_thresholds(
         np.asarray(ell), np.asarray(nu), np.asarray(episode), labels
     )
     _check_sets(y)
-    n_inc = np.bincount(index, weights=(ell >= lambda_) & (nu < eta), minlength=len(ids))
+    n_inc = np.bincount(index, weights=is_incompatible(ell, nu, lambda_, eta), minlength=len(ids))
     reject = n_inc > accept_fraction * lengths
     ba = float(_balanced_accuracy(reject[:, None], y)[0])
     return ba, {
@@ -278,7 +299,7 @@ def operator_rejections(
     accept_fraction: float = 0.05,
 ) -> dict[str, dict[str, int]]:
     """Per operator: pairs, incompatible pairs, episodes and rejected episodes under (λ, η)."""
-    inc = (np.asarray(ell) >= lambda_) & (np.asarray(nu) < eta)
+    inc = is_incompatible(np.asarray(ell), np.asarray(nu), lambda_, eta)
     ids, index = np.unique(episode, return_inverse=True)
     n_inc = np.bincount(index, weights=inc, minlength=len(ids))
     lengths = np.bincount(index, minlength=len(ids))
@@ -333,6 +354,5 @@ def read_thresholds(path: str | Path) -> tuple[float, float, dict[str, Any]]:
         lam, eta = float(data["lambda"]), float(data["eta"])
     except (KeyError, TypeError, ValueError) as e:
         raise ElicitError("thresholds file lacks numeric 'lambda' and 'eta'", path) from e
-    if not (lam > 0 and eta > 0):
-        raise ElicitError(f"thresholds must be positive, got lambda={lam}, eta={eta}", path)
+    lam, eta = check_thresholds(lam, eta, str(path))
     return lam, eta, data

@@ -129,4 +129,3 @@ class Demos:
             ep.update({k: v[s:e] for k, v in self.extra.items()})
             out.append(ep)
         return out
-

@@ -97,6 +97,7 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
         "incompatible_seed",
         "lambda",
         "eta",
+        "force",
     )
     meta, over = _split(raw, keys)
     if ("lambda" in meta) != ("eta" in meta):
@@ -210,6 +211,7 @@ def fit_stage(ctx: StageContext) -> None:
         fit=FitConfig(**cfg["fit"]),
         lambda_=cfg.get("lambda"),
         eta=cfg.get("eta"),
+        force=bool(cfg.get("force", False)),
     )
     fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job)
 
