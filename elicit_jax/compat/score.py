@@ -175,6 +175,19 @@ def _check_finite(rows: dict[str, np.ndarray], source: str) -> None:
             )
 
 
+def _check_scores(scores: dict[str, np.ndarray], rows: dict[str, np.ndarray], policy: str) -> None:
+    """Non-finite scores (a NaN prediction would otherwise read as M = 1) are an error."""
+    bad = ~(np.isfinite(scores["likelihood"]) & np.isfinite(scores["novelty"]))
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise ElicitError(
+            f"the policy's predictions are not finite (NaN or inf) at episode "
+            f"{rows['episode'][r]}, step {rows['step'][r]} ({int(bad.sum())} pairs in this "
+            "chunk): the checkpoint is corrupt or its training diverged; nothing was scored",
+            policy,
+        )
+
+
 def score_batches(
     policy: Any,
     batches: Iterable[dict[str, np.ndarray]],
@@ -182,6 +195,7 @@ def score_batches(
     source: str = "<demos>",
     n_rows: int | None = None,
     n_devices: int | None = None,
+    policy_source: str = "<policy>",
 ) -> Iterator[dict[str, np.ndarray]]:
     """Score row batches of demonstrations, yielding per-pair score batches in input order.
 
@@ -198,6 +212,7 @@ def score_batches(
       n_rows: total rows, if known: feed-forward chunks are then balanced
         (:func:`balanced_chunk`) so the padded last chunk wastes little.
       n_devices: devices to shard each chunk over (default: all that JAX sees).
+      policy_source: name of the policy (its checkpoint) in error messages.
 
     Yields:
       The input columns except ``obs``/``action``, plus ``likelihood``, ``novelty``,
@@ -229,6 +244,7 @@ def score_batches(
             if place is not None:
                 obs, action = place(obs), place(action)
             scores = _to_numpy(_score_rows(policy, obs, action, lam, eta, static), n)
+        _check_scores(scores, rows, policy_source)
         keep = {k: v for k, v in rows.items() if k not in ("obs", "action")}
         yield {**keep, **scores}
 

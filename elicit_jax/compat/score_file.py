@@ -244,7 +244,15 @@ def score_file(
     with atomic_path(out_path) as tmp, _Progress(progress, n_total) as advance:
         with pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
             pending: list[Any] = []
-            for out in score_batches(policy, batches, config, str(demos_path), n_total):
+            scored = score_batches(
+                policy,
+                batches,
+                config,
+                str(demos_path),
+                n_total,
+                policy_source=str(policy_path or "<policy>"),
+            )
+            for out in scored:
                 pending.append(_arrow_table(out, schema))
                 if sum(t.num_rows for t in pending) >= ROW_GROUP:
                     writer.write_table(pa.concat_tables(pending))

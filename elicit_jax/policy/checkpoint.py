@@ -17,6 +17,7 @@ last epoch's file.
 from __future__ import annotations
 
 import re
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -80,14 +81,27 @@ def save_params(path: Path, params: Mapping[str, Any]) -> None:
 
 
 def load_params(path: Path) -> dict[str, Any]:
-    """Read a params ``.npz`` into a nested dict of numpy arrays."""
-    if not path.exists():
+    """Read a params ``.npz`` into a nested dict of numpy arrays.
+
+    Raises:
+      ElicitError: a missing, corrupt or truncated file, or non-finite (NaN/inf) values.
+    """
+    if not path.is_file():
         raise ElicitError("checkpoint parameters not found", path)
     try:
-        with np.load(path) as data:
-            return unflatten_params({k: data[k] for k in data.files})
-    except (OSError, ValueError) as e:
-        raise ElicitError(f"unreadable parameter file ({e})", path) from e
+        with np.load(path, allow_pickle=False) as data:
+            flat = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
+        raise ElicitError(f"unreadable parameter file ({type(e).__name__}: {e})", path) from e
+    for name, value in flat.items():
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            bad = int((~np.isfinite(value)).sum())
+            raise ElicitError(
+                f"parameters hold non-finite values ({bad} NaN/inf entries in '{name}'): the "
+                "checkpoint is corrupt or its training diverged",
+                path,
+            )
+    return unflatten_params(flat)
 
 
 def write_seed_header(seed_dir: Path, header: Mapping[str, Any]) -> None:
@@ -151,7 +165,6 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
     import jax
     import jax.numpy as jnp
 
-    from elicit_jax.policy import models
     from elicit_jax.policy.base import Policy
 
     seed_dir = _resolve_seed_dir(Path(path), seed)
@@ -176,18 +189,7 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
         raise ElicitError(f"unknown checkpoint {which!r}; use best, final or an epoch number")
     params = load_params(file)
     norm = load_params(seed_dir / "normalization.npz")
-    module = models.make_module(
-        spec["kind"], spec["hidden"], spec["action_dim"], spec["dropout"], spec["n_components"]
-    )
-    expected = jax.eval_shape(
-        lambda k: models.init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
-        jax.random.key(0),
-    )
-    want = {k: tuple(v.shape) for k, v in flatten_params(expected).items()}
-    got = {k: tuple(v.shape) for k, v in flatten_params(params).items()}
-    if want != got:
-        diff = sorted(set(want.items()) ^ set(got.items()))[:3]
-        raise ElicitError(f"parameters do not match the model spec in artifact.json: {diff}", file)
+    check_param_shapes(params, spec, file)
     return Policy(
         params=jax.tree.map(jnp.asarray, params),
         obs_mean=jnp.asarray(norm["obs_mean"]),
@@ -202,6 +204,56 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
         reset_every=int(spec["reset_every"]),
         obs_fields=tuple(spec.get("obs_fields", ())),
     )
+
+
+def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file: Path) -> None:
+    """Raise unless ``params`` have exactly the shapes the model ``spec`` builds."""
+    import jax
+
+    from elicit_jax.policy import models
+
+    module = models.make_module(
+        spec["kind"], spec["hidden"], spec["action_dim"], spec["dropout"], spec["n_components"]
+    )
+    expected = jax.eval_shape(
+        lambda k: models.init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
+        jax.random.key(0),
+    )
+    want = {k: tuple(v.shape) for k, v in flatten_params(expected).items()}
+    got = {k: tuple(v.shape) for k, v in flatten_params(params).items()}
+    if want != got:
+        diff = sorted(set(want.items()) ^ set(got.items()))[:3]
+        raise ElicitError(f"parameters do not match the model spec in artifact.json: {diff}", file)
+
+
+def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
+    """Seed -> problems found in its checkpoint directory (empty list: healthy).
+
+    Reads every parameter file and the normalisation statistics, checking that each opens,
+    holds only finite numbers and matches the model spec; used by ``elicit-jax info``.
+    """
+    out: dict[int, list[str]] = {}
+    for seed, d in sorted(seed_dirs(path).items()):
+        problems: list[str] = []
+        try:
+            spec = read_header(d)["model"]
+        except (ElicitError, KeyError) as e:
+            out[seed] = [f"{d}: unreadable header ({e})"]
+            continue
+        files = sorted((d / "params").glob("*.npz"))
+        if not files:
+            problems.append(f"{d / 'params'}: no parameter files")
+        if not (d / "params" / "best.npz").exists():
+            problems.append(f"{d / 'params'}: best.npz is missing")
+        for file in [d / "normalization.npz", *files]:
+            try:
+                params = load_params(file)
+                if file.name != "normalization.npz":
+                    check_param_shapes(params, spec, file)
+            except ElicitError as e:
+                problems.append(str(e))
+        out[seed] = problems
+    return out
 
 
 def policy_spec(policy: Any) -> dict[str, Any]:

@@ -5,7 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.policy.checkpoint import CHECKPOINT_KIND, list_checkpoints, seed_dirs
+from elicit_jax.policy.checkpoint import (
+    CHECKPOINT_KIND,
+    checkpoint_problems,
+    list_checkpoints,
+    seed_dirs,
+)
 
 
 def _fmt(x: Any) -> str:
@@ -78,3 +83,14 @@ def describe_run(path: Path, header: dict[str, Any]) -> None:
         )
     console.print(table)
     console.print(f"  versions: {header.get('versions', {})}")
+    problems = checkpoint_problems(path)
+    n_bad = sum(bool(p) for p in problems.values())
+    if not n_bad:
+        console.print(
+            "  [green]check: ok[/] (every parameter file opens, is finite and fits the model)"
+        )
+        return
+    console.print(f"  [bold red]check: {n_bad} of {len(problems)} seeds have problems[/]")
+    for seed, found in problems.items():
+        for p in found:
+            console.print(f"    [red]seed {seed}:[/] {p}", soft_wrap=True)
