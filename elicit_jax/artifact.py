@@ -14,14 +14,15 @@ import hashlib
 import json
 import os
 import platform
+import re
 import shutil
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.runtime import available_cpus
+from elicit_jax.runtime import available_cpus, process_alive
 
 HEADER_KEY = b"elicit_jax"
 DIR_HEADER = "artifact.json"
@@ -119,16 +120,61 @@ def dumps(obj: Any) -> str:
     return json.dumps(obj, default=default, indent=1, sort_keys=True)
 
 
+def _host_tag() -> str:
+    return hashlib.sha256(platform.node().encode()).hexdigest()[:8]
+
+
+def _temp_prefix(path: Path) -> str:
+    """``.<name>.p<pid>-<host>.``: temporaries say which process on which machine owns them."""
+    return f".{path.name}.p{os.getpid()}-{_host_tag()}."
+
+
+def clean_stale_temporaries(path: str | Path) -> list[Path]:
+    """Remove temporaries of ``path`` left by killed writers; returns what was removed.
+
+    Only temporaries written on this machine by processes that no longer exist are removed
+    (``.<name>.p<pid>-<host>.*.tmp`` and ``.<name>.old-<pid>``), so a concurrent writer's
+    work in progress is never touched.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    pattern = re.compile(
+        rf"^\.{re.escape(path.name)}\.(?:p(\d+)-([0-9a-f]{{8}})\..*\.tmp|old-(\d+))$"
+    )
+    removed = []
+    for p in path.parent.iterdir():
+        m = pattern.match(p.name)
+        if not m:
+            continue
+        pid = int(m.group(1) or m.group(3))
+        if m.group(2) not in (None, _host_tag()) or process_alive(pid):
+            continue
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary sibling path; rename it onto ``path`` only if the block succeeds.
 
     Works for files and directories. On error the temporary is removed and ``path`` is
-    untouched, so no half-written artifact is ever visible.
+    untouched, so no half-written artifact is ever visible; temporaries a killed writer left
+    behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
+    written (read-only directory, a file in the way) is an :class:`ElicitError` naming
+    ``path``, not the temporary.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        clean_stale_temporaries(path)
+        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
+    except OSError as e:
+        raise ElicitError(f"cannot write here ({e.strerror or e})", path) from e
     target = tmp / path.name
     try:
         yield target
@@ -139,8 +185,34 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(target, path)
+    except OSError as e:
+        if e.filename and str(e.filename).startswith(str(tmp)):
+            raise ElicitError(f"cannot write ({e.strerror or e})", path) from e
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def refuse_overwriting_inputs(
+    outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
+) -> None:
+    """Raise when an output would replace one of the inputs (or a directory holding one).
+
+    Args:
+      outputs: paths about to be written.
+      inputs: paths being read (``None`` entries are ignored).
+    """
+    ins = [Path(p).resolve() for p in inputs if p is not None]
+    for out in outputs:
+        o = Path(out).resolve()
+        for i in ins:
+            if o == i or o in i.parents:
+                what = "is" if o == i else "holds"
+                raise ElicitError(
+                    f"refusing to write here: this path {what} the input {i}; choose another "
+                    "output",
+                    out,
+                )
 
 
 def write_json(path: str | Path, obj: Any) -> None:

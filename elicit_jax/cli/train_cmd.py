@@ -50,6 +50,9 @@ def train(
         False, "--sequential-seeds", help="Train seeds one after another (less memory)."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace an existing run of another config or other data."
+    ),
 ) -> None:
     """Train a base policy on demonstrations and write a checkpoint directory.
 
@@ -76,6 +79,8 @@ def train(
         grad_clip=grad_clip,
         vmap_seeds=False if sequential_seeds else None,
     )
-    train_policy(read_demos(demos), config, out, inputs={"demos": demos}, quiet=quiet)
+    train_policy(
+        read_demos(demos), config, out, inputs={"demos": demos}, quiet=quiet, overwrite=overwrite
+    )
     if not quiet:
         typer.echo(f"wrote {out}")

@@ -43,7 +43,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from elicit_jax.artifact import file_sha256, make_header, write_parquet
+from elicit_jax.artifact import (
+    file_sha256,
+    make_header,
+    refuse_overwriting_inputs,
+    write_parquet,
+)
 from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
 
@@ -255,6 +260,10 @@ def filter_demos(
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
 
     demos_path = Path(demos_path)
+    refuse_overwriting_inputs(
+        [out_path, log_path(out_path)],
+        [scores_path, demos_path, base_path, *([export.source] if export else [])],
+    )
     if export is not None:
         if config.level != "episode" or base_path is not None:
             raise ElicitError(

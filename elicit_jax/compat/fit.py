@@ -170,8 +170,10 @@ def fit_scores_file(
     Raises:
       ElicitError: bad sets, a failed fit, or a meaningless fit without ``force``.
     """
+    from elicit_jax.artifact import refuse_overwriting_inputs
     from elicit_jax.compat.score_file import read_scores
 
+    refuse_overwriting_inputs([out_path], [scores_path])
     cols = [c for c in _needed(job) if c not in ("episode", "operator", "likelihood", "novelty")]
     _, s = read_scores(
         scores_path,

@@ -283,8 +283,10 @@ def map_scores_file(
     axis: str = "likelihood-error",
 ) -> tuple[float, float]:
     """Draw the map of a scores file (thresholds default to those it was scored with)."""
+    from elicit_jax.artifact import refuse_overwriting_inputs
     from elicit_jax.compat.score_file import read_scores
 
+    refuse_overwriting_inputs([out], [scores_path])
     header, scores = read_scores(
         scores_path,
         columns=["episode", "operator", "step", "likelihood", "novelty", "compatibility"],

@@ -23,6 +23,7 @@ from elicit_jax.artifact import (
     dumps,
     make_header,
     read_header,
+    refuse_overwriting_inputs,
     write_parquet,
 )
 from elicit_jax.compat.measures import ScoreConfig
@@ -202,6 +203,7 @@ def score_file(
     import pyarrow.parquet as pq
 
     demos_path, out_path = Path(demos_path), Path(out_path)
+    refuse_overwriting_inputs([out_path, episodes_path(out_path)], [demos_path, policy_path])
     header = read_header(demos_path)
     if header.get("kind") != "demos":
         raise ElicitError(

@@ -8,6 +8,7 @@ import warnings
 from pathlib import Path
 from typing import Literal
 
+from elicit_jax.artifact import refuse_overwriting_inputs
 from elicit_jax.data.demos import BoundsPolicy, Demos, DemosWarning, validate, write_demos
 from elicit_jax.errors import ElicitError
 
@@ -124,6 +125,7 @@ def import_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
     """
     if Path(cfg.out).suffix != ".parquet":
         raise ElicitError("output must be a .parquet file", cfg.out)
+    refuse_overwriting_inputs([cfg.out], [cfg.source])
     demos = load_dataset(cfg, progress=progress)
     config = {k: v for k, v in dataclasses.asdict(cfg).items() if k != "out"}
     demos = validate(demos, cfg.source, bounds=cfg.bounds)  # problems name the source file

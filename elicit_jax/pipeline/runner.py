@@ -31,6 +31,7 @@ from elicit_jax.artifact import (
 )
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.graph import Graph, Stage
+from elicit_jax.runtime import process_alive
 
 STAGE_RECORD_KIND = "pipeline-stage"
 STAGE_RECORD_SCHEMA = 1
@@ -150,7 +151,7 @@ def run_lock(run_dir: Path) -> Iterator[None]:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
         except FileExistsError:
             pid = _lock_pid(lock)
-            if pid is not None and pid != os.getpid() and _alive(pid):
+            if pid is not None and pid != os.getpid() and process_alive(pid):
                 raise ElicitError(
                     f"another pipeline run (pid {pid}) is using this run directory", run_dir
                 ) from None
@@ -172,16 +173,6 @@ def _lock_pid(lock: Path) -> int | None:
         return int(lock.read_text().strip())
     except (OSError, ValueError):
         return None
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def clean_temporaries(run_dir: Path) -> int:

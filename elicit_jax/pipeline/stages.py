@@ -158,7 +158,13 @@ def train_stage(ctx: StageContext) -> None:
     files = {n: demos_file(ctx.inputs[n]) for n in names}
     files = {n: f for n, f in files.items() if f.exists() or n == "demos0"}
     demos = concat_demos([read_demos(f) for f in files.values()])
-    train_policy(demos, TrainConfig.from_dict(ctx.config["train"]), ctx.output, inputs=files)
+    train_policy(
+        demos,
+        TrainConfig.from_dict(ctx.config["train"]),
+        ctx.output,
+        inputs=files,
+        overwrite=True,
+    )
 
 
 def score_stage(ctx: StageContext) -> None:

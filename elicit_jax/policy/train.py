@@ -7,6 +7,7 @@ until the run is done, showing a rich progress bar and saving checkpoints betwee
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Mapping
@@ -15,8 +16,17 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import atomic_path, make_header, write_json, write_parquet
+from elicit_jax.artifact import (
+    atomic_path,
+    dumps,
+    make_header,
+    read_header,
+    refuse_overwriting_inputs,
+    write_json,
+    write_parquet,
+)
 from elicit_jax.data.demos import Demos
+from elicit_jax.errors import ElicitError
 from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
 from elicit_jax.policy.dataset import TrainData, demos_sha256, prepare
@@ -141,6 +151,29 @@ def _nan_to_none(x: float) -> float | None:
     return None if not np.isfinite(x) else float(x)
 
 
+def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwrite: bool) -> None:
+    """Refuse to replace ``out_dir`` unless it is empty, ``overwrite`` is set, or it holds a run
+    of this very config on these very data (training is deterministic: nothing is lost)."""
+    if overwrite or not out_dir.exists():
+        return
+    if out_dir.is_dir() and not any(out_dir.iterdir()):
+        return
+    try:
+        header = read_header(out_dir)
+    except ElicitError:
+        header = {}
+    if header.get("kind") == ckpt.RUN_KIND:
+        same = header.get("config") == json.loads(dumps(config.to_dict()))
+        if same and header.get("data_sha256") == data_hash:
+            return
+        what = "a training run of another config" if not same else "a run trained on other data"
+    else:
+        what = "something that is not a training run"
+    raise ElicitError(
+        f"already holds {what}; pass --overwrite to replace it, or choose another --out", out_dir
+    )
+
+
 def train_policy(
     demos: Demos,
     config: TrainConfig,
@@ -148,25 +181,34 @@ def train_policy(
     *,
     inputs: Mapping[str, str | Path] | None = None,
     quiet: bool = False,
+    overwrite: bool = False,
 ) -> Path:
     """Train ``config.seeds`` policies on ``demos`` and write the run directory.
 
     Args:
       demos: training demonstrations.
       config: the training configuration.
-      out_dir: run directory to create (replaced atomically if it exists).
+      out_dir: run directory to create (replaced atomically when it holds a run of the same
+        config and data, or with ``overwrite``).
       inputs: name -> path of input artifacts, hashed into the headers (e.g. the demos file).
       quiet: no progress bar or summary.
+      overwrite: replace whatever ``out_dir`` holds.
 
     Returns:
       ``out_dir`` as a Path. Each seed's checkpoint is ``out_dir / f"seed{seed}"``.
+
+    Raises:
+      ElicitError: ``out_dir`` holds another run (or anything else) and not ``overwrite``;
+        ``out_dir`` is or holds one of the inputs.
     """
     from elicit_jax.policy.progress import TrainProgress
 
     out_dir = Path(out_dir)
+    refuse_overwriting_inputs([out_dir], (inputs or {}).values())
+    data_hash = demos_sha256(demos)
+    check_destination(out_dir, config, data_hash, overwrite)
     data = prepare(demos, config.val_fraction, config.seq_len if config.model == "lstm" else 1)
     template = _template(config, demos, data, params=None)
-    data_hash = demos_sha256(demos)
     groups = [config.seeds] if config.vmap_seeds else [(s,) for s in config.seeds]
     with atomic_path(out_dir) as tmp, TrainProgress(config, data.n_train, quiet) as progress:
         results = {}
