@@ -8,9 +8,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from elicit_jax.artifact import file_sha256, read_header
+from elicit_jax.compat.episode_summary import summarise_episodes
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score import score_demos
-from elicit_jax.compat.score_file import read_scores, score_file, summarise_episodes
+from elicit_jax.compat.score_file import read_scores, score_file
 from elicit_jax.data.demos import from_episodes, write_demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import init_policy

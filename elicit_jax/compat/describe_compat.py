@@ -54,7 +54,7 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
     """Per-operator summary of the per-episode scores."""
     import pyarrow.parquet as pq
 
-    from elicit_jax.compat.score_file import print_operator_table
+    from elicit_jax.compat.episode_summary import print_operator_table
 
     table = pq.read_table(path)
     cols = {

@@ -33,6 +33,25 @@ def _bound_text(v: Any) -> str:
     return "?" if v is None else f"{float(v):.3g}"
 
 
+def _id_names(path: str | Path, show: int = 3) -> str:
+    """``0 (demo_0), 1 (demo_1), …, 49 (demo_49)``: ids with their names in the source."""
+    import pyarrow.parquet as pq
+
+    have = pq.read_schema(path).names
+    cols = ["episode", "source_episode"] if "source_episode" in have else ["episode"]
+    table = pq.read_table(path, columns=cols)
+    ids, first = np.unique(table.column("episode").to_numpy(), return_index=True)
+    names = (
+        np.asarray(table.column("source_episode").to_pylist(), dtype=object)[first]
+        if len(cols) == 2
+        else None
+    )
+    text = [f"{i}" + (f" ({names[k]})" if names is not None else "") for k, i in enumerate(ids)]
+    if len(text) > 2 * show:
+        text = [*text[:show], "…", *text[-show:]]
+    return ", ".join(text)
+
+
 def operator_stats(path: str | Path) -> list[dict[str, Any]]:
     """Per-operator episode counts, mean/std episode length and success rate (plus 'all').
 
@@ -86,6 +105,7 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
                     "action bounds",
                     f"{low} .. {high} ({header.get('action_bounds_policy', 'error')})",
                 ),
+                ("episode ids (source name)", _id_names(path)),
                 ("extra columns", ", ".join(header.get("extra_columns", [])) or None),
                 ("created", header.get("created")),
                 ("elicit-jax", header.get("versions", {}).get("elicit-jax")),
