@@ -123,3 +123,12 @@ def shard_batch(
         return out if pad == 0 else jax.tree.map(lambda x: x[:size], out)
 
     return wrapped
+
+
+def row_placer(devices: int) -> Callable[..., Any] | None:
+    """``place(x, replicate=False)`` putting arrays on a 1-D mesh of ``devices`` devices
+    (rows split, or replicated), or ``None`` for one device (nothing is moved or copied)."""
+    if devices == 1:
+        return None
+    rows, replicated = batch_shardings(devices)
+    return lambda x, replicate=False: place(x, replicated if replicate else rows)

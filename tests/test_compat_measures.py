@@ -106,3 +106,56 @@ def test_compatibility_properties(ell, nu, lam, eta, lam2):
         assert m == 1.0
     lo, hi = sorted((lam, lam2))
     assert float(_M(ell, nu, lo, eta)) <= float(_M(ell, nu, hi, eta)) + 1e-7
+
+
+def test_pinned_to_the_original_codes_get_compatibility():
+    """With member-average ℓ and the sample std, our ℓ, ν and decision match the original
+    code's scoring (per member: clamp both actions to the action limit, mean squared error over
+    dims, then the mean over members; novelty: the unbiased std across members, mean over
+    dims; a pair counts as bad when ℓ > λ and ν < η). Numbers computed by hand below."""
+    members = jnp.array([[0.5, -0.2], [1.4, 0.0], [0.2, 0.1]])
+    action = jnp.array([0.8, -1.3])  # clamped to [0.8, -1.0]
+    # clamped predictions [0.5,-0.2], [1.0,0.0], [0.2,0.1]:
+    # (0.09 + 0.64)/2 = 0.365; (0.04 + 1.0)/2 = 0.52; (0.36 + 1.21)/2 = 0.785; mean 0.556667
+    ell = likelihood_error(members, action, "member-average", clip=(-1.0, 1.0))
+    assert float(ell) == pytest.approx(1.67 / 3, abs=1e-6)
+    # unclamped predictions; dim 0 [0.5, 1.4, 0.2]: var (0.04 + 0.49 + 0.25)/2 = 0.39;
+    # dim 1 [-0.2, 0, 0.1]: var 0.0466667/2; nu = (sqrt(0.39) + sqrt(0.0233333)) / 2
+    nu = novelty(members, ddof=1)
+    assert float(nu) == pytest.approx((np.sqrt(0.39) + np.sqrt(0.14 / 6)) / 2, abs=1e-6)
+    cfg = ScoreConfig(likelihood="member-average", ddof=1)
+    bad = score_pair(members, action, jnp.float32(0.5), jnp.float32(0.4), cfg, clip=(-1.0, 1.0))
+    assert bool(bad.incompatible) and float(bad.compatibility) == 0.0  # 0.5567 > 0.5, 0.389 < 0.4
+    ok = score_pair(members, action, jnp.float32(0.6), jnp.float32(0.4), cfg, clip=(-1.0, 1.0))
+    assert not bool(ok.incompatible)
+    assert float(ok.compatibility) == pytest.approx(1 - (1.67 / 3) / 0.6, abs=1e-6)
+    # novel state (nu >= eta): never bad, M = 1
+    novel = score_pair(members, action, jnp.float32(0.5), jnp.float32(0.3), cfg, clip=(-1.0, 1.0))
+    assert not bool(novel.incompatible) and float(novel.compatibility) == 1.0
+
+
+def test_member_average_clips_to_per_dim_bounds_by_hand():
+    # bounds [-2, 2] on dim 0 and [-0.5, 0.5] on dim 1 (e.g. the demos' recorded bounds)
+    members = jnp.array([[0.0, 0.9]])
+    action = jnp.array([1.5, -0.3])
+    low, high = jnp.array([-2.0, -0.5]), jnp.array([2.0, 0.5])
+    # dim 0: 0 - 1.5 -> 2.25; dim 1: clip(0.9) = 0.5, 0.5 - (-0.3) = 0.8 -> 0.64; mean 1.445
+    got = likelihood_error(members, action, "member-average", clip=(low, high))
+    assert float(got) == pytest.approx(1.445)
+    # a fixed ±1 clip would have given ((0 - 1)^2 + (0.9 + 0.3)^2) / 2 = 1.22
+    assert float(likelihood_error(members, action, "member-average", clip=1.0)) == pytest.approx(
+        1.22
+    )
+
+
+def test_action_scaling_by_hand():
+    # training action std [0.5, 0 (constant), 2]: weights [2, left out, 0.5]
+    weight = jnp.array([2.0, 0.0, 0.5])
+    members = jnp.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    action = jnp.array([1.0, 0.0, 1.0])
+    # mean prediction [0, 0, 0.5]; scaled errors [2, -, 0.25]; squares 4, 0.0625 over 2 dims
+    assert float(likelihood_error(members, action, weight=weight)) == pytest.approx(4.0625 / 2)
+    # unscaled: (1 + 0 + 0.25) / 3
+    assert float(likelihood_error(members, action)) == pytest.approx(1.25 / 3)
+    # novelty: per-dim std [0, 0, 0.5] -> scaled [0, -, 0.25] over 2 dims = 0.125
+    assert float(novelty(members, 0, weight)) == pytest.approx(0.125)

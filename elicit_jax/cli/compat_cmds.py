@@ -57,12 +57,28 @@ def score(
     lambda_: float | None = _LAMBDA,
     eta: float | None = _ETA,
     preset: str | None = typer.Option(
-        None, "--preset", help="Paper thresholds: square-nut (default), round-nut, hammer."
+        None,
+        "--preset",
+        help="Paper thresholds: square-nut, round-nut or hammer-drawer. Default: the preset of "
+        "the demos' task if it has one, else square-nut as a placeholder (with a warning).",
     ),
     likelihood: str = typer.Option(
         "ensemble-mean", "--likelihood", help="ensemble-mean (paper) or member-average (code)."
     ),
     ddof: int = typer.Option(0, "--ddof", help="Std convention of novelty: 0 paper, 1 code."),
+    action_scale: str = typer.Option(
+        "none",
+        "--action-scale",
+        help="none (paper: raw action units) or std (each dim divided by the training actions' "
+        "std; constant dims left out).",
+    ),
+    dropout_samples: int = typer.Option(
+        0,
+        "--dropout-samples",
+        help="MC-dropout scoring: N passes per member with dropout on (the original code "
+        "scored with dropout on). 0 = deterministic members (paper).",
+    ),
+    dropout_seed: int = typer.Option(0, "--dropout-seed", help="Seed of the dropout masks."),
     accept_fraction: float = typer.Option(
         0.05, "--accept-fraction", help="Reject a demo above this fraction incompatible."
     ),
@@ -75,6 +91,10 @@ def score(
     Writes per-pair scores to OUT and a per-episode summary (5% accept/reject rule) next to
     it as OUT.episodes.parquet, and prints a table per operator.
 
+    Without thresholds, the paper's preset of the demos' task is used (NutAssemblyRound ->
+    round-nut, ...); for other tasks square-nut's values stand in, with a warning: fit your own
+    with fit-thresholds.
+
     Example: elicit-jax score --policy runs/base --demos new.parquet -o scores.parquet
     --preset round-nut
     """
@@ -82,8 +102,16 @@ def score(
     from elicit_jax.compat.score_file import score_checkpoint
 
     resolved = _resolve(thresholds, lambda_, eta, preset)
-    base = ScoreConfig()
-    lam, et = resolved if resolved is not None else (base.lambda_, base.eta)
+    source = (
+        f"file {thresholds}"
+        if thresholds is not None
+        else f"preset {preset}"
+        if preset is not None
+        else "given"
+    )
+    if resolved is None:
+        resolved, source = _task_preset(demos)
+    lam, et = resolved
     config = ScoreConfig(
         likelihood=likelihood,  # type: ignore[arg-type]
         ddof=ddof,
@@ -91,9 +119,34 @@ def score(
         eta=et,
         accept_fraction=accept_fraction,
         chunk_size=chunk_size,
+        action_scale=action_scale,
+        dropout_samples=dropout_samples,
+        dropout_seed=dropout_seed,
     )
     which_: str | int = int(which) if which.isdigit() else which
-    score_checkpoint(policy, demos, out, config, which=which_, seed=seed)
+    score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
+
+
+def _task_preset(demos: Path) -> tuple[tuple[float, float], str]:
+    """(λ, η) and their source when none are given: the paper preset of the demos' task, or
+    square-nut's values as a placeholder (said on stderr)."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.compat.measures import PRESETS, preset_for_task
+
+    task = read_header(demos).get("task", "unknown")
+    name = preset_for_task(task)
+    if name is not None:
+        lam, eta = PRESETS[name]
+        typer.echo(f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}", err=True)
+        return (lam, eta), f"preset {name} (task {task})"
+    lam, eta = PRESETS["square-nut"]
+    typer.echo(
+        f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
+        f"λ={lam}, η={eta} as a placeholder. Fit your own (elicit-jax fit-thresholds) and pass "
+        "--thresholds to filter and map.",
+        err=True,
+    )
+    return (lam, eta), f"placeholder: square-nut preset (task {task} has none)"
 
 
 @app.command("fit-thresholds", rich_help_panel=COMPAT)

@@ -25,7 +25,13 @@ def train(
     demos: Path = typer.Option(..., "--demos", help="Training demonstrations (Parquet)."),
     out: Path = typer.Option(..., "--out", help="Run directory to write (one seed<k>/ per seed)."),
     model: str = typer.Option("mlp", "--model", help="mlp (ensemble), mdn or lstm."),
-    profile: str = typer.Option("paper", "--profile", help="paper (paper sizes) or cpu (small)."),
+    profile: str | None = typer.Option(
+        None,
+        "--profile",
+        help="paper (the paper's 5 x 2 x 1024, 1000 epochs), cpu (2 x 256, 100 epochs, 1 seed) "
+        "or original-code (paper sizes, trained as the original code). Default: paper with a "
+        "GPU/TPU, cpu on a CPU-only machine (printed).",
+    ),
     epochs: int | None = typer.Option(None, "--epochs", help="Epochs (profile default)."),
     hidden: str | None = typer.Option(None, "--hidden", help="Hidden sizes, e.g. 1024,1024."),
     seeds: str | None = typer.Option(None, "--seeds", help="Training seeds, e.g. 0,1,2."),
@@ -56,11 +62,19 @@ def train(
 ) -> None:
     """Train a base policy on demonstrations and write a checkpoint directory.
 
+    Without --profile the paper's sizes are used on an accelerator and the small cpu profile
+    on a CPU-only machine (the paper's sizes take about 20 minutes per model on 2 CPU cores).
+
     Example: elicit-jax train --demos base.parquet --out runs/base --profile cpu --seeds 0,1,2
     """
     from elicit_jax.data.demos import read_demos
-    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.config import TrainConfig, default_profile
     from elicit_jax.policy.train import train_policy
+
+    if profile is None:
+        profile, why = default_profile()
+        other = "cpu" if profile == "paper" else "paper"
+        typer.echo(f"profile: {profile} ({why}; --profile {other} for the other)", err=True)
 
     config = TrainConfig.from_profile(
         profile,

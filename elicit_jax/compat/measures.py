@@ -6,7 +6,7 @@ predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action
 * likelihood error ``ℓ``:
     ``ensemble-mean`` (paper, default): mean over dims of ``(π̄(s) − a)²``;
     ``member-average`` (original simulation code): mean over members of the mean over dims of
-    ``(clip(π_k(s)) − clip(a))²``, clipping to ``±clip``;
+    ``(clip(π_k(s)) − clip(a))²``, clipping to the demonstrations' recorded action bounds;
 * novelty ``ν``: mean over dims of the standard deviation across members (``ddof=0``, the
   population std of the paper's text; ``ddof=1``, the sample std the original code uses). A
   model with its own spread (MDN) uses the mean over dims of that spread instead;
@@ -14,6 +14,12 @@ predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action
   its likelihood error *exceeds* λ in a familiar state: ``ℓ > λ`` and ``ν < η``
   (:func:`is_incompatible`, strict as in the paper's text and the original code; at the tie
   ``ℓ = λ`` M is 0 but the pair is not flagged).
+
+Options beyond the paper (default off): *action scaling* (``action_scale="std"``) divides each
+action dim by the std of the base policy's training actions and leaves dims that were constant
+there out of both means, so a ±1 gripper does not dominate ℓ; *MC-dropout scoring*
+(``dropout_samples=N``) runs every member N times with its dropout active, the K·N predictions
+forming the ensemble — the original code scored with dropout on.
 
 Every function here handles one example; callers ``jax.vmap`` them.
 """
@@ -31,6 +37,7 @@ from elicit_jax.errors import ElicitError
 
 Likelihood = Literal["ensemble-mean", "member-average"]
 LIKELIHOODS: tuple[str, ...] = ("ensemble-mean", "member-average")
+ACTION_SCALES: tuple[str, ...] = ("none", "std")
 
 # Paper thresholds (averaged over action dims): name -> (lambda, eta).
 PRESETS: dict[str, tuple[float, float]] = {
@@ -38,6 +45,20 @@ PRESETS: dict[str, tuple[float, float]] = {
     "round-nut": (0.35, 0.05),
     "hammer-drawer": (0.35, 0.06),
 }
+# Task names (ours and robosuite's / the original code's) -> preset.
+TASK_PRESETS: dict[str, str] = {
+    "square-nut": "square-nut",
+    "nutassemblysquare": "square-nut",
+    "round-nut": "round-nut",
+    "nutassemblyround": "round-nut",
+    "hammer-drawer": "hammer-drawer",
+    "hammerplaceenv": "hammer-drawer",
+}
+
+
+def preset_for_task(task: str | None) -> str | None:
+    """The paper preset of a task name (``NutAssemblyRound`` -> ``round-nut``), or None."""
+    return TASK_PRESETS.get(str(task or "").strip().lower())
 
 
 def check_thresholds(lambda_: float, eta: float, source: str | None = None) -> tuple[float, float]:
@@ -84,7 +105,13 @@ class ScoreConfig:
       accept_fraction: a demonstration is rejected when its number of incompatible pairs
         exceeds this fraction of its length (paper: 5%).
       chunk_size: pairs per jitted scoring call (the last chunk is padded).
-      clip: action bound used by ``member-average`` clipping.
+      clip: ``member-average`` clipping bound ±clip; None (default): the scored demos'
+        recorded action bounds, per dim.
+      action_scale: ``none`` (paper) or ``std``: per-dim scaling by the base policy's training
+        action std, constant dims left out (see module docstring).
+      dropout_samples: 0 (paper: deterministic members) or N > 0: MC-dropout scoring with N
+        stochastic passes per member.
+      dropout_seed: seed of the MC-dropout masks (scores are deterministic given it).
     """
 
     likelihood: Likelihood = "ensemble-mean"
@@ -93,7 +120,10 @@ class ScoreConfig:
     eta: float = PRESETS["square-nut"][1]
     accept_fraction: float = 0.05
     chunk_size: int = 4096
-    clip: float = 1.0
+    clip: float | None = None
+    action_scale: str = "none"
+    dropout_samples: int = 0
+    dropout_seed: int = 0
 
     def __post_init__(self) -> None:
         if self.likelihood not in LIKELIHOODS:
@@ -106,6 +136,14 @@ class ScoreConfig:
         check_accept_fraction(self.accept_fraction)
         if self.chunk_size < 1:
             raise ElicitError(f"chunk size must be >= 1, got {self.chunk_size}")
+        if self.clip is not None and not (math.isfinite(self.clip) and self.clip > 0):
+            raise ElicitError(f"clip must be a finite number > 0, got {self.clip}")
+        if self.action_scale not in ACTION_SCALES:
+            raise ElicitError(
+                f"unknown action scale '{self.action_scale}' (choose {', '.join(ACTION_SCALES)})"
+            )
+        if self.dropout_samples < 0:
+            raise ElicitError(f"dropout samples must be >= 0, got {self.dropout_samples}")
 
     @classmethod
     def from_preset(cls, name: str, **overrides: object) -> ScoreConfig:
@@ -135,8 +173,24 @@ class PairScores:
     mean: jnp.ndarray
 
 
+def _bounds(clip: float | tuple[Any, Any]) -> tuple[Any, Any]:
+    return (-clip, clip) if isinstance(clip, int | float) else clip
+
+
+def _dim_mean(x: jnp.ndarray, weight: jnp.ndarray | None) -> jnp.ndarray:
+    """Mean over the last (action) axis; with ``weight`` (A,), of ``x`` over dims whose weight
+    is non-zero (the caller has already multiplied the weights in)."""
+    if weight is None:
+        return jnp.mean(x, axis=-1)
+    return jnp.sum(x, axis=-1) / jnp.maximum(jnp.sum(weight != 0), 1)
+
+
 def likelihood_error(
-    members: jnp.ndarray, action: jnp.ndarray, kind: Likelihood = "ensemble-mean", clip: float = 1.0
+    members: jnp.ndarray,
+    action: jnp.ndarray,
+    kind: Likelihood = "ensemble-mean",
+    clip: float | tuple[Any, Any] = 1.0,
+    weight: jnp.ndarray | None = None,
 ) -> jnp.ndarray:
     """Likelihood error ℓ of one pair.
 
@@ -144,30 +198,35 @@ def likelihood_error(
       members: (K, A) member predictions π_k(s).
       action: (A,) demonstrated action.
       kind: ``ensemble-mean`` or ``member-average`` (see module docstring).
-      clip: bound for the ``member-average`` clipping.
+      clip: ``member-average`` clipping: ±clip, or per-dim ``(low (A,), high (A,))``.
+      weight: (A,) per-dim scale (1/std, 0 for dims left out), or None for the plain mean.
 
     Returns:
       scalar ℓ.
     """
+    w = 1.0 if weight is None else weight
     if kind == "ensemble-mean":
-        return jnp.mean((jnp.mean(members, axis=0) - action) ** 2)
+        return _dim_mean(((jnp.mean(members, axis=0) - action) * w) ** 2, weight)
     if kind == "member-average":
-        diff = jnp.clip(members, -clip, clip) - jnp.clip(action, -clip, clip)[None, :]
-        return jnp.mean(jnp.mean(diff**2, axis=-1))
+        low, high = _bounds(clip)
+        diff = jnp.clip(members, low, high) - jnp.clip(action, low, high)[None, :]
+        return jnp.mean(_dim_mean((diff * w) ** 2, weight))
     raise ElicitError(f"unknown likelihood '{kind}'")
 
 
-def novelty(members: jnp.ndarray, ddof: int = 0) -> jnp.ndarray:
+def novelty(members: jnp.ndarray, ddof: int = 0, weight: jnp.ndarray | None = None) -> jnp.ndarray:
     """Novelty ν of one state: mean over dims of the across-member std.
 
     Args:
       members: (K, A) member predictions.
       ddof: 0 (population std) or 1 (sample std; needs K > 1).
+      weight: (A,) per-dim scale, as in :func:`likelihood_error`.
 
     Returns:
       scalar ν.
     """
-    return jnp.mean(jnp.std(members, axis=0, ddof=ddof))
+    std = jnp.std(members, axis=0, ddof=ddof)
+    return _dim_mean(std if weight is None else std * weight, weight)
 
 
 def compatibility(
@@ -185,6 +244,8 @@ def score_pair(
     eta: jnp.ndarray,
     config: ScoreConfig,
     spread: jnp.ndarray | None = None,
+    clip: float | tuple[Any, Any] = 1.0,
+    weight: jnp.ndarray | None = None,
 ) -> PairScores:
     """All scores of one pair.
 
@@ -193,14 +254,19 @@ def score_pair(
       action: (A,) demonstrated action.
       lambda_: scalar λ (an argument, so changing it does not recompile).
       eta: scalar η.
-      config: likelihood kind, ddof and clip are read from it.
+      config: likelihood kind and ddof are read from it.
       spread: (A,) the model's own per-dim spread (MDN); replaces the across-member std.
+      clip: ``member-average`` clipping bounds (see :func:`likelihood_error`).
+      weight: (A,) action scaling, or None (paper).
 
     Returns:
       :class:`PairScores` of this pair.
     """
-    ell = likelihood_error(members, action, config.likelihood, config.clip)
-    nu = jnp.mean(spread) if spread is not None else novelty(members, config.ddof)
+    ell = likelihood_error(members, action, config.likelihood, clip, weight)
+    if spread is not None:
+        nu = _dim_mean(spread if weight is None else spread * weight, weight)
+    else:
+        nu = novelty(members, config.ddof, weight)
     m = compatibility(ell, nu, lambda_, eta)
     return PairScores(ell, nu, m, is_incompatible(ell, nu, lambda_, eta), jnp.mean(members, axis=0))
 
@@ -208,3 +274,19 @@ def score_pair(
 def rejects(n_incompatible: int, length: int, accept_fraction: float = 0.05) -> bool:
     """The accept/reject rule: reject when incompatible pairs exceed ``fraction × length``."""
     return bool(n_incompatible > accept_fraction * length)
+
+
+def config_dict(config: ScoreConfig) -> dict[str, Any]:
+    """JSON form of a score config (``lambda_`` written as ``lambda``)."""
+    d = dataclasses.asdict(config)
+    d["lambda"] = d.pop("lambda_")
+    return d
+
+
+def config_from_dict(d: dict[str, Any]) -> ScoreConfig:
+    """Inverse of :func:`config_dict`."""
+    d = dict(d)
+    if "lambda" in d:
+        d["lambda_"] = d.pop("lambda")
+    names = {f.name for f in dataclasses.fields(ScoreConfig)}
+    return ScoreConfig(**{k: v for k, v in d.items() if k in names})

@@ -2,7 +2,8 @@
 
 Feed-forward policies (MLP ensemble, MDN) are scored row by row: rows are grouped into chunks
 of one fixed size — at most ``config.chunk_size``, balanced over the dataset so the padded
-last chunk wastes little (:func:`balanced_chunk`) — and ONE jitted function, the per-pair
+last chunk wastes little (:func:`~elicit_jax.compat.chunks.balanced_chunk`) — and ONE jitted
+function, the per-pair
 :func:`~elicit_jax.compat.measures.score_pair` vmapped over the chunk, scores each chunk, so
 the whole dataset compiles once. Scores do not depend on the chunk size.
 
@@ -26,7 +27,6 @@ content hashes of the policy checkpoint and the demonstrations.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -34,28 +34,18 @@ from typing import Any
 
 import jax
 import numpy as np
+from flax import struct
 
+from elicit_jax.compat.chunks import balanced_chunk, concat, episode_groups, pad, row_chunks
 from elicit_jax.compat.measures import ScoreConfig, score_pair
 from elicit_jax.errors import ElicitError
-from elicit_jax.sharding import batch_shardings, device_count, round_up
-from elicit_jax.sharding import place as place_tree
+from elicit_jax.sharding import device_count, round_up, row_placer
 
 SCORES_KIND = "scores"
 EPISODES_KIND = "episode-scores"
 SCHEMA_VERSION = 1
 MIN_BUCKET = 16
 _SCORE_COLUMNS = ("likelihood", "novelty", "compatibility", "incompatible")
-
-
-def balanced_chunk(n_rows: int, chunk_size: int, multiple: int = 256) -> int:
-    """The chunk size that covers ``n_rows`` in as many chunks as ``chunk_size`` would, with
-    the least padding: ``ceil(n / ceil(n / chunk))`` rounded up to ``multiple`` (and at most
-    ``chunk_size``). Scores do not depend on the chunk size; this only saves padded work."""
-    if n_rows <= 0:
-        return chunk_size
-    n_chunks = -(-n_rows // chunk_size)
-    size = -(-n_rows // n_chunks)
-    return min(chunk_size, -(-size // multiple) * multiple)
 
 
 def episodes_path(scores_path: str | Path) -> Path:
@@ -72,28 +62,77 @@ def policy_spec(policy: Any, name: str, default: Any = None) -> Any:
     return getattr(spec, name, default) if spec is not None else default
 
 
+@struct.dataclass
+class ScoreInputs:
+    """Numbers of a scoring call that are arguments, not compile-time constants.
+
+    Attributes:
+      lam: λ; eta: η (scalars).
+      low: (A,) lower clipping bound of ``member-average``; high: (A,) upper bound.
+      weight: (A,) action scaling (1/std, 0 for dims left out), or None (paper).
+      seed: MC-dropout seed (int32 scalar).
+    """
+
+    lam: Any
+    eta: Any
+    low: Any
+    high: Any
+    weight: Any
+    seed: Any
+
+
 def _static(config: ScoreConfig) -> ScoreConfig:
-    """The part of a config that shapes the compiled function (thresholds are arguments)."""
-    return ScoreConfig(likelihood=config.likelihood, ddof=config.ddof, clip=config.clip)
+    """The part of a config that shapes the compiled function (numbers are arguments)."""
+    return ScoreConfig(
+        likelihood=config.likelihood,
+        ddof=config.ddof,
+        action_scale=config.action_scale,
+        dropout_samples=config.dropout_samples,
+    )
+
+
+def _pair_fn(inputs: ScoreInputs, config: ScoreConfig) -> Callable[..., Any]:
+    return functools.partial(
+        score_pair,
+        lambda_=inputs.lam,
+        eta=inputs.eta,
+        config=config,
+        clip=(inputs.low, inputs.high),
+        weight=inputs.weight,
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _score_rows(policy: Any, obs: Any, action: Any, lam: Any, eta: Any, config: ScoreConfig):
-    """Scores of a chunk of independent pairs. obs: (C, O), action: (C, A) -> PairScores (C,)."""
+def _score_rows(
+    policy: Any, obs: Any, action: Any, inputs: ScoreInputs, row0: Any, config: ScoreConfig
+):
+    """Scores of a chunk of independent pairs. obs: (C, O), action: (C, A) -> PairScores (C,).
 
-    members = policy.members(obs)  # (K, C, A)
-    spread = policy.spread(obs)  # (C, A) or None
-    fn = functools.partial(score_pair, lambda_=lam, eta=eta, config=config)
+    ``row0`` is the chunk's first row in the dataset: MC-dropout masks are keyed by the row,
+    so they do not depend on the chunking.
+    """
+    import jax.numpy as jnp
+
+    if config.dropout_samples:
+        base = jax.random.key(inputs.seed)
+        rows = row0 + jnp.arange(obs.shape[0])
+        keys = jax.vmap(lambda r: jax.random.fold_in(base, r))(rows)
+        members = policy.sample_members(obs, keys, config.dropout_samples)  # (K*N, C, A)
+        spread = None
+    else:
+        members = policy.members(obs)  # (K, C, A)
+        spread = policy.spread(obs)  # (C, A) or None
+    fn = _pair_fn(inputs, config)
     if spread is None:
         return jax.vmap(lambda m, a: fn(m, a), in_axes=(1, 0))(members, action)
     return jax.vmap(lambda m, a, s: fn(m, a, spread=s), in_axes=(1, 0, 0))(members, action, spread)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _score_sequences(policy: Any, obs: Any, action: Any, lam: Any, eta: Any, config: ScoreConfig):
+def _score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, config: ScoreConfig):
     """Scores of G padded episodes. obs: (G, L, O), action: (G, L, A) -> PairScores (G, L)."""
 
-    fn = functools.partial(score_pair, lambda_=lam, eta=eta, config=config)
+    fn = _pair_fn(inputs, config)
 
     def one(o, a):
         members = policy.members(o)  # (K, L, A)
@@ -102,66 +141,56 @@ def _score_sequences(policy: Any, obs: Any, action: Any, lam: Any, eta: Any, con
     return jax.vmap(one)(obs, action)
 
 
+def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") -> Any:
+    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions, 0 for
+    dims that were constant there; None for ``action_scale='none'``."""
+    if config.action_scale == "none":
+        return None
+    std = getattr(policy, "action_std", None)
+    if std is None:
+        raise ElicitError(
+            "--action-scale std needs the training actions' std, which this checkpoint "
+            "predates; retrain the base policy",
+            source,
+        )
+    std = np.asarray(std, np.float64)
+    weight = np.where(std >= 1e-6, 1.0 / np.maximum(std, 1e-6), 0.0)
+    if not weight.any():
+        raise ElicitError("every action dim was constant in the training data", source)
+    return weight.astype(np.float32)
+
+
+def score_inputs(
+    policy: Any, config: ScoreConfig, bounds: tuple[Any, Any] | None, source: str
+) -> ScoreInputs:
+    """The :class:`ScoreInputs` of a scoring run: thresholds, clipping bounds (``config.clip``,
+    else the demonstrations' recorded ``bounds``, else ±1), action weights, dropout seed."""
+    import jax.numpy as jnp
+
+    a = int(policy_spec(policy, "action_dim", 1))
+    if config.clip is not None:
+        low, high = -config.clip, config.clip
+    elif bounds is not None:
+        low, high = bounds
+    else:
+        low, high = -1.0, 1.0
+    weight = action_weight(policy, config, source)
+    return ScoreInputs(
+        lam=jnp.float32(config.lambda_),
+        eta=jnp.float32(config.eta),
+        low=jnp.broadcast_to(jnp.asarray(low, jnp.float32), (a,)),
+        high=jnp.broadcast_to(jnp.asarray(high, jnp.float32), (a,)),
+        weight=None if weight is None else jnp.asarray(weight),
+        seed=jnp.int32(config.dropout_seed),
+    )
+
+
 def _to_numpy(scores: Any, n: int) -> dict[str, np.ndarray]:
     out = {k: np.asarray(getattr(scores, k))[:n] for k in _SCORE_COLUMNS}
     out["prediction"] = np.asarray(scores.mean, dtype=np.float32)[:n]
     for k in ("likelihood", "novelty", "compatibility"):
         out[k] = out[k].astype(np.float32)
     return out
-
-
-def _concat(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-
-
-def _take(rows: dict[str, np.ndarray], sl: slice) -> dict[str, np.ndarray]:
-    return {k: v[sl] for k, v in rows.items()}
-
-
-def _pad(x: np.ndarray, n: int) -> np.ndarray:
-    if len(x) == n:
-        return x
-    return np.concatenate([x, np.zeros((n - len(x), *x.shape[1:]), x.dtype)])
-
-
-def _row_chunks(
-    batches: Iterable[dict[str, np.ndarray]], size: int
-) -> Iterator[dict[str, np.ndarray]]:
-    """Regroup row batches into chunks of exactly ``size`` rows (the last may be shorter)."""
-    pending: list[dict[str, np.ndarray]] = []
-    count = 0
-    for b in batches:
-        pending.append(b)
-        count += len(b["episode"])
-        if count >= size:
-            rows = _concat(pending)
-            stop = (count // size) * size
-            for s in range(0, stop, size):
-                yield _take(rows, slice(s, s + size))
-            pending = [_take(rows, slice(stop, None))] if stop < count else []
-            count -= stop
-    if count:
-        yield _concat(pending)
-
-
-def _episode_groups(
-    batches: Iterable[dict[str, np.ndarray]], size: int
-) -> Iterator[dict[str, np.ndarray]]:
-    """Regroup row batches into runs of complete episodes of at least ``size`` rows."""
-    pending: list[dict[str, np.ndarray]] = []
-    for b in batches:
-        pending.append(b)
-        rows = _concat(pending)
-        ep = rows["episode"]
-        last = np.flatnonzero(ep != ep[-1])
-        if len(last) and last[-1] + 1 >= size:
-            cut = int(last[-1]) + 1
-            yield _take(rows, slice(0, cut))
-            pending = [_take(rows, slice(cut, None))]
-        else:
-            pending = [rows]
-    if pending and len(pending[0]["episode"]):
-        yield _concat(pending)
 
 
 def _check_finite(rows: dict[str, np.ndarray], source: str) -> None:
@@ -196,6 +225,7 @@ def score_batches(
     n_rows: int | None = None,
     n_devices: int | None = None,
     policy_source: str = "<policy>",
+    bounds: tuple[Any, Any] | None = None,
 ) -> Iterator[dict[str, np.ndarray]]:
     """Score row batches of demonstrations, yielding per-pair score batches in input order.
 
@@ -213,6 +243,8 @@ def score_batches(
         (:func:`balanced_chunk`) so the padded last chunk wastes little.
       n_devices: devices to shard each chunk over (default: all that JAX sees).
       policy_source: name of the policy (its checkpoint) in error messages.
+      bounds: the demonstrations' recorded action bounds ``(low, high)`` (scalars or (A,)),
+        the ``member-average`` clipping range unless ``config.clip`` is set.
 
     Yields:
       The input columns except ``obs``/``action``, plus ``likelihood``, ``novelty``,
@@ -220,49 +252,49 @@ def score_batches(
     """
     import jax.numpy as jnp
 
-    lam, eta = jnp.float32(config.lambda_), jnp.float32(config.eta)
+    inputs = score_inputs(policy, config, bounds, policy_source)
     static = _static(config)
     recurrent = policy_spec(policy, "kind", "mlp") == "lstm"
+    if config.dropout_samples and policy_spec(policy, "kind", "mlp") != "mlp":
+        raise ElicitError("--dropout-samples applies to MLP ensembles only", policy_source)
+    if config.dropout_samples and not policy_spec(policy, "dropout", 0.0):
+        raise ElicitError(
+            "--dropout-samples needs a policy trained with dropout (this one has none)",
+            policy_source,
+        )
     chunk = config.chunk_size
     if n_rows is not None and not recurrent:
         chunk = balanced_chunk(n_rows, chunk)
     devices = device_count(n_devices)
-    place = _row_placer(devices)
+    place = row_placer(devices)
     if place is not None:
         policy = place(policy, replicate=True)
         chunk = round_up(chunk, devices)
-    groups = _episode_groups(batches, chunk) if recurrent else _row_chunks(batches, chunk)
+    groups = episode_groups(batches, chunk) if recurrent else row_chunks(batches, chunk)
+    row0 = 0
     for rows in groups:
         _check_finite(rows, source)
         n = len(rows["episode"])
         if recurrent:
             scores = _score_episodes(
-                policy, rows, lam, eta, static, config.chunk_size, devices, place
+                policy, rows, inputs, static, config.chunk_size, devices, place
             )
         else:
-            obs, action = _pad(rows["obs"], chunk), _pad(rows["action"], chunk)
+            obs, action = pad(rows["obs"], chunk), pad(rows["action"], chunk)
             if place is not None:
                 obs, action = place(obs), place(action)
-            scores = _to_numpy(_score_rows(policy, obs, action, lam, eta, static), n)
+            out = _score_rows(policy, obs, action, inputs, jnp.int32(row0), static)
+            scores = _to_numpy(out, n)
+        row0 += n
         _check_scores(scores, rows, policy_source)
         keep = {k: v for k, v in rows.items() if k not in ("obs", "action")}
         yield {**keep, **scores}
 
 
-def _row_placer(devices: int) -> Callable[..., Any] | None:
-    """``place(x, replicate=False)`` putting arrays on a 1-D mesh of ``devices`` devices
-    (rows split, or replicated), or ``None`` for one device (nothing is moved or copied)."""
-    if devices == 1:
-        return None
-    rows, replicated = batch_shardings(devices)
-    return lambda x, replicate=False: place_tree(x, replicated if replicate else rows)
-
-
 def _score_episodes(
     policy: Any,
     rows: dict[str, np.ndarray],
-    lam: Any,
-    eta: Any,
+    inputs: ScoreInputs,
     static: ScoreConfig,
     chunk: int,
     devices: int = 1,
@@ -288,12 +320,12 @@ def _score_episodes(
                 act[j, : lengths[i]] = rows["action"][starts[i] : stops[i]]
             if place is not None:
                 obs, act = place(obs), place(act)
-            out = _score_sequences(policy, obs, act, lam, eta, static)
+            out = _score_sequences(policy, obs, act, inputs, static)
             if place is not None:
                 out = jax.device_get(out)  # gather once, not once per episode
             for j, i in enumerate(part):
                 results[i] = _to_numpy(_index(out, j), int(lengths[i]))
-    return _concat([r for r in results if r is not None])
+    return concat([r for r in results if r is not None])
 
 
 def _index(tree: Any, j: int) -> Any:
@@ -348,21 +380,12 @@ def score_demos(
     fields = tuple(f.name for f in demos.obs_fields)
     check_dims(policy, demos.obs_dim, demos.action_dim, "<demos>", fields)
     batches = demos_batches(demos)
-    out = score_batches(policy, batches, config, n_rows=demos.n_steps, n_devices=n_devices)
-    return _concat(list(out))
-
-
-def config_dict(config: ScoreConfig) -> dict[str, Any]:
-    """JSON form of a score config (``lambda_`` written as ``lambda``)."""
-    d = dataclasses.asdict(config)
-    d["lambda"] = d.pop("lambda_")
-    return d
-
-
-def config_from_dict(d: dict[str, Any]) -> ScoreConfig:
-    """Inverse of :func:`config_dict`."""
-    d = dict(d)
-    if "lambda" in d:
-        d["lambda_"] = d.pop("lambda")
-    names = {f.name for f in dataclasses.fields(ScoreConfig)}
-    return ScoreConfig(**{k: v for k, v in d.items() if k in names})
+    out = score_batches(
+        policy,
+        batches,
+        config,
+        n_rows=demos.n_steps,
+        n_devices=n_devices,
+        bounds=(demos.action_low, demos.action_high),
+    )
+    return concat(list(out))

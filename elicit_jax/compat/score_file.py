@@ -31,13 +31,12 @@ from elicit_jax.compat.episode_summary import (
     episodes_table,
     print_operator_table,
 )
-from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.measures import ScoreConfig, config_dict
 from elicit_jax.compat.score import (
     EPISODES_KIND,
     SCHEMA_VERSION,
     SCORES_KIND,
     check_dims,
-    config_dict,
     episodes_path,
     policy_spec,
     score_batches,
@@ -135,6 +134,7 @@ def score_file(
     policy_path: str | Path | None = None,
     policy_info: Mapping[str, Any] | None = None,
     progress: bool = True,
+    thresholds_source: str | None = None,
 ) -> ScoreResult:
     """Score every pair of a demonstrations artifact, streaming; write scores + episode summary.
 
@@ -147,6 +147,7 @@ def score_file(
       policy_path: the checkpoint the policy was loaded from (its hash goes in the header).
       policy_info: how it was loaded (e.g. ``{"which": "best", "seed": 0}``), recorded too.
       progress: show a rich progress bar.
+      thresholds_source: where λ and η came from (recorded as ``thresholds_source``).
 
     Returns:
       A :class:`ScoreResult`.
@@ -187,6 +188,7 @@ def score_file(
         "task": header.get("task", "unknown"),
         "policy_kind": str(policy_spec(policy, "kind", "mlp")),
         "policy": dict(policy_info or {}),
+        "thresholds_source": thresholds_source or "given",
     }
     scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=pf.metadata.num_rows)
     schema = schema.with_metadata({HEADER_KEY: dumps(scores_header).encode()})
@@ -204,6 +206,7 @@ def score_file(
                 str(demos_path),
                 n_total,
                 policy_source=str(policy_path or "<policy>"),
+                bounds=(header.get("action_low", -1.0), header.get("action_high", 1.0)),
             )
             for out in scored:
                 pending.append(_arrow_table(out, schema))
@@ -292,6 +295,7 @@ def score_checkpoint(
     which: str | int = "best",
     seed: int | None = None,
     show: bool = True,
+    thresholds_source: str | None = None,
 ) -> ScoreResult:
     """Load a policy checkpoint, score a demonstrations file, print a table per operator.
 
@@ -303,10 +307,19 @@ def score_checkpoint(
       which: ``best``, ``final`` or an epoch number.
       seed: the seed of a multi-seed run directory.
       show: progress bar and summary table.
+      thresholds_source: where λ and η came from, recorded in the header.
     """
     from elicit_jax.policy.checkpoint import load_policy
 
     policy = load_policy(policy_path, which, seed=seed)
+    if show and policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
+        from rich.console import Console
+
+        Console(stderr=True).print(
+            "[yellow]warning:[/] the policy has one member: novelty is 0 for every state, so "
+            "every state counts as familiar and M rests on the likelihood error alone",
+            soft_wrap=True,
+        )
     result = score_file(
         policy,
         demos_path,
@@ -315,6 +328,7 @@ def score_checkpoint(
         policy_path=policy_path,
         policy_info={"which": which, "seed": seed},
         progress=show,
+        thresholds_source=thresholds_source,
     )
     if show:
         print_operator_table(

@@ -10,6 +10,7 @@ from typing import Literal
 
 from elicit_jax.artifact import refuse_overwriting_inputs
 from elicit_jax.data.demos import BoundsPolicy, Demos, DemosWarning, validate, write_demos
+from elicit_jax.data.validation import action_dim_warnings
 from elicit_jax.errors import ElicitError
 
 Format = Literal["robomimic", "lerobot", "npz"]
@@ -131,6 +132,9 @@ def import_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
     demos = validate(demos, cfg.source, bounds=cfg.bounds)  # problems name the source file
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DemosWarning)  # already reported for the source
-        return write_demos(
+        demos = write_demos(
             cfg.out, demos, config=config, inputs={"source": cfg.source}, bounds=cfg.bounds
         )
+    for msg in action_dim_warnings(demos.action):
+        warnings.warn(f"{cfg.source}: {msg}", DemosWarning, stacklevel=2)
+    return demos

@@ -103,6 +103,39 @@ def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy | None 
     return demos if bounds is None else _check_bounds(demos, source, bounds)
 
 
+def action_dim_warnings(action: np.ndarray, ratio: float = 10.0) -> list[str]:
+    """Action dims that distort ℓ (a mean over dims of raw squared errors).
+
+    Returns messages for dims that never change (they add nothing to ℓ but dilute its mean)
+    and for one dim whose spread exceeds ``ratio`` times the median of the others' (e.g. a
+    ±1 gripper among small deltas: it dominates ℓ).
+    """
+    action = np.asarray(action, np.float64)
+    if action.ndim != 2 or not len(action):
+        return []
+    std = action.std(axis=0)
+    out = []
+    const = np.flatnonzero(std < 1e-6)
+    if len(const):
+        values = ", ".join(f"{int(d)}: {action[0, d]:.3g}" for d in const)
+        out.append(
+            f"action dims {const.tolist()} are constant ({values}): they add nothing to the "
+            "likelihood error but dilute its mean over dims; `score --action-scale std` leaves "
+            "them out"
+        )
+    varying = np.flatnonzero(std >= 1e-6)
+    if len(varying) >= 2:
+        top = int(varying[np.argmax(std[varying])])
+        rest = float(np.median(std[varying[varying != top]]))
+        if std[top] > ratio * rest:
+            out.append(
+                f"action dim {top} varies {std[top] / rest:.0f}x more than the others (std "
+                f"{std[top]:.2g} vs a median {rest:.2g}; e.g. a ±1 gripper): it dominates the "
+                "likelihood error; `score --action-scale std` weighs every dim by its spread"
+            )
+    return out
+
+
 def _check_bounds(demos: Demos, source: str, bounds: BoundsPolicy) -> Demos:
     try:
         lo = np.broadcast_to(np.asarray(demos.action_low, np.float32), (demos.action_dim,))

@@ -77,8 +77,7 @@ def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
 
 
 def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
-    from elicit_jax.compat.measures import ScoreConfig
-    from elicit_jax.compat.score import config_dict
+    from elicit_jax.compat.measures import ScoreConfig, config_dict
 
     meta, over = _split(raw, ("task", "model", "policy_seed", "set", "checkpoint"))
     meta.setdefault("checkpoint", "best")
@@ -169,7 +168,7 @@ def train_stage(ctx: StageContext) -> None:
 
 def score_stage(ctx: StageContext) -> None:
     """Score the ``demos*`` inputs (concatenated) with the base policy of ``policy_seed``."""
-    from elicit_jax.compat.score import config_from_dict
+    from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score_file import score_file
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
     from elicit_jax.policy.checkpoint import load_policy

@@ -43,6 +43,12 @@ class Policy:
       reset_every: LSTM only: the recurrent state is zeroed every this many steps (the training
         window length), as in training; 0 never resets.
       obs_fields: names of the observation fields, in order.
+      layer_norm_eps: epsilon of the trunk's LayerNorm (Flax's 1e-6; the original code's
+        PyTorch 1e-5).
+      dropout_last: dropout also after the last hidden layer (the original code), not only
+        between hidden layers (the paper).
+      action_std: (A,) std of the training actions per dim (action scaling), or None for
+        checkpoints that predate it.
     """
 
     params: Any
@@ -57,12 +63,21 @@ class Policy:
     n_components: int = struct.field(pytree_node=False, default=2)
     reset_every: int = struct.field(pytree_node=False, default=0)
     obs_fields: tuple[str, ...] = struct.field(pytree_node=False, default=())
+    layer_norm_eps: float = struct.field(pytree_node=False, default=models.LAYER_NORM_EPS)
+    dropout_last: bool = struct.field(pytree_node=False, default=False)
+    action_std: Any = None
 
     @property
     def module(self) -> Any:
         """The Flax module of one member."""
         return models.make_module(
-            self.kind, self.hidden, self.action_dim, self.dropout, self.n_components
+            self.kind,
+            self.hidden,
+            self.action_dim,
+            self.dropout,
+            self.n_components,
+            layer_norm_eps=self.layer_norm_eps,
+            dropout_last=self.dropout_last,
         )
 
     def normalize(self, obs: jax.Array) -> jax.Array:
@@ -96,6 +111,36 @@ class Policy:
         reset = _reset_mask(x.shape[0], self.reset_every)
         out = jax.vmap(lambda p: models.lstm_sequence(module, p, x[:, None, :], reset))(self.params)
         return out[:, :, 0, :]
+
+    def sample_members(self, obs: jax.Array, keys: jax.Array, n: int) -> jax.Array:
+        """Member predictions with dropout active (MC dropout), ``n`` passes per member.
+
+        Args:
+          obs: (B, O) raw observations.
+          keys: (B,) PRNG keys, one per row: masks depend on the row's key only, so a row
+            scores the same whatever batch it is in.
+          n: passes per member.
+
+        Returns:
+          (K * n, B, A) predictions: member k's passes are rows ``k * n .. k * n + n - 1``.
+        """
+        if self.kind != "mlp":
+            raise ValueError(f"MC-dropout scoring needs an MLP ensemble, not {self.kind}")
+        x = self.normalize(obs)
+        module = self.module
+
+        def one(p: Any, member: jax.Array, xr: jax.Array, key: jax.Array) -> jax.Array:
+            def sample(i: jax.Array) -> jax.Array:
+                k = jax.random.fold_in(jax.random.fold_in(key, member), i)
+                return module.apply({"params": p}, xr[None], True, rngs={"dropout": k})[0]
+
+            return jax.vmap(sample)(jnp.arange(n))  # (n, A)
+
+        rows = jax.vmap(one, in_axes=(None, None, 0, 0))  # over rows -> (B, n, A)
+        out = jax.vmap(rows, in_axes=(0, 0, None, None))(
+            self.params, jnp.arange(self.n_members), x, keys
+        )  # (K, B, n, A)
+        return jnp.swapaxes(out, 1, 2).reshape(self.n_members * n, x.shape[0], -1)
 
     def spread(self, obs: jax.Array) -> jax.Array | None:
         """Per-dim spread of the model's own predictive distribution, ``(B, A)``, or ``None``.
@@ -175,9 +220,19 @@ def init_policy(
     obs_fields: tuple[str, ...] = (),
     obs_mean: Any = None,
     obs_std: Any = None,
+    layer_norm_eps: float = models.LAYER_NORM_EPS,
+    dropout_last: bool = False,
 ) -> Policy:
     """A freshly initialised policy (identity normalisation unless stats are given)."""
-    module = models.make_module(kind, hidden, action_dim, dropout, n_components)
+    module = models.make_module(
+        kind,
+        hidden,
+        action_dim,
+        dropout,
+        n_components,
+        layer_norm_eps=layer_norm_eps,
+        dropout_last=dropout_last,
+    )
     params = models.init_members(module, kind, key, obs_dim, n_members)
     return Policy(
         params=params,
@@ -192,4 +247,6 @@ def init_policy(
         n_components=int(n_components),
         reset_every=int(reset_every),
         obs_fields=tuple(obs_fields),
+        layer_norm_eps=float(layer_norm_eps),
+        dropout_last=bool(dropout_last),
     )

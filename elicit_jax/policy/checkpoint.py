@@ -40,6 +40,8 @@ SPEC_KEYS = (
     "n_components",
     "reset_every",
     "obs_fields",
+    "layer_norm_eps",
+    "dropout_last",
 )
 _EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
 
@@ -165,6 +167,7 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
     import jax
     import jax.numpy as jnp
 
+    from elicit_jax.policy import models
     from elicit_jax.policy.base import Policy
 
     seed_dir = _resolve_seed_dir(Path(path), seed)
@@ -203,6 +206,9 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
         n_components=int(spec["n_components"]),
         reset_every=int(spec["reset_every"]),
         obs_fields=tuple(spec.get("obs_fields", ())),
+        layer_norm_eps=float(spec.get("layer_norm_eps", models.LAYER_NORM_EPS)),
+        dropout_last=bool(spec.get("dropout_last", False)),
+        action_std=jnp.asarray(norm["action_std"]) if "action_std" in norm else None,
     )
 
 
@@ -214,7 +220,7 @@ def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file:
 
     module = models.make_module(
         spec["kind"], spec["hidden"], spec["action_dim"], spec["dropout"], spec["n_components"]
-    )
+    )  # LayerNorm epsilon and dropout placement do not change shapes
     expected = jax.eval_shape(
         lambda k: models.init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
         jax.random.key(0),

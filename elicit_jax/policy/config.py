@@ -10,6 +10,13 @@ Profiles (:data:`PROFILES`):
   * ``paper``: exactly the defaults above (LSTM: 5 x 2 x 512, windows of 10 steps).
   * ``cpu``: small enough to train in about a minute on 2 CPU cores on ~50 demos x 100 steps:
     hidden 2 x 256 (LSTM 2 x 64), 100 epochs (LSTM 20), checkpoints every 20 epochs, 1 seed.
+  * ``original-code``: the paper's sizes trained as the original (PyTorch) code does, where it
+    differs from the paper's text: dropout after *both* hidden layers (before the head too),
+    squared error *summed* over action dims, gradients clipped at global norm 10, LayerNorm
+    epsilon 1e-5.
+
+:func:`default_profile` picks ``paper`` on an accelerator and ``cpu`` on a CPU-only machine
+(the ``train`` command prints its choice).
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from typing import Any
 from elicit_jax.errors import ElicitError
 
 MODELS = ("mlp", "mdn", "lstm")
+LOSSES = ("mean", "sum")
 _DEFAULT_HIDDEN = MappingProxyType({"mlp": (1024, 1024), "mdn": (1024, 1024), "lstm": (512, 512)})
 _DEFAULT_MEMBERS = MappingProxyType({"mlp": 5, "mdn": 1, "lstm": 5})
 _DEFAULT_LR = MappingProxyType({"mlp": 1e-3, "mdn": 1e-4, "lstm": 1e-3})
@@ -46,6 +54,10 @@ class TrainConfig:
         two or more episodes and the fraction is positive).
       bootstrap: resample each member's training set with replacement (ThriftyDAgger-style).
       grad_clip: clip gradients by global norm (None: off; the original code used 10).
+      loss: squared error over action dims: ``mean`` (paper) or ``sum`` (original code).
+      layer_norm_eps: LayerNorm epsilon (Flax's 1e-6; PyTorch's 1e-5 in the original code).
+      dropout_last: dropout after the last hidden layer too (original code), not only
+        between hidden layers (paper).
       seq_len: LSTM training window length; acting resets the state every ``seq_len`` steps.
       n_components: MDN mixture components.
       seeds: training seeds; each gives one checkpoint directory ``seed<k>``.
@@ -68,6 +80,9 @@ class TrainConfig:
     val_fraction: float = 0.1
     bootstrap: bool = False
     grad_clip: float | None = None
+    loss: str = "mean"
+    layer_norm_eps: float = 1e-6
+    dropout_last: bool = False
     seq_len: int = 10
     n_components: int = 2
     seeds: tuple[int, ...] = (0, 1, 2)
@@ -100,6 +115,8 @@ class TrainConfig:
             (self.progress_every >= 1, "progress_every must be >= 1"),
             (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
             (self.grad_clip is None or self.grad_clip > 0, "grad_clip must be > 0"),
+            (self.loss in LOSSES, f"loss must be one of {', '.join(LOSSES)}"),
+            (self.layer_norm_eps > 0, "layer_norm_eps must be > 0"),
             (self.seq_len >= 1, "seq_len must be >= 1"),
             (self.n_components >= 1, "n_components must be >= 1"),
             (len(self.seeds) >= 1, "at least one seed is needed"),
@@ -111,7 +128,7 @@ class TrainConfig:
 
     @classmethod
     def from_profile(cls, profile: str = "paper", **overrides: Any) -> TrainConfig:
-        """A config from a named profile (``paper`` or ``cpu``) with field overrides.
+        """A config from a named profile (:data:`PROFILES`) with field overrides.
 
         ``None`` overrides are ignored, so CLI flags can be passed straight through.
         """
@@ -166,4 +183,26 @@ def _cpu(model: str) -> dict[str, Any]:
     }
 
 
-PROFILES = MappingProxyType({"paper": _paper, "cpu": _cpu})
+def _original_code(model: str) -> dict[str, Any]:
+    return {
+        "model": model,
+        "dropout_last": True,
+        "loss": "sum",
+        "grad_clip": 10.0,
+        "layer_norm_eps": 1e-5,
+    }
+
+
+PROFILES = MappingProxyType({"paper": _paper, "cpu": _cpu, "original-code": _original_code})
+
+
+def default_profile() -> tuple[str, str]:
+    """The profile to use when none is given, and why: ``paper`` when JAX has an accelerator,
+    ``cpu`` when it runs on the CPU (the paper's sizes take about 20 minutes per model on a
+    2-core CPU)."""
+    import jax
+
+    backend = jax.default_backend()
+    if backend == "cpu":
+        return "cpu", "JAX runs on the CPU"
+    return "paper", f"JAX runs on {backend}"

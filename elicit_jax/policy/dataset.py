@@ -53,6 +53,13 @@ class TrainData:
         return int(self.val_windows.shape[0])
 
 
+def action_stats(data: TrainData) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std ``(A,)`` of the training split's actions (float32), for action scaling."""
+    rows = np.unique(data.train_windows[data.train_mask > 0])
+    act = np.asarray(data.action, np.float64)[rows]
+    return act.mean(axis=0).astype(np.float32), act.std(axis=0).astype(np.float32)
+
+
 def split_episodes(ids: np.ndarray, val_fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """Deterministic split of episode ids into (train, val), both sorted.
 

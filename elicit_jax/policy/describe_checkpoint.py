@@ -83,6 +83,8 @@ def describe_run(path: Path, header: dict[str, Any]) -> None:
         )
     console.print(table)
     console.print(f"  versions: {header.get('versions', {})}")
+    for note in header.get("warnings", []):
+        console.print(f"  [yellow]warning:[/] {note}", soft_wrap=True)
     problems = checkpoint_problems(path)
     n_bad = sum(bool(p) for p in problems.values())
     if not n_bad:

@@ -62,6 +62,7 @@ class LoopSpec:
     lr: float
     grad_clip: float | None
     bootstrap: bool
+    loss_sum: bool = False
 
     @property
     def n_batches(self) -> int:
@@ -96,19 +97,21 @@ def member_loss(
       rng: dropout key. train: dropout on.
 
     Returns:
-      (loss, total weight): MSE averaged over action dims (MDN: negative log-likelihood).
+      (loss, total weight): squared error averaged over action dims (``spec.loss_sum``: summed
+      over them, as the original code does), or the MDN's negative log-likelihood.
     """
     weight = jnp.sum(mask)
+    reduce = jnp.sum if spec.loss_sum else jnp.mean
     if spec.kind == "lstm":
         reset = jnp.arange(obs.shape[1]) == 0
         pred = models.lstm_sequence(spec.module, params, jnp.swapaxes(obs, 0, 1), reset)
-        per = jnp.mean((jnp.swapaxes(pred, 0, 1) - action) ** 2, axis=-1)
+        per = reduce((jnp.swapaxes(pred, 0, 1) - action) ** 2, axis=-1)
     else:
         out = spec.module.apply({"params": params}, obs[:, 0], train, rngs={"dropout": rng})
         if spec.kind == "mdn":
             per = -models.mdn_log_likelihood(*out, action[:, 0])[:, None]
         else:
-            per = jnp.mean((out - action[:, 0]) ** 2, axis=-1)[:, None]
+            per = reduce((out - action[:, 0]) ** 2, axis=-1)[:, None]
     return jnp.sum(per * mask) / jnp.maximum(weight, 1.0), weight
 
 

@@ -6,7 +6,8 @@ and the ``*_members`` functions run all members with ``jax.vmap`` in a single ca
 
 Architectures (paper defaults, ``docs/method.md``):
   * ``mlp``: ``hidden`` Dense layers, each followed by LayerNorm and ReLU, dropout between
-    hidden layers, a Dense head and ``tanh``.
+    hidden layers (``dropout_last``: after every hidden layer, before the head too, as the
+    original code does), a Dense head and ``tanh``.
   * ``mdn``: the same trunk; heads for ``n_components`` mixture logits, tanh-bounded means and
     softplus scales (plus a floor of ``MDN_MIN_STD``) per action dim.
   * ``lstm``: stacked LSTM cells of sizes ``hidden``, a Dense head and ``tanh``.
@@ -24,23 +25,29 @@ import jax.numpy as jnp
 from elicit_jax.policy.dropout import BitDropout
 
 MDN_MIN_STD = 1e-4
+LAYER_NORM_EPS = 1e-6  # Flax's default; PyTorch (the original code) uses 1e-5
 Params = Any
 LSTMCarry = tuple[tuple[jax.Array, jax.Array], ...]
 
 
 class Trunk(nn.Module):
     """Dense -> LayerNorm -> ReLU per hidden layer, dropout between hidden layers
-    (:class:`~elicit_jax.policy.dropout.BitDropout`)."""
+    (:class:`~elicit_jax.policy.dropout.BitDropout`), and after the last one too when
+    ``dropout_last``."""
 
     hidden: Sequence[int]
     dropout: float
+    layer_norm_eps: float = LAYER_NORM_EPS
+    dropout_last: bool = False
 
     @nn.compact
     def __call__(self, x: jax.Array, train: bool) -> jax.Array:
         for i, size in enumerate(self.hidden):
             if i > 0 and self.dropout > 0.0:
                 x = BitDropout(self.dropout)(x, deterministic=not train)
-            x = nn.relu(nn.LayerNorm()(nn.Dense(size)(x)))
+            x = nn.relu(nn.LayerNorm(epsilon=self.layer_norm_eps)(nn.Dense(size)(x)))
+        if self.dropout_last and self.dropout > 0.0:
+            x = BitDropout(self.dropout)(x, deterministic=not train)
         return x
 
 
@@ -50,10 +57,12 @@ class MLPMember(nn.Module):
     hidden: Sequence[int]
     action_dim: int
     dropout: float
+    layer_norm_eps: float = LAYER_NORM_EPS
+    dropout_last: bool = False
 
     @nn.compact
     def __call__(self, x: jax.Array, train: bool = False) -> jax.Array:
-        x = Trunk(self.hidden, self.dropout)(x, train)
+        x = Trunk(self.hidden, self.dropout, self.layer_norm_eps, self.dropout_last)(x, train)
         return jnp.tanh(nn.Dense(self.action_dim)(x))
 
 
@@ -65,10 +74,12 @@ class MDNMember(nn.Module):
     action_dim: int
     dropout: float
     n_components: int
+    layer_norm_eps: float = LAYER_NORM_EPS
+    dropout_last: bool = False
 
     @nn.compact
     def __call__(self, x: jax.Array, train: bool = False) -> tuple[jax.Array, ...]:
-        x = Trunk(self.hidden, self.dropout)(x, train)
+        x = Trunk(self.hidden, self.dropout, self.layer_norm_eps, self.dropout_last)(x, train)
         c, a = self.n_components, self.action_dim
         logits = nn.Dense(c, name="logits")(x)
         means = jnp.tanh(nn.Dense(c * a, name="means")(x)).reshape(*x.shape[:-1], c, a)
@@ -92,14 +103,22 @@ class LSTMStep(nn.Module):
 
 
 def make_module(
-    kind: str, hidden: Sequence[int], action_dim: int, dropout: float, n_components: int
+    kind: str,
+    hidden: Sequence[int],
+    action_dim: int,
+    dropout: float,
+    n_components: int,
+    *,
+    layer_norm_eps: float = LAYER_NORM_EPS,
+    dropout_last: bool = False,
 ) -> nn.Module:
     """The Flax module of one member of a ``kind`` model."""
     hidden = tuple(int(h) for h in hidden)
+    eps, last = float(layer_norm_eps), bool(dropout_last)
     if kind == "mlp":
-        return MLPMember(hidden, action_dim, dropout)
+        return MLPMember(hidden, action_dim, dropout, eps, last)
     if kind == "mdn":
-        return MDNMember(hidden, action_dim, dropout, n_components)
+        return MDNMember(hidden, action_dim, dropout, n_components, eps, last)
     if kind == "lstm":
         return LSTMStep(hidden, action_dim)
     raise ValueError(f"unknown model kind {kind!r} (expected mlp, mdn or lstm)")

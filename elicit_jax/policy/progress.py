@@ -80,6 +80,11 @@ class TrainProgress:
         stats = f"train {tl:.4g}  val {val_text}  {steps:,.1f} steps/s  {rate:,.0f} samples/s"
         self._bar.update(self._task, completed=done, stats=stats)
 
+    def warn(self, notes: list[str]) -> None:
+        """Print each note as a ``warning:`` line (unless quiet)."""
+        for note in notes:
+            self.console.print(f"[yellow]warning:[/] {note}", soft_wrap=True)
+
     def summary(self, results: dict[int, tuple[np.ndarray, np.ndarray, int, float]]) -> None:
         """Print one row per seed: best epoch, best/final val loss, final train loss, time."""
         from rich.table import Table

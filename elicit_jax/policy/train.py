@@ -29,7 +29,7 @@ from elicit_jax.data.demos import Demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
-from elicit_jax.policy.dataset import TrainData, demos_sha256, prepare
+from elicit_jax.policy.dataset import TrainData, action_stats, demos_sha256, prepare
 
 
 def chunk_epochs(config: TrainConfig) -> int:
@@ -44,7 +44,13 @@ def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: i
     from elicit_jax.policy.loop import LoopSpec
 
     module = models.make_module(
-        config.model, config.hidden, action_dim, config.dropout, config.n_components
+        config.model,
+        config.hidden,
+        action_dim,
+        config.dropout,
+        config.n_components,
+        layer_norm_eps=config.layer_norm_eps,
+        dropout_last=config.dropout_last,
     )
     return LoopSpec(
         kind=config.model,
@@ -57,6 +63,7 @@ def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: i
         lr=config.lr,
         grad_clip=config.grad_clip,
         bootstrap=config.bootstrap,
+        loss_sum=config.loss == "sum",
     )
 
 
@@ -76,6 +83,8 @@ def _template(config: TrainConfig, demos: Demos, data: TrainData, params: Any) -
         n_components=config.n_components,
         reset_every=config.seq_len if config.model == "lstm" else 0,
         obs_fields=tuple(f.name for f in demos.obs_fields),
+        layer_norm_eps=config.layer_norm_eps,
+        dropout_last=config.dropout_last,
     )
 
 
@@ -145,6 +154,28 @@ def _loss_table(train: np.ndarray, val: np.ndarray) -> Any:
         cols[f"train_loss_m{k}"] = pa.array(train[:, k].astype(np.float64))
         cols[f"val_loss_m{k}"] = pa.array(val[:, k].astype(np.float64))
     return pa.table(cols)
+
+
+def training_warnings(
+    config: TrainConfig, action: np.ndarray, results: Mapping[int, tuple[Any, Any, int, float]]
+) -> list[str]:
+    """What the user should know about a finished run: an ensemble of one (ν ≡ 0), seeds whose
+    best epoch is the last (still improving), action dims that distort ℓ."""
+    out = []
+    if config.ensemble_size == 1 and config.model != "mdn":
+        out.append(
+            "one ensemble member: novelty is 0 for every state, so every state counts as "
+            "familiar and compatibility rests on the likelihood error alone (the paper uses 5)"
+        )
+    last = [s for s, (_, _, best, _) in sorted(results.items()) if best == config.epochs]
+    if last and config.epochs > 1:
+        out.append(
+            f"seed(s) {', '.join(map(str, last))}: the best validation loss is at the last "
+            f"epoch ({config.epochs}), so the policy was still improving; more epochs may help"
+        )
+    from elicit_jax.data.validation import action_dim_warnings
+
+    return out + action_dim_warnings(action)
 
 
 def _nan_to_none(x: float) -> float | None:
@@ -248,6 +279,7 @@ def train_policy(
                 best_epoch,
                 seconds,
             )
+        notes = training_warnings(config, demos.action, results)
         write_json(
             tmp / "artifact.json",
             make_header(
@@ -261,9 +293,11 @@ def train_policy(
                 model=ckpt.policy_spec(template),
                 data_sha256=data_hash,
                 task=demos.task,
+                warnings=notes,
             ),
         )
         progress.summary(results)
+        progress.warn(notes)
     return out_dir
 
 
@@ -281,8 +315,15 @@ def _write_seed(
     seconds: float,
 ) -> None:
     """Write one seed's normalisation stats, loss curve and header."""
+    act_mean, act_std = action_stats(data)
     with open(seed_dir / "normalization.npz", "wb") as f:
-        np.savez(f, obs_mean=data.obs_mean, obs_std=data.obs_std)
+        np.savez(
+            f,
+            obs_mean=data.obs_mean,
+            obs_std=data.obs_std,
+            action_mean=act_mean,
+            action_std=act_std,
+        )
     header_fields = {
         "model": ckpt.policy_spec(template),
         "obs_dim": template.obs_dim,

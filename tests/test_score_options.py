@@ -1,0 +1,153 @@
+"""Scoring options beyond the paper's defaults: clipping bounds from the demos, action scaling,
+MC-dropout; thresholds that follow the demos' task."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from elicit_jax.cli import app
+from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.score import score_demos
+from elicit_jax.compat.score_file import read_scores
+from elicit_jax.data.demos import from_episodes, write_demos
+from elicit_jax.errors import ElicitError
+from elicit_jax.policy.base import init_policy
+
+
+def _zero_policy(action_dim, dropout=0.0, **kw):
+    """A policy whose every member predicts exactly 0 (all parameters zero)."""
+    p = init_policy(
+        jax.random.key(0),
+        kind="mlp",
+        obs_dim=2,
+        action_dim=action_dim,
+        n_members=2,
+        hidden=(4,),
+        dropout=dropout,
+    )
+    return p.replace(params=jax.tree.map(jnp.zeros_like, p.params), **kw)
+
+
+def _demos(actions, low=-1.0, high=1.0):
+    actions = np.asarray(actions, np.float32)
+    ep = {"obs": np.zeros((len(actions), 2), np.float32), "action": actions}
+    return from_episodes([ep], operators="op", action_low=low, action_high=high)
+
+
+def test_member_average_clips_to_the_demos_recorded_bounds():
+    demos = _demos([[1.5, 0.3]], low=(-2.0, -2.0), high=(2.0, 2.0))
+    cfg = ScoreConfig(likelihood="member-average")
+    got = score_demos(_zero_policy(2), demos, cfg)["likelihood"][0]
+    assert got == pytest.approx((1.5**2 + 0.3**2) / 2)  # 1.17; a fixed ±1 clip gave 0.545
+    fixed = score_demos(_zero_policy(2), demos, ScoreConfig(likelihood="member-average", clip=1))
+    assert fixed["likelihood"][0] == pytest.approx((1.0 + 0.09) / 2)
+
+
+def test_action_scaling_uses_the_training_action_std():
+    demos = _demos([[1.0, 0.0, 1.0]])
+    policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
+    std = score_demos(policy, demos, ScoreConfig(action_scale="std"))["likelihood"][0]
+    assert std == pytest.approx((2.0**2 + 0.5**2) / 2)  # dim 1 constant in training: left out
+    none = score_demos(policy, demos, ScoreConfig())["likelihood"][0]
+    assert none == pytest.approx(2.0 / 3)
+    with pytest.raises(ElicitError, match="predates"):
+        score_demos(_zero_policy(3), demos, ScoreConfig(action_scale="std"))
+
+
+def test_mc_dropout_scoring_is_seeded_and_chunk_independent():
+    rng = np.random.default_rng(0)
+    policy = init_policy(
+        jax.random.key(1), kind="mlp", obs_dim=2, action_dim=2, n_members=3, hidden=(16, 16),
+        dropout=0.5,
+    )  # fmt: skip
+    eps = [{"obs": rng.normal(size=(37, 2)), "action": rng.uniform(-1, 1, size=(37, 2))}]
+    demos = from_episodes(eps, operators="op")
+    cfg = ScoreConfig(dropout_samples=4, dropout_seed=7, chunk_size=16)
+    a = score_demos(policy, demos, cfg)
+    b = score_demos(policy, demos, ScoreConfig(dropout_samples=4, dropout_seed=7, chunk_size=64))
+    # masks are keyed by row, not chunk (what differs is float rounding of other batch shapes)
+    np.testing.assert_allclose(a["novelty"], b["novelty"], rtol=1e-5)
+    again = score_demos(policy, demos, cfg)
+    np.testing.assert_array_equal(a["novelty"], again["novelty"])  # deterministic given the seed
+    c = score_demos(policy, demos, ScoreConfig(dropout_samples=4, dropout_seed=8, chunk_size=16))
+    assert np.abs(a["novelty"] - c["novelty"]).max() > 1e-4
+    det = score_demos(policy, demos, ScoreConfig(chunk_size=16))
+    # dropout on makes members disagree more: novelty is inflated, as in the original code
+    assert a["novelty"].mean() > det["novelty"].mean()
+    # pinned semantics: member k, pass i of row r uses fold_in(fold_in(fold_in(key(seed), r), k), i)
+    x = policy.normalize(jnp.asarray(demos.obs[5:6]))
+    key = jax.random.fold_in(jax.random.fold_in(jax.random.fold_in(jax.random.key(7), 5), 2), 3)
+    p2 = jax.tree.map(lambda v: v[2], policy.params)
+    manual = policy.module.apply({"params": p2}, x, True, rngs={"dropout": key})[0]
+    keys = jax.vmap(lambda r: jax.random.fold_in(jax.random.key(7), r))(jnp.arange(5, 6))
+    samples = policy.sample_members(jnp.asarray(demos.obs[5:6]), keys, 4)
+    np.testing.assert_allclose(samples[2 * 4 + 3, 0], manual, rtol=1e-6)
+    with pytest.raises(ElicitError, match="trained with dropout"):
+        score_demos(_zero_policy(2), _demos([[0.1, 0.2]]), ScoreConfig(dropout_samples=2))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+
+    d = tmp_path_factory.mktemp("score-options")
+    rng = np.random.default_rng(0)
+    eps = [
+        {"obs": rng.normal(size=(20, 3)), "action": rng.uniform(-1, 1, size=(20, 2))}
+        for _ in range(6)
+    ]
+    for task in ("NutAssemblyRound", "my-task"):
+        write_demos(d / f"{task}.parquet", from_episodes(eps, operators="op", task=task))
+    cfg = TrainConfig(
+        ensemble_size=2, hidden=(8,), epochs=2, batch_size=32, checkpoint_every=2,
+        progress_every=1, seeds=(0,), val_fraction=0.0,
+    )  # fmt: skip
+    train_policy(from_episodes(eps, operators="op"), cfg, d / "run", quiet=True)
+    return d
+
+
+def _score(run, demos, *extra):
+    out = run / f"s-{demos}.parquet"
+    r = CliRunner().invoke(
+        app,
+        [
+            "score",
+            "--policy",
+            str(run / "run"),
+            "--demos",
+            str(run / demos),
+            "-o",
+            str(out),
+            *extra,
+        ],
+    )
+    return r, out
+
+
+def test_thresholds_follow_the_task(run):
+    r, out = _score(run, "NutAssemblyRound.parquet")
+    assert r.exit_code == 0, r.output
+    header, _ = read_scores(out)
+    assert header["thresholds"] == {"lambda": 0.35, "eta": 0.05}  # round-nut, not square-nut
+    assert header["thresholds_source"] == "preset round-nut (task NutAssemblyRound)"
+    r, out = _score(run, "my-task.parquet")
+    assert r.exit_code == 0 and "has no paper preset" in r.output
+    assert "placeholder" in read_scores(out)[0]["thresholds_source"]
+    r, _ = _score(run, "my-task.parquet", "--preset", "hammer")
+    assert "unknown preset 'hammer'" in str(r.exception)
+    help_text = CliRunner().invoke(app, ["score", "--help"]).output
+    assert "hammer-drawer" in help_text
+
+
+def test_checkpoint_records_action_std_and_std_scoring_runs(run):
+    from elicit_jax.policy.checkpoint import load_policy
+
+    policy = load_policy(run / "run")
+    assert policy.action_std is not None and policy.action_std.shape == (2,)
+    r, out = _score(run, "my-task.parquet", "--action-scale", "std", "--lambda", "1", "--eta", "1")
+    assert r.exit_code == 0, r.output
+    header, s = read_scores(out)
+    assert header["config"]["action_scale"] == "std" and np.isfinite(s["likelihood"]).all()
