@@ -38,8 +38,10 @@ def _operator_table(path: Path) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from elicit_jax.data.describe_demos import operator_stats
+    from elicit_jax.artifact import read_header
+    from elicit_jax.data.describe_demos import operator_stats, success_recorded, success_text
 
+    recorded = success_recorded(read_header(path))
     table = Table(title=f"wrote {path}", title_justify="left")
     for col in ("operator", "episodes", "steps", "length mean", "success"):
         table.add_column(col, justify="left" if col == "operator" else "right")
@@ -49,7 +51,7 @@ def _operator_table(path: Path) -> None:
             str(r["episodes"]),
             str(r["steps"]),
             f"{r['mean_length']:.1f}",
-            f"{100 * r['success_rate']:.0f}%",
+            success_text(r["success_rate"], recorded),
         )
     Console().print(table)
 
@@ -90,6 +92,11 @@ def import_cmd(
         help="unit ([-1, 1]) or data (per-dim min/max). Default: unit for robomimic/npz, "
         "data for LeRobot.",
     ),
+    skip_bad_episodes: bool = typer.Option(
+        False,
+        "--skip-bad-episodes",
+        help="Leave out episodes with NaN/inf values (listed) instead of failing.",
+    ),
 ) -> None:
     """Import demonstrations from a robomimic, LeRobot or .npz dataset into a Parquet artifact.
 
@@ -113,6 +120,7 @@ def import_cmd(
         task=task,
         bounds="clip" if clip_actions else "warn" if warn_actions else "error",
         action_bounds=action_bounds,
+        skip_bad_episodes=skip_bad_episodes,
     )
     _echo_warnings(lambda: import_dataset(cfg, progress=True))
     _operator_table(out)

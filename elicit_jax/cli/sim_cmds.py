@@ -144,7 +144,8 @@ def print_summary(console: object, summary: object) -> None:
             str(row["policy"]),
             str(row["checkpoint"]),
             str(row["n_seeds"]),
-            f"{row['success_mean']:.1f} ({row['success_std']:.1f})",
+            f"{row['success_mean']:.1f} "
+            + ("(–)" if row["n_seeds"] < 2 else f"({row['success_std']:.1f})"),
             f"{row['mean_length']:.1f}",
             str(row.get("unstable", 0)),
         )

@@ -8,9 +8,18 @@ import warnings
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
+
 from elicit_jax.artifact import refuse_overwriting_inputs
-from elicit_jax.data.demos import BoundsPolicy, Demos, DemosWarning, validate, write_demos
-from elicit_jax.data.validation import action_dim_warnings
+from elicit_jax.data.demos import (
+    SOURCE_EPISODE,
+    BoundsPolicy,
+    Demos,
+    DemosWarning,
+    validate,
+    write_demos,
+)
+from elicit_jax.data.validation import action_dim_warnings, bad_episodes
 from elicit_jax.errors import ElicitError
 
 Format = Literal["robomimic", "lerobot", "npz"]
@@ -34,6 +43,8 @@ class ImportConfig:
       bounds: out-of-bounds actions: ``error``, ``warn`` or ``clip``.
       action_bounds: ``unit`` ([-1, 1]) or ``data`` (per-dim min/max); ``None``: the
         format's default (``unit`` for robomimic/npz, ``data`` for LeRobot).
+      skip_bad_episodes: leave out episodes with non-finite values (listed in a warning and
+        in the provenance) instead of failing.
     """
 
     source: str
@@ -46,6 +57,7 @@ class ImportConfig:
     task: str | None = None
     bounds: BoundsPolicy = "error"
     action_bounds: Literal["unit", "data"] | None = None
+    skip_bad_episodes: bool = False
 
 
 def infer_format(source: str | Path) -> Format:
@@ -89,13 +101,15 @@ def load_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
     if fmt == "lerobot":
         from elicit_jax.data.lerobot import import_lerobot
 
-        return import_lerobot(
+        demos = import_lerobot(
             cfg.source,
             obs_keys=cfg.obs_keys,
             operator=cfg.operator,
             task=cfg.task,
             action_bounds=unit if cfg.action_bounds == "unit" else None,
+            finite=not cfg.skip_bad_episodes,
         )
+        return _skip_bad(demos, cfg.source) if cfg.skip_bad_episodes else demos
     if fmt == "robomimic":
         from elicit_jax.data.robomimic import import_robomimic
 
@@ -108,13 +122,22 @@ def load_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
             task=cfg.task,
             action_bounds=unit,
             progress=progress,
+            finite=not cfg.skip_bad_episodes,
         )
     else:
         from elicit_jax.data.npz import import_npz
 
         if cfg.obs_keys:
             raise ElicitError("--obs-keys does not apply to .npz files (one 'obs' array)")
-        demos = import_npz(cfg.source, operator=cfg.operator, task=cfg.task, action_bounds=unit)
+        demos = import_npz(
+            cfg.source,
+            operator=cfg.operator,
+            task=cfg.task,
+            action_bounds=unit,
+            finite=not cfg.skip_bad_episodes,
+        )
+    if cfg.skip_bad_episodes:
+        demos = _skip_bad(demos, cfg.source)
     return _data_bounds(demos, cfg.action_bounds)
 
 
@@ -138,3 +161,28 @@ def import_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
     for msg in action_dim_warnings(demos.action):
         warnings.warn(f"{cfg.source}: {msg}", DemosWarning, stacklevel=2)
     return demos
+
+
+def _skip_bad(demos: Demos, source: str) -> Demos:
+    """``demos`` without the episodes :func:`bad_episodes` finds; each is named in a warning
+    and recorded in the provenance (``skipped_episodes``)."""
+    bad = bad_episodes(demos)
+    if not bad:
+        return demos
+    if len(bad) == demos.n_episodes:
+        raise ElicitError(f"every one of the {len(bad)} episodes has non-finite values", source)
+    names = demos.extra.get(SOURCE_EPISODE)
+    first = {e: s for e, s, _ in demos.episode_bounds()}
+    skipped = [
+        {"episode": e, "source_episode": str(names[first[e]]) if names is not None else str(e),
+         "reason": why}
+        for e, why in sorted(bad.items())
+    ]  # fmt: skip
+    listed = "; ".join(f"{s['source_episode']}: {s['reason']}" for s in skipped)
+    warnings.warn(
+        f"{source}: skipped {len(skipped)} of {demos.n_episodes} episodes ({listed})",
+        DemosWarning,
+        stacklevel=3,
+    )
+    kept = demos.select(~np.isin(demos.episode, list(bad)))
+    return dataclasses.replace(kept, provenance={**kept.provenance, "skipped_episodes": skipped})

@@ -52,6 +52,18 @@ def _id_names(path: str | Path, show: int = 3) -> str:
     return ", ".join(text)
 
 
+def success_recorded(header: dict[str, Any]) -> bool:
+    """False when the importer assumed every episode successful (no success or reward data):
+    a success rate is then unknown, not 100%."""
+    source = str(header.get("provenance", {}).get("success_from", ""))
+    return not source.startswith("assumed")
+
+
+def success_text(rate: float, recorded: bool) -> str:
+    """A success rate for tables, or ``unknown`` when the data never recorded it."""
+    return f"{100 * rate:.1f}%" if recorded else "unknown"
+
+
 def operator_stats(path: str | Path) -> list[dict[str, Any]]:
     """Per-operator episode counts, mean/std episode length and success rate (plus 'all').
 
@@ -121,6 +133,7 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
     ops = Table(title="episodes per operator", title_justify="left")
     for col in ("operator", "episodes", "steps", "length mean", "length std", "success"):
         ops.add_column(col, justify="left" if col == "operator" else "right")
+    recorded = success_recorded(header)
     for r in operator_stats(path):
         ops.add_row(
             r["operator"],
@@ -128,7 +141,7 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
             str(r["steps"]),
             f"{r['mean_length']:.1f}",
             f"{r['std_length']:.1f}",
-            f"{100 * r['success_rate']:.1f}%",
+            success_text(r["success_rate"], recorded),
             style="bold" if r["operator"] == "all" else None,
         )
     console.print(ops)

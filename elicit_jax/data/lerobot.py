@@ -45,6 +45,8 @@ NON_TABULAR = ("video", "image", "string")
 def read_info(root: str | Path) -> dict[str, Any]:
     """``meta/info.json`` of a dataset folder, checked for a supported codebase version."""
     root = Path(root)
+    if root.is_file():
+        raise ElicitError("is a file, not a LeRobot dataset folder", root)
     if not root.is_dir():
         raise ElicitError("not a LeRobot dataset folder (no such directory)", root)
     if not (root / "meta" / "info.json").is_file():
@@ -249,6 +251,7 @@ def import_lerobot(
     task: str | None = None,
     episodes: Sequence[int] | None = None,
     action_bounds: tuple[float, float] | None = None,
+    finite: bool = True,
 ) -> Demos:
     """Read a local LeRobot dataset folder into :class:`Demos`.
 
@@ -260,6 +263,7 @@ def import_lerobot(
       episodes: episode indices to import (default all).
       action_bounds: declared action bounds; ``None`` takes each dimension's min/max over
         the data (LeRobot actions are often joint targets, not in [-1, 1]).
+      finite: reject non-finite values here (False: the caller skips such episodes).
 
     Episode outcome: any ``next.success`` if that column exists, else assumed successful.
     Rewards: ``next.reward`` if present, else 0. A folder written by ``elicit-jax export``
@@ -330,7 +334,7 @@ def import_lerobot(
         sizes = [_to_matrix(part.column(k), k, root).shape[1] for k in obs_keys]
     actions = np.concatenate([ep["action"] for ep in eps])
     low, high = (
-        (actions.min(0).tolist(), actions.max(0).tolist())
+        (np.nanmin(actions, 0).tolist(), np.nanmax(actions, 0).tolist())
         if action_bounds is None
         else action_bounds
     )
@@ -358,4 +362,4 @@ def import_lerobot(
             episode_sha256=digests,
         ),
     )
-    return validate(demos, str(root), bounds=None)
+    return validate(demos, str(root), bounds=None, finite=finite)

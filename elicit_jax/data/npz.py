@@ -29,6 +29,8 @@ from elicit_jax.errors import ElicitError
 
 def _load(path: str | Path) -> dict[str, np.ndarray]:
     path = Path(path)
+    if path.is_dir():
+        raise ElicitError("is a folder, not a .npz file", path)
     if not path.is_file():
         raise ElicitError("file not found", path)
     try:
@@ -97,8 +99,10 @@ def import_npz(
     operator: str = "unknown",
     task: str | None = None,
     action_bounds: tuple[float, float] = (-1.0, 1.0),
+    finite: bool = True,
 ) -> Demos:
-    """Read a ``.npz`` of demonstrations (see the module docstring for its keys)."""
+    """Read a ``.npz`` of demonstrations (see the module docstring for its keys); with
+    ``finite=False`` non-finite values are left for the caller to skip."""
     path = Path(path)
     arrays = _load(path)
     if "obs" not in arrays:
@@ -145,7 +149,7 @@ def import_npz(
             success_from="'success' array" if success is not None else "assumed (no 'success')",
         ),
     )
-    return validate(demos, str(path), bounds=None)
+    return validate(demos, str(path), bounds=None, finite=finite)
 
 
 def export_npz(demos: Demos, out: str | Path, header: dict[str, Any] | None = None) -> None:

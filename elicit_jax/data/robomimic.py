@@ -41,6 +41,8 @@ def open_hdf5(path: str | Path, mode: str = "r") -> Iterator[Any]:
     import h5py
 
     path = Path(path)
+    if path.is_dir():
+        raise ElicitError("is a folder, not an HDF5 file", path)
     if not path.is_file():
         raise ElicitError("file not found", path)
     try:
@@ -175,6 +177,7 @@ def import_robomimic(
     task: str | None = None,
     action_bounds: tuple[float, float] = (-1.0, 1.0),
     progress: bool = False,
+    finite: bool = True,
 ) -> Demos:
     """Read a robomimic HDF5 file into :class:`Demos` (episodes 0..E-1 in demo_N order).
 
@@ -190,6 +193,7 @@ def import_robomimic(
       task: task name; default the ``env_name`` in ``data.attrs['env_args']``.
       action_bounds: declared action bounds (robomimic actions lie in [-1, 1]).
       progress: show a progress bar.
+      finite: reject non-finite values here (False: the caller skips such episodes).
 
     The episode outcome is ``max(rewards) >= 1`` (robosuite's sparse success reward), or
     assumed successful when the file has no rewards; ``provenance['success_from']`` says which.
@@ -251,4 +255,4 @@ def import_robomimic(
             episode_sha256=digests,
         ),
     )
-    return validate(demos, str(path), bounds=None)
+    return validate(demos, str(path), bounds=None, finite=finite)

@@ -33,13 +33,19 @@ def _where(demos: Demos, row: int) -> str:
     return f"episode {demos.episode[row]}{src}, step {demos.step[row]}"
 
 
-def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy | None = "error") -> Demos:
+def validate(
+    demos: Demos,
+    source: str = "<demos>",
+    bounds: BoundsPolicy | None = "error",
+    finite: bool = True,
+) -> Demos:
     """Check a :class:`Demos` for consistency; returns it (clipped if ``bounds='clip'``).
 
     Checks: matching row counts, 2-D obs/action, finite values, at least one episode,
     contiguous episodes, steps 0..T-1 in order, one operator and one outcome per episode,
-    obs fields within obs_dim, actions within their declared bounds (skipped when ``bounds``
-    is ``None``, as importers do before the user's bounds policy applies).
+    obs fields within obs_dim, actions within their declared bounds. Importers skip the
+    bounds (``bounds=None``: the user's bounds policy applies afterwards) and, when asked to
+    skip bad episodes, the finiteness check (``finite=False``); every write checks all.
     """
     n = demos.obs.shape[0] if demos.obs.ndim else 0
     if demos.obs.ndim != 2 or demos.action.ndim != 2:
@@ -56,7 +62,7 @@ def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy | None 
             raise ElicitError(f"extra column '{k}' has {len(v)} rows, expected {n}", source)
     if n == 0:
         raise ElicitError("holds no steps (empty demonstration set)", source)
-    for name in ("obs", "action", "reward"):
+    for name in ("obs", "action", "reward") if finite else ():
         bad = ~np.isfinite(getattr(demos, name))
         if bad.any():
             row, *col = (int(x) for x in np.argwhere(bad)[0])
@@ -101,6 +107,19 @@ def validate(demos: Demos, source: str = "<demos>", bounds: BoundsPolicy | None 
                 source,
             )
     return demos if bounds is None else _check_bounds(demos, source, bounds)
+
+
+def bad_episodes(demos: Demos) -> dict[int, str]:
+    """Episode id -> why it cannot be used (non-finite obs, action or reward), for importers
+    asked to skip such episodes rather than fail."""
+    out: dict[int, str] = {}
+    for name in ("obs", "action", "reward"):
+        values = getattr(demos, name)
+        bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+        for row in np.flatnonzero(bad):
+            e = int(demos.episode[row])
+            out.setdefault(e, f"non-finite {name} at step {int(demos.step[row])}")
+    return out
 
 
 def action_dim_warnings(action: np.ndarray, ratio: float = 10.0) -> list[str]:

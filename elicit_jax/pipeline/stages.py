@@ -12,11 +12,12 @@ config and re-runs the stage.
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.artifact import atomic_path, dumps, make_header, write_json
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.runner import StageContext, StageFn
 
@@ -148,7 +149,13 @@ def resolve_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
 
 def train_stage(ctx: StageContext) -> None:
     """Train on the concatenation of the ``demos*`` inputs (D_base first); a filter output
-    that kept nothing contributes nothing."""
+    that kept nothing contributes nothing.
+
+    Training is deterministic, so a run of the same config on the same training arrays
+    (e.g. a filter that kept nothing, leaving D_base alone, next to the base policy) is
+    copied from the run that already trained them instead of training again
+    (:func:`reuse_training`).
+    """
     from elicit_jax.data.demos import concat_demos, read_demos
     from elicit_jax.policy.config import TrainConfig
     from elicit_jax.policy.train import train_policy
@@ -157,13 +164,65 @@ def train_stage(ctx: StageContext) -> None:
     files = {n: demos_file(ctx.inputs[n]) for n in names}
     files = {n: f for n, f in files.items() if f.exists() or n == "demos0"}
     demos = concat_demos([read_demos(f) for f in files.values()])
-    train_policy(
-        demos,
-        TrainConfig.from_dict(ctx.config["train"]),
-        ctx.output,
-        inputs=files,
-        overwrite=True,
+    config = TrainConfig.from_dict(ctx.config["train"])
+    if reuse_training(ctx, demos, config, files):
+        return
+    train_policy(demos, config, ctx.output, inputs=files, overwrite=True)
+    _record_training(ctx, demos, config)
+
+
+def _training_key(demos: Any, config: Any) -> str:
+    import hashlib
+
+    from elicit_jax.artifact import dumps
+    from elicit_jax.policy.dataset import demos_sha256
+
+    text = dumps(config.to_dict()) + demos_sha256(demos)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _index_path(ctx: StageContext, key: str) -> Path:
+    from elicit_jax.pipeline.runner import STATE_DIR
+
+    return ctx.run_dir / STATE_DIR / "trainings" / f"{key}.json"
+
+
+def _record_training(ctx: StageContext, demos: Any, config: Any) -> None:
+    write_json(
+        _index_path(ctx, _training_key(demos, config)),
+        {"output": ctx.stage.output, "stage": ctx.stage.id},
     )
+
+
+def reuse_training(ctx: StageContext, demos: Any, config: Any, files: Mapping[str, Path]) -> bool:
+    """Copy the run of an earlier stage that trained ``config`` on the same arrays (same
+    content hash) to this stage's output; False when there is none. The copy's headers name
+    this stage's inputs and say where it was reused from (``reused_from``)."""
+    import shutil
+
+    from elicit_jax.artifact import file_sha256, read_json
+    from elicit_jax.policy.dataset import demos_sha256
+
+    index = _index_path(ctx, _training_key(demos, config))
+    if not index.exists():
+        return False
+    source = ctx.run_dir / read_json(index)["output"]
+    try:
+        header = read_json(source / "artifact.json")
+    except ElicitError:
+        return False
+    same_config = header.get("config") == json.loads(dumps(config.to_dict()))
+    if not same_config or header.get("data_sha256") != demos_sha256(demos):
+        return False
+    inputs = {n: {"path": str(p), "sha256": file_sha256(p)} for n, p in files.items()}
+    with atomic_path(ctx.output) as tmp:
+        shutil.copytree(source, tmp)
+        for head in [tmp / "artifact.json", *tmp.glob("seed*/artifact.json")]:
+            data = read_json(head)
+            data.update(inputs=inputs, reused_from=str(read_json(index)["output"]))
+            write_json(head, data)
+    ctx.console.print(f"reused the identical training run {source.name} (same config and data)")
+    return True
 
 
 def score_stage(ctx: StageContext) -> None:
