@@ -452,3 +452,40 @@ def write_lerobot_v30(
     df.to_parquet(root / "meta" / "tasks.parquet")
     (root / "meta" / "stats.json").write_text(json.dumps(_json(total), indent=4))
     return root
+
+
+def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40) -> Path:
+    """A robomimic file shaped like a real teleoperated one, to walk the whole tool through.
+
+    7-D actions: 3 translation dims (the operator's style), 2 dims always 0, a small rotation
+    and a ±1 gripper; non-default obs keys ``eef_pos`` (3), ``gripper_qpos`` (2) and
+    ``object_pose`` (7); two operator mask keys, ``op_base`` (demo_0..) and ``op_alt``. The
+    base operator heads straight for the object; ``op_alt`` starts from the same states but
+    heads 90° off in the xy-plane, so its actions conflict with the base's in familiar states.
+    """
+    rng = np.random.default_rng(0)
+    demos, names = {}, {"op_base": [], "op_alt": []}
+    for i in range(n_base + n_alt):
+        alt = i >= n_base
+        obj = rng.normal(0.0, 0.02, 3)
+        eef = rng.uniform(-0.5, 0.5, 3)
+        pos, act = [], []
+        for _ in range(t):
+            step = np.clip(obj - eef, -0.3, 0.3)
+            if alt:
+                step = np.array([-step[1], step[0], step[2]])
+            grip = 1.0 if np.linalg.norm(obj - eef) > 0.15 else -1.0
+            pos.append(eef.copy())
+            act.append([*step, 0.0, 0.0, rng.normal(0.0, 0.02), grip])
+            eef = eef + 0.1 * step
+        act = np.asarray(act)
+        pose = np.concatenate([np.tile(obj, (t, 1)), np.tile([1.0, 0, 0, 0], (t, 1))], axis=1)
+        demos[f"demo_{i}"] = {
+            "actions": act,
+            "rewards": np.r_[np.zeros(t - 1), 1.0],
+            "obs/eef_pos": np.asarray(pos),
+            "obs/gripper_qpos": np.stack([act[:, 6], -act[:, 6]], axis=1) * 0.04,
+            "obs/object_pose": pose,
+        }
+        names["op_alt" if alt else "op_base"].append(f"demo_{i}")
+    return write_robomimic(path, demos, masks=names, env_name="NutAssemblySquare")

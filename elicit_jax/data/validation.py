@@ -122,7 +122,7 @@ def bad_episodes(demos: Demos) -> dict[int, str]:
     return out
 
 
-def action_dim_warnings(action: np.ndarray, ratio: float = 10.0) -> list[str]:
+def action_dim_warnings(action: np.ndarray, ratio: float = 5.0) -> list[str]:
     """Action dims that distort ℓ (a mean over dims of raw squared errors).
 
     Returns messages for dims that never change (they add nothing to ℓ but dilute its mean)

@@ -1,0 +1,104 @@
+"""A new user's walk with their own robomimic file, through the CLI exactly as the README's
+"Your own data" section gives it: import with --obs-keys → split → train → score → fit →
+filter. The file has non-default obs keys, two constant action dims, a ±1 gripper and two
+operator mask keys (:func:`fixtures_data.own_robomimic_file`)."""
+
+import json
+
+import numpy as np
+import pytest
+from fixtures_data import own_robomimic_file
+from typer.testing import CliRunner
+
+from elicit_jax.cli import app
+from elicit_jax.compat.score_file import read_scores
+from elicit_jax.data.demos import read_demos
+
+
+def _ok(*args):
+    r = CliRunner().invoke(app, [str(a) for a in args])
+    assert r.exit_code == 0, (r.output, r.exception)
+    return r.output
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    d = tmp_path_factory.mktemp("own-data")
+    src = own_robomimic_file(d / "teleop.hdf5")
+    out = {"dir": d, "src": src}
+    # 1. look, then import with the file's own obs keys and operators from its mask keys
+    out["info"] = _ok("info", src)
+    r = CliRunner().invoke(app, ["import", str(src), "-o", str(d / "x.parquet")])
+    out["default_keys_error"] = str(r.exception)
+    out["import"] = _ok(
+        "import", src, "--obs-keys", "eef_pos,gripper_qpos,object_pose",
+        "--operators-from-masks", "op_*", "-o", d / "all.parquet",
+    )  # fmt: skip
+    # 2. split: three base demos held out for the threshold fit, the rest trains
+    _ok("demos", "list", d / "all.parquet")
+    _ok("demos", "select", d / "all.parquet", "--episodes", "0-2", "-o", d / "heldout.parquet")
+    _ok(
+        "demos", "select", d / "all.parquet", "--operator", "op_base", "--exclude", "0-2",
+        "-o", d / "base.parquet",
+    )  # fmt: skip
+    # 3. train the base policy (a small net, so the test is quick)
+    out["train"] = _ok(
+        "train", "--demos", d / "base.parquet", "--out", d / "runs/base", "--profile", "cpu",
+        "--hidden", "64,64", "--epochs", "150", "--ensemble-size", "3", "--batch-size", "64",
+        "--checkpoint-every", "50",
+    )  # fmt: skip
+    # 4. score everything, each action dim in units of its spread (the gripper would dominate)
+    out["score"] = _ok(
+        "score", "--policy", d / "runs/base", "--demos", d / "all.parquet", "-o",
+        d / "scores.parquet", "--action-scale", "std",
+    )  # fmt: skip
+    # 5. fit thresholds: held-out base demos vs the other operator
+    out["fit"] = _ok(
+        "fit-thresholds", "--scores", d / "scores.parquet", "--compatible", "episodes:0-2",
+        "--incompatible", "operator:op_alt", "-o", d / "thresholds.json",
+    )  # fmt: skip
+    # 6. filter: drop rejected demos of the new operator
+    out["filter"] = _ok(
+        "filter", "--scores", d / "scores.parquet", "--demos", d / "all.parquet",
+        "--thresholds", d / "thresholds.json", "--level", "episode", "-o", d / "kept.parquet",
+    )  # fmt: skip
+    return out
+
+
+def test_import_says_what_it_needs_and_warns_about_the_actions(walk):
+    assert "eef_pos" in walk["info"] and "op_alt" in walk["info"]
+    assert "has no 'robot0_eef_pos'" in walk["default_keys_error"]
+    assert "choose keys with --obs-keys" in walk["default_keys_error"]
+    assert "action dims [3, 4] are constant" in walk["import"]
+    assert "action dim 6 varies" in walk["import"]
+    all_demos = read_demos(walk["dir"] / "all.parquet")
+    assert [f.name for f in all_demos.obs_fields] == ["eef_pos", "gripper_qpos", "object_pose"]
+    assert sorted(set(all_demos.operator)) == ["op_alt", "op_base"]
+
+
+def test_split_keeps_ids_and_source_names(walk):
+    held = read_demos(walk["dir"] / "heldout.parquet")
+    base = read_demos(walk["dir"] / "base.parquet")
+    assert held.episode_ids.tolist() == [0, 1, 2]
+    assert base.episode_ids.tolist() == list(range(3, 12))
+    assert base.extra["source_episode"][0] == "demo_3"
+
+
+def test_scores_fit_and_filter_separate_the_operators(walk):
+    d = walk["dir"]
+    header, s = read_scores(d / "scores.parquet")
+    assert header["config"]["action_scale"] == "std"
+    assert header["thresholds_source"] == "preset square-nut (task NutAssemblySquare)"
+    ops = s["operator"].astype(str)
+    assert s["likelihood"][ops == "op_alt"].mean() > 5 * s["likelihood"][ops == "op_base"].mean()
+    t = json.loads((d / "thresholds.json").read_text())
+    rep = t["report"]
+    assert rep["balanced_accuracy"] == 1.0
+    assert rep["trust"]["trustworthy"], rep["trust"]["problems"]
+    assert rep["per_operator"]["op_base"]["rejected_episodes"] == 0
+    assert rep["per_operator"]["op_alt"]["rejected_episodes"] == 6
+    kept = read_demos(d / "kept.parquet")
+    assert sorted(set(kept.operator)) == ["op_base"] and kept.n_episodes == 12
+    names = {str(n) for n in kept.extra["source_episode"]}
+    assert names == {f"demo_{i}" for i in range(12)}
+    assert np.isfinite(s["novelty"]).all()
