@@ -57,6 +57,10 @@ def walk(tmp_path_factory):
         "fit-thresholds", "--scores", d / "scores.parquet", "--compatible", "episodes:0-2",
         "--incompatible", "operator:op_alt", "-o", d / "thresholds.json",
     )  # fmt: skip
+    _ok(
+        "map", "--scores", d / "scores.parquet", "--thresholds", d / "thresholds.json",
+        "-o", d / "map.html",
+    )  # fmt: skip
     # 6. filter: drop rejected demos of the new operator
     out["filter"] = _ok(
         "filter", "--scores", d / "scores.parquet", "--demos", d / "all.parquet",
@@ -99,6 +103,7 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     assert rep["per_operator"]["op_alt"]["rejected_episodes"] == 6
     kept = read_demos(d / "kept.parquet")
     assert sorted(set(kept.operator)) == ["op_base"] and kept.n_episodes == 12
+    assert (d / "kept.dropped.parquet").exists() and (d / "map.html").stat().st_size > 1000
     names = {str(n) for n in kept.extra["source_episode"]}
     assert names == {f"demo_{i}" for i in range(12)}
     assert np.isfinite(s["novelty"]).all()
