@@ -281,3 +281,17 @@ def test_help_lists_commands_in_workflow_order():
     pos = [text.index(f"│ {name} ") for name in order if f"│ {name} " in text]
     assert pos == sorted(pos) and len(pos) >= 6
     assert text.index("1. Bring demonstrations") < text.index("3. Compatibility")
+
+
+def test_the_pipeline_report_carries_the_trust_verdict():
+    from elicit_jax.pipeline.tables import ReportData, ThresholdRow, threshold_table
+
+    bad = {"trustworthy": False, "meaningless": False, "problems": ["no margin: …"]}
+    rows = [
+        ThresholdRow("t", "mlp", 0.4, 0.05, "c", "i", {"trust": bad}),
+        ThresholdRow("t", "mdn", 0.4, 0.05, "c", "i", {"trust": {"trustworthy": True}}),
+    ]
+    data = ReportData("p", "cpu", "", "", "", (), thresholds=tuple(rows))
+    header, table = threshold_table(data)
+    col = header.index("trust")
+    assert table[0][col] == "NOT TRUSTWORTHY: no margin: …" and table[1][col] == "ok"

@@ -40,6 +40,11 @@ def describe_scores(path: Path, header: dict[str, Any]) -> None:
             ("dims (obs, action)", (header.get("obs_dim"), header.get("action_dim"))),
             ("policy kind", header.get("policy_kind")),
             ("thresholds", header.get("thresholds")),
+            ("thresholds from", header.get("thresholds_source")),
+            (
+                "action scale / dropout samples",
+                f"{cfg.get('action_scale', 'none')} / {cfg.get('dropout_samples', 0)}",
+            ),
             ("likelihood / ddof", f"{cfg.get('likelihood')} / {cfg.get('ddof')}"),
             ("accept fraction", cfg.get("accept_fraction")),
             *_inputs(header),

@@ -196,6 +196,7 @@ def threshold_table(data: ReportData) -> Table:
         "balanced acc.",
         "margin",
         "leave-one-out acc.",
+        "trust",
         "compatible set",
         "incompatible set",
     ]
@@ -211,11 +212,22 @@ def threshold_table(data: ReportData) -> Table:
                 _num(m.get("balanced_accuracy")),
                 _num(m.get("margin")),
                 _num(m.get("loo_accuracy")),
+                trust_text(m.get("trust")),
                 t.compatible,
                 t.incompatible,
             ]
         )
     return header, rows
+
+
+def trust_text(trust: Mapping[str, Any] | None) -> str:
+    """A fit's trust verdict for a report cell: ``ok``, or the verdict and its reasons."""
+    if not trust:
+        return "–"
+    if trust.get("trustworthy"):
+        return "ok"
+    verdict = "MEANINGLESS (forced)" if trust.get("meaningless") else "NOT TRUSTWORTHY"
+    return f"{verdict}: " + "; ".join(trust.get("problems", []))
 
 
 def decisions_table(data: ReportData) -> Table:
