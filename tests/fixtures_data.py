@@ -489,3 +489,39 @@ def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40
         }
         names["op_alt" if alt else "op_base"].append(f"demo_{i}")
     return write_robomimic(path, demos, masks=names, env_name="NutAssemblySquare")
+
+
+def tiny_episodes(n: int = 6, t: int = 20, seed: int = 0) -> list[dict]:
+    """``n`` random episodes of ``t`` steps: obs (t, 3), action (t, 2) in [-1, 1]."""
+    rng = np.random.default_rng(seed)
+    return [
+        {"obs": rng.normal(size=(t, 3)), "action": rng.uniform(-1, 1, size=(t, 2))}
+        for _ in range(n)
+    ]
+
+
+def tiny_train_config(**overrides):
+    """A training config that trains in a second: 2 members of one 8-unit layer, 2 epochs."""
+    from elicit_jax.policy.config import TrainConfig
+
+    base = {
+        "ensemble_size": 2,
+        "hidden": (8,),
+        "epochs": 2,
+        "batch_size": 32,
+        "checkpoint_every": 2,
+        "progress_every": 1,
+        "seeds": (0,),
+    }
+    return TrainConfig(**{**base, **overrides})
+
+
+def tiny_run(d: Path, **overrides) -> Path:
+    """``d/demos.parquet`` (tiny episodes) and a tiny training run on them in ``d/run``."""
+    from elicit_jax.data.demos import from_episodes, write_demos
+    from elicit_jax.policy.train import train_policy
+
+    demos = from_episodes(tiny_episodes(), operators="base")
+    write_demos(d / "demos.parquet", demos)
+    train_policy(demos, tiny_train_config(**overrides), d / "run", quiet=True)
+    return d

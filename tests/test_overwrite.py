@@ -4,15 +4,13 @@ an unwritable destination is named in the error."""
 import os
 import tempfile
 
-import numpy as np
 import pytest
+from fixtures_data import tiny_run, tiny_train_config
 from typer.testing import CliRunner
 
 from elicit_jax.artifact import atomic_path, file_sha256
 from elicit_jax.cli import app
-from elicit_jax.data.demos import from_episodes, write_demos
 from elicit_jax.errors import ElicitError
-from elicit_jax.policy.config import TrainConfig
 
 
 def _invoke(*args):
@@ -21,31 +19,7 @@ def _invoke(*args):
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
-    from elicit_jax.policy.train import train_policy
-
-    d = tmp_path_factory.mktemp("overwrite")
-    rng = np.random.default_rng(0)
-    eps = [
-        {"obs": rng.normal(size=(20, 3)), "action": rng.uniform(-1, 1, size=(20, 2))}
-        for _ in range(6)
-    ]
-    demos = from_episodes(eps, operators="base")
-    write_demos(d / "demos.parquet", demos)
-    train_policy(demos, _cfg(), d / "run", quiet=True)
-    return d
-
-
-def _cfg(**kw):
-    base = {
-        "ensemble_size": 2,
-        "hidden": (8,),
-        "epochs": 2,
-        "batch_size": 32,
-        "checkpoint_every": 2,
-        "progress_every": 1,
-        "seeds": (0,),
-    }
-    return TrainConfig(**{**base, **kw})
+    return tiny_run(tmp_path_factory.mktemp("overwrite"))
 
 
 def test_score_and_filter_refuse_to_write_over_their_input(work):
@@ -78,13 +52,13 @@ def test_train_refuses_to_replace_another_run(work, tmp_path):
 
     demos = read_demos(work / "demos.parquet")
     run = tmp_path / "run"
-    train_policy(demos, _cfg(), run, quiet=True)
+    train_policy(demos, tiny_train_config(), run, quiet=True)
     # the same config on the same data again: deterministic, so replacing it loses nothing
-    train_policy(demos, _cfg(), run, quiet=True)
+    train_policy(demos, tiny_train_config(), run, quiet=True)
     with pytest.raises(ElicitError, match=r"another config.*--overwrite"):
-        train_policy(demos, _cfg(seeds=(1,)), run, quiet=True)
+        train_policy(demos, tiny_train_config(seeds=(1,)), run, quiet=True)
     assert (run / "seed0").is_dir()  # the run is untouched
-    train_policy(demos, _cfg(seeds=(1,)), run, quiet=True, overwrite=True)
+    train_policy(demos, tiny_train_config(seeds=(1,)), run, quiet=True, overwrite=True)
     assert (run / "seed1").is_dir() and not (run / "seed0").exists()
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "a.txt").write_text("mine")

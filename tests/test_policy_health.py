@@ -6,12 +6,12 @@ import shutil
 import jax
 import numpy as np
 import pytest
+from fixtures_data import tiny_run
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score_file import score_file
-from elicit_jax.data.demos import from_episodes, write_demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import init_policy
 from elicit_jax.policy.checkpoint import flatten_params, load_params, unflatten_params
@@ -19,28 +19,7 @@ from elicit_jax.policy.checkpoint import flatten_params, load_params, unflatten_
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from elicit_jax.policy.config import TrainConfig
-    from elicit_jax.policy.train import train_policy
-
-    d = tmp_path_factory.mktemp("health")
-    rng = np.random.default_rng(0)
-    eps = [
-        {"obs": rng.normal(size=(20, 3)), "action": rng.uniform(-1, 1, size=(20, 2))}
-        for _ in range(6)
-    ]
-    demos = from_episodes(eps, operators="base")
-    write_demos(d / "demos.parquet", demos)
-    cfg = TrainConfig(
-        ensemble_size=2,
-        hidden=(8,),
-        epochs=2,
-        batch_size=32,
-        checkpoint_every=2,
-        progress_every=1,
-        seeds=(0,),
-    )
-    train_policy(demos, cfg, d / "run", quiet=True)
-    return d
+    return tiny_run(tmp_path_factory.mktemp("health"))
 
 
 def _copy(run, tmp_path):

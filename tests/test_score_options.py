@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from fixtures_data import tiny_episodes, tiny_train_config
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
@@ -90,21 +91,13 @@ def test_mc_dropout_scoring_is_seeded_and_chunk_independent():
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from elicit_jax.policy.config import TrainConfig
     from elicit_jax.policy.train import train_policy
 
     d = tmp_path_factory.mktemp("score-options")
-    rng = np.random.default_rng(0)
-    eps = [
-        {"obs": rng.normal(size=(20, 3)), "action": rng.uniform(-1, 1, size=(20, 2))}
-        for _ in range(6)
-    ]
+    eps = tiny_episodes()
     for task in ("NutAssemblyRound", "my-task"):
         write_demos(d / f"{task}.parquet", from_episodes(eps, operators="op", task=task))
-    cfg = TrainConfig(
-        ensemble_size=2, hidden=(8,), epochs=2, batch_size=32, checkpoint_every=2,
-        progress_every=1, seeds=(0,), val_fraction=0.0,
-    )  # fmt: skip
+    cfg = tiny_train_config(val_fraction=0.0)
     train_policy(from_episodes(eps, operators="op"), cfg, d / "run", quiet=True)
     return d
 
