@@ -68,8 +68,9 @@ def _short(value: Any, limit: int = 160) -> str:
 def describe(path: str | Path) -> None:
     """Print a description of the artifact at ``path``.
 
-    Known kinds use their describer (:data:`DESCRIBERS`); raw robomimic files and LeRobot folders get a
-    summary of what an import would see; any other artifact lists its header fields.
+    Known kinds use their describer (:data:`DESCRIBERS`); raw robomimic files and LeRobot
+    folders get a summary of what an import would see; any other artifact lists its header
+    fields.
     """
     from rich.console import Console
     from rich.table import Table

@@ -64,7 +64,7 @@ def walk(tmp_path_factory):
     # 6. filter: drop rejected demos of the new operator
     out["filter"] = _ok(
         "filter", "--scores", d / "scores.parquet", "--demos", d / "all.parquet",
-        "--thresholds", d / "thresholds.json", "--level", "episode", "-o", d / "kept.parquet",
+        "--thresholds", d / "thresholds.json", "--level", "episode", "-o", d / "filtered.parquet",
     )  # fmt: skip
     return out
 
@@ -101,9 +101,9 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     assert rep["trust"]["trustworthy"], rep["trust"]["problems"]
     assert rep["per_operator"]["op_base"]["rejected_episodes"] == 0
     assert rep["per_operator"]["op_alt"]["rejected_episodes"] == 6
-    kept = read_demos(d / "kept.parquet")
+    kept = read_demos(d / "filtered.parquet")
     assert sorted(set(kept.operator)) == ["op_base"] and kept.n_episodes == 12
-    assert (d / "kept.dropped.parquet").exists() and (d / "map.html").stat().st_size > 1000
+    assert (d / "filtered.dropped.parquet").exists() and (d / "map.html").stat().st_size > 1000
     names = {str(n) for n in kept.extra["source_episode"]}
     assert names == {f"demo_{i}" for i in range(12)}
     assert np.isfinite(s["novelty"]).all()
