@@ -28,6 +28,7 @@ DESCRIBERS: dict[str, tuple[str, str]] = {
     "rollouts": ("elicit_jax.sim.describe_rollouts", "describe_rollouts"),
     "checkpoint": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
     "training_run": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
+    "elicit-session": ("elicit_jax.elicit.describe_session", "describe_session"),
 }
 
 

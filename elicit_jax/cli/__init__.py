@@ -4,6 +4,7 @@ from elicit_jax.cli import (
     compat_cmds,  # noqa: F401
     data_cmds,  # noqa: F401
     demos_cmds,  # noqa: F401
+    elicit_cmds,  # noqa: F401
     pipeline_cmds,  # noqa: F401
     sim_cmds,  # noqa: F401
     train_cmd,  # noqa: F401

@@ -56,69 +56,114 @@ def _operator_table(path: Path) -> None:
     Console().print(table)
 
 
-@app.command("import", rich_help_panel=DATA)
-def import_cmd(
-    source: Path = typer.Argument(..., help="robomimic .hdf5, LeRobot folder or .npz."),
-    out: Path = typer.Option(..., "-o", "--out", help="Demonstrations artifact to write."),
-    fmt: str = typer.Option(
-        None, "--format", "-f", help="robomimic | lerobot | npz (default: from the path)."
-    ),
-    obs_keys: str = typer.Option(
-        None,
-        "--obs-keys",
-        help="Comma-separated observation keys/features, in order (default: robomimic "
-        "robot0_eef_pos,robot0_eef_quat,robot0_gripper_qpos,object; LeRobot observation.state).",
-    ),
-    operator: str = typer.Option("unknown", "--operator", help="Operator label of the demos."),
-    operators_from_masks: str = typer.Option(
-        None,
-        "--operators-from-masks",
-        help="robomimic: label each demo by the mask key matching this glob (or any of "
-        "several, comma-separated) that lists it, e.g. '*_operator_*' or 'base,conflict'.",
-    ),
-    filter_key: str = typer.Option(
-        None, "--filter-key", help="robomimic: import only the demos of mask/<KEY>."
-    ),
-    task: str = typer.Option(None, "--task", help="Task name (default: from the dataset)."),
-    clip_actions: bool = typer.Option(
-        False, "--clip-actions", help="Clip actions outside their bounds instead of failing."
-    ),
-    warn_actions: bool = typer.Option(
-        False, "--warn-actions", help="Keep out-of-bounds actions, with a warning."
-    ),
-    action_bounds: str = typer.Option(
-        None,
-        "--action-bounds",
-        help="unit ([-1, 1]) or data (per-dim min/max). Default: unit for robomimic/npz, "
-        "data for LeRobot.",
-    ),
-    skip_bad_episodes: bool = typer.Option(
-        False,
-        "--skip-bad-episodes",
-        help="Leave out episodes with NaN/inf values (listed) instead of failing.",
-    ),
-) -> None:
-    """Import demonstrations from a robomimic, LeRobot or .npz dataset into a Parquet artifact.
+_FORMAT = typer.Option(
+    None, "--format", "-f", help="robomimic | lerobot | npz (default: from the path)."
+)
+_OBS_KEYS = typer.Option(
+    None,
+    "--obs-keys",
+    help="Comma-separated observation keys/features, in order (default: robomimic "
+    "robot0_eef_pos,robot0_eef_quat,robot0_gripper_qpos,object; LeRobot observation.state).",
+)
+_OPERATOR = typer.Option("unknown", "--operator", help="Operator label of the demos.")
+_OPERATORS_FROM_MASKS = typer.Option(
+    None,
+    "--operators-from-masks",
+    help="robomimic: label each demo by the mask key matching this glob (or any of "
+    "several, comma-separated) that lists it, e.g. '*_operator_*' or 'base,conflict'.",
+)
+_FILTER_KEY = typer.Option(
+    None, "--filter-key", help="robomimic: import only the demos of mask/<KEY>."
+)
+_TASK = typer.Option(None, "--task", help="Task name (default: from the dataset).")
+_CLIP = typer.Option(
+    False, "--clip-actions", help="Clip actions outside their bounds instead of failing."
+)
+_WARN = typer.Option(False, "--warn-actions", help="Keep out-of-bounds actions, with a warning.")
+_ACTION_BOUNDS = typer.Option(
+    None,
+    "--action-bounds",
+    help="unit ([-1, 1]) or data (per-dim min/max). Default: unit for robomimic/npz, "
+    "data for LeRobot.",
+)
+_SKIP_BAD = typer.Option(
+    False,
+    "--skip-bad-episodes",
+    help="Leave out episodes with NaN/inf values (listed) instead of failing.",
+)
 
-    Example: elicit-jax import low_dim.hdf5 --format robomimic --operators-from-masks
-    '*_operator_*' -o demos.parquet
-    """
-    from elicit_jax.data.convert import ImportConfig, import_dataset
+
+def import_config(
+    source: Path,
+    out: Path | str,
+    *,
+    fmt: str | None,
+    obs_keys: str | None,
+    operator: str,
+    operators_from_masks: str | None,
+    filter_key: str | None,
+    task: str | None,
+    clip_actions: bool,
+    warn_actions: bool,
+    action_bounds: str | None,
+    skip_bad_episodes: bool,
+) -> Any:
+    """The ``ImportConfig`` of ``import``'s options, checked the same way for every command
+    that takes them (``import``, ``watch``)."""
+    from elicit_jax.data.convert import ImportConfig
 
     if clip_actions and warn_actions:
         raise ElicitError("choose one of --clip-actions and --warn-actions")
     if action_bounds not in (None, "unit", "data"):
         raise ElicitError(f"--action-bounds must be 'unit' or 'data', not {action_bounds!r}")
-    cfg = ImportConfig(
+    return ImportConfig(
         source=str(source),
         out=str(out),
-        format=fmt,
+        format=fmt,  # type: ignore[arg-type]
         obs_keys=_split(obs_keys),
         operator=operator,
         operators_from_masks=operators_from_masks,
         filter_key=filter_key,
         task=task,
         bounds="clip" if clip_actions else "warn" if warn_actions else "error",
+        action_bounds=action_bounds,  # type: ignore[arg-type]
+        skip_bad_episodes=skip_bad_episodes,
+    )
+
+
+@app.command("import", rich_help_panel=DATA)
+def import_cmd(
+    source: Path = typer.Argument(..., help="robomimic .hdf5, LeRobot folder or .npz."),
+    out: Path = typer.Option(..., "-o", "--out", help="Demonstrations artifact to write."),
+    fmt: str = _FORMAT,
+    obs_keys: str = _OBS_KEYS,
+    operator: str = _OPERATOR,
+    operators_from_masks: str = _OPERATORS_FROM_MASKS,
+    filter_key: str = _FILTER_KEY,
+    task: str = _TASK,
+    clip_actions: bool = _CLIP,
+    warn_actions: bool = _WARN,
+    action_bounds: str = _ACTION_BOUNDS,
+    skip_bad_episodes: bool = _SKIP_BAD,
+) -> None:
+    """Import demonstrations from a robomimic, LeRobot or .npz dataset into a Parquet artifact.
+
+    Example: elicit-jax import low_dim.hdf5 --format robomimic --operators-from-masks
+    '*_operator_*' -o demos.parquet
+    """
+    from elicit_jax.data.convert import import_dataset
+
+    cfg = import_config(
+        source,
+        out,
+        fmt=fmt,
+        obs_keys=obs_keys,
+        operator=operator,
+        operators_from_masks=operators_from_masks,
+        filter_key=filter_key,
+        task=task,
+        clip_actions=clip_actions,
+        warn_actions=warn_actions,
         action_bounds=action_bounds,
         skip_bad_episodes=skip_bad_episodes,
     )

@@ -83,13 +83,24 @@ def pipeline_status(
 
 @app.command("report", rich_help_panel=PIPELINES)
 def report(
-    run_dir: Path = typer.Argument(..., help="A pipeline run directory."),
+    run_dir: Path = typer.Argument(..., help="A pipeline run or an elicitation session."),
     out: Path = typer.Option(None, "--out", "-o", help="Report directory [RUN_DIR/report]."),
 ) -> None:
-    """Write the Markdown and self-contained HTML report of a pipeline run.
+    """Write the Markdown and self-contained HTML report of a pipeline run or a session.
 
-    Example: elicit-jax report runs/filtering-cpu
+    Examples:
+      elicit-jax report runs/filtering-cpu
+      elicit-jax report sessions/op4
     """
+    from elicit_jax.artifact import read_json
+
+    header = read_json(run_dir / "artifact.json") if (run_dir / "artifact.json").is_file() else {}
+    if isinstance(header, dict) and header.get("kind") == "elicit-session":
+        from elicit_jax.elicit.report import write_session_report
+
+        md, page = write_session_report(run_dir, out)
+        typer.echo(f"wrote {md} and {page}")
+        return
     from elicit_jax.pipeline.run import render_run_report
 
     md, page = render_run_report(run_dir, out)

@@ -37,6 +37,8 @@ OBS_FIELDS: tuple[ObsField, ...] = fields_from_sizes(
 )
 OBS_DIM = 23
 ACTION_DIM = 7
+ACTION_NAMES = ("dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper")
+"""Names of the action dimensions (delta position, delta rotation, gripper)."""
 N_GRIPPER_Q = 6
 
 

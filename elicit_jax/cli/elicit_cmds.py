@@ -1,0 +1,223 @@
+"""Elicitation commands: ``elicit`` (a live session) and ``watch`` (demonstrations in a folder)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from elicit_jax.cli import data_cmds
+from elicit_jax.cli.app import app
+from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
+from elicit_jax.errors import ElicitError
+
+_PRESET = typer.Option(None, "--preset", help="Paper thresholds of a task: square-nut, ...")
+
+
+def _given(**values: Any) -> dict[str, Any]:
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def _stored_config(out: Path) -> dict[str, Any]:
+    from elicit_jax.elicit.store import SessionStore
+
+    return dict(SessionStore(out).header().get("config", {}))
+
+
+@app.command("elicit")
+def elicit_cmd(
+    out: Path = typer.Option(..., "-o", "--out", help="Session directory (created or resumed)."),
+    task: str = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`)."),
+    policy: Path = typer.Option(None, "--policy", help="Base policy (run or seed directory)."),
+    base_demos: Path = typer.Option(None, "--base-demos", help="D_base (demos artifact)."),
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    preset: str | None = _PRESET,
+    operator: str = typer.Option(
+        None, "--operator", help="Who demonstrates: scripted:STYLE (a task's scripted operator)."
+    ),
+    mode: str = typer.Option(None, "--mode", help="informed (default) or naive (control)."),
+    demos: int = typer.Option(None, "--demos", help="Demonstrations wanted [10]."),
+    batch: int = typer.Option(None, "--batch", help="Retrain after every N accepted [0: never]."),
+    fixed_base: bool = typer.Option(
+        None, "--fixed-base/--no-fixed-base", help="Score every batch against π_base."
+    ),
+    dagger: bool = typer.Option(None, "--dagger/--no-dagger", help="HG-DAgger: robot acts."),
+    practice: int = typer.Option(None, "--practice", help="Practice episodes first [3]."),
+    prompt: int = typer.Option(None, "--prompt", help="Base demos shown in the prompt [5]."),
+    accept_fraction: float = typer.Option(
+        None, "--accept-fraction", help="Reject above this fraction incompatible [0.05]."
+    ),
+    reject_count: int = typer.Option(
+        None, "--reject-count", help="Reject above N incompatible pairs (original code's rule)."
+    ),
+    window: int = typer.Option(None, "--window", help="Feedback window length [10]."),
+    windows: int = typer.Option(None, "--windows", help="Feedback windows on a rejection [3]."),
+    retrieval: str = typer.Option(None, "--retrieval", help="l2 (paper, default) or dtw."),
+    likelihood: str = typer.Option(
+        None, "--likelihood", help="ensemble-mean (paper, default) or member-average."
+    ),
+    ddof: int = typer.Option(None, "--ddof", help="Novelty std convention: 0 paper, 1 code."),
+    which: str = typer.Option(None, "--which", help="Checkpoint: best (default), final, epoch."),
+    policy_seed: int = typer.Option(None, "--policy-seed", help="Seed of a multi-seed run."),
+    seed: int = typer.Option(None, "--seed", help="Session seed (initial states) [0]."),
+    max_episodes: int = typer.Option(
+        None, "--max-episodes", help="Stop after N episodes [practice + 5 x demos]."
+    ),
+    horizon: int = typer.Option(None, "--horizon", help="Steps per episode [the task's]."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the session in OUT with its recorded settings."
+    ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start the session in OUT again."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress output."),
+) -> None:
+    """Run an elicitation session: practice, prompt, demonstrations with live M, feedback.
+
+    Re-running the same command resumes the session where it stopped (kill -9 loses at most
+    the episode in progress); `--resume -o OUT` does so with the recorded settings.
+
+    Example: elicit-jax elicit --task square-nut --policy runs/base --base-demos base.parquet
+    --thresholds thresholds.json --operator scripted:conflict-flip-pause --mode informed
+    --demos 10 --batch 5 -o sessions/op4
+    """
+    from elicit_jax.elicit.config import SessionConfig
+    from elicit_jax.elicit.run import elicit
+
+    given = _given(
+        task=task,
+        policy=None if policy is None else str(policy),
+        base_demos=None if base_demos is None else str(base_demos),
+        operator=operator,
+        mode=mode,
+        demos=demos,
+        batch=batch,
+        fixed_base=fixed_base,
+        dagger=dagger,
+        practice=practice,
+        prompt=prompt,
+        accept_fraction=accept_fraction,
+        reject_count=reject_count,
+        window=window,
+        windows=windows,
+        retrieval=retrieval,
+        likelihood=likelihood,
+        ddof=ddof,
+        which=which,
+        policy_seed=policy_seed,
+        seed=seed,
+        max_episodes=max_episodes,
+        horizon=horizon,
+    )
+    resolved = _resolve(thresholds, lambda_, eta, preset)
+    if resolved is not None:
+        given.update({"lambda": resolved[0], "eta": resolved[1]})
+        given["thresholds_file"] = None if thresholds is None else str(thresholds)
+    if resume:
+        config_dict = {**_stored_config(out), **given}
+    else:
+        missing = [f"--{k.replace('_', '-')}" for k in ("task", "policy", "base_demos", "operator")
+                   if k not in given]  # fmt: skip
+        if resolved is None:
+            missing.append("thresholds (--thresholds, --lambda/--eta or --preset)")
+        if missing:
+            raise ElicitError(f"missing {', '.join(missing)} (or --resume an existing session)")
+        config_dict = given
+    config = SessionConfig.from_dict(config_dict)
+    elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
+
+
+@app.command("watch")
+def watch_cmd(
+    inbox: Path = typer.Argument(..., help="Folder where demonstrations land."),
+    policy: Path = typer.Option(..., "--policy", help="Policy to score against."),
+    base_demos: Path = typer.Option(..., "--base-demos", help="D_base (for feedback)."),
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    preset: str | None = _PRESET,
+    out: Path = typer.Option(None, "-o", "--out", help="Pages and log [INBOX/verdicts]."),
+    accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
+    reject_count: int = typer.Option(None, "--reject-count", help="Reject above N pairs."),
+    window: int = typer.Option(10, "--window", help="Feedback window length."),
+    windows: int = typer.Option(3, "--windows", help="Feedback windows per demonstration."),
+    retrieval: str = typer.Option("l2", "--retrieval", help="l2 (paper) or dtw."),
+    likelihood: str = typer.Option("ensemble-mean", "--likelihood", help="Or member-average."),
+    ddof: int = typer.Option(0, "--ddof", help="Novelty std convention: 0 paper, 1 code."),
+    which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
+    policy_seed: int = typer.Option(None, "--policy-seed", help="Seed of a multi-seed run."),
+    settle: float = typer.Option(2.0, "--settle", help="Seconds unchanged before reading."),
+    poll: float = typer.Option(1.0, "--poll", help="Seconds between scans."),
+    once: bool = typer.Option(False, "--once", help="Stop when everything present is judged."),
+    timeout: float = typer.Option(None, "--timeout", help="Stop after this many seconds."),
+    fmt: str = data_cmds._FORMAT,
+    obs_keys: str = data_cmds._OBS_KEYS,
+    operator: str = data_cmds._OPERATOR,
+    operators_from_masks: str = data_cmds._OPERATORS_FROM_MASKS,
+    filter_key: str = data_cmds._FILTER_KEY,
+    task: str = data_cmds._TASK,
+    clip_actions: bool = data_cmds._CLIP,
+    warn_actions: bool = data_cmds._WARN,
+    action_bounds: str = data_cmds._ACTION_BOUNDS,
+) -> None:
+    """Give a verdict and feedback for each demonstration that lands in INBOX.
+
+    Robomimic .hdf5 files and LeRobot dataset folders are read with `import`'s options once
+    they stop changing (--settle); each demonstration gets a console line and an HTML/PNG
+    page in OUT. Runs until interrupted (or --once / --timeout).
+
+    Example: elicit-jax watch INBOX/ --policy runs/base --base-demos base.parquet
+    --thresholds t.json
+    """
+    import dataclasses
+
+    from elicit_jax.elicit.watch import WatchConfig, Watcher
+
+    resolved = _resolve(thresholds, lambda_, eta, preset)
+    if resolved is None:
+        raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
+    imp = data_cmds.import_config(
+        inbox,
+        "",
+        fmt=fmt,
+        obs_keys=obs_keys,
+        operator=operator,
+        operators_from_masks=operators_from_masks,
+        filter_key=filter_key,
+        task=task,
+        clip_actions=clip_actions,
+        warn_actions=warn_actions,
+        action_bounds=action_bounds,
+    )
+    options = tuple(
+        (f.name, getattr(imp, f.name))
+        for f in dataclasses.fields(imp)
+        if f.name not in ("source", "out")
+    )
+    config = WatchConfig(
+        inbox=str(inbox),
+        policy=str(policy),
+        base_demos=str(base_demos),
+        lambda_=resolved[0],
+        eta=resolved[1],
+        out=None if out is None else str(out),
+        which=which,
+        policy_seed=policy_seed,
+        likelihood=likelihood,
+        ddof=ddof,
+        accept_fraction=accept_fraction,
+        reject_count=reject_count,
+        window=window,
+        windows=windows,
+        retrieval=retrieval,
+        import_options=options,
+        settle=settle,
+        poll=poll,
+        once=once,
+        timeout=timeout,
+    )
+    watcher = Watcher(config, echo=typer.echo)
+    typer.echo(f"watching {inbox} (pages and log in {watcher.out}; Ctrl-C stops)")
+    n = watcher.run()
+    typer.echo(f"judged {n} demonstrations")

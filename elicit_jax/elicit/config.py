@@ -1,0 +1,162 @@
+"""Session configuration: a frozen dataclass with the paper's protocol as defaults.
+
+Defaults (the paper's elicitation protocol): 3 practice episodes, a prompt of 5 base
+demonstrations, the 5% accept/reject rule, feedback on the 3 worst windows of 10 steps with
+L2 retrieval, retraining after each batch scored against the new policy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from elicit_jax.errors import ElicitError
+
+MODES = ("informed", "naive")
+RETRIEVALS = ("l2", "dtw")
+SEED_STRIDE = 100_000
+PATH_FIELDS = ("policy", "base_demos", "thresholds_file")
+"""Fields naming input files: a resumed session compares the files' hashes, not the paths."""
+EXTENDABLE = ("demos", "max_episodes")
+"""Settings a resumed session may change (ask for more demonstrations or episodes)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionConfig:
+    """How an elicitation session runs.
+
+    Attributes:
+      task: simulated task name.
+      policy: base policy checkpoint (run or seed directory).
+      base_demos: the base demonstrations D_base (demos artifact).
+      lambda_: likelihood-error threshold λ.
+      eta: novelty threshold η.
+      thresholds_file: the thresholds artifact λ, η came from, if any.
+      operator: operator spec, e.g. ``scripted:conflict-flip-pause``.
+      mode: ``informed`` (prompt, live indicator, feedback, the rule applied) or ``naive``
+        (the paper's control: practice only; the rule is computed and recorded, not applied).
+      demos: demonstrations wanted (accepted).
+      batch: retrain after every this many accepted demonstrations (0: never).
+      fixed_base: score every batch against the base policy (else against the latest π_new).
+      dagger: HG-DAgger: the policy acts, the operator takes over.
+      practice: practice episodes first (recorded, never part of the demonstrations).
+      prompt: base demonstrations shown in the prompt (informed mode).
+      accept_fraction: the paper's rule: reject above this fraction of incompatible pairs.
+      reject_count: the original code's rule: reject above this many (None: use the fraction).
+      window: feedback window length (steps).
+      windows: feedback windows shown on a rejection.
+      retrieval: ``l2`` (paper) or ``dtw`` (original code).
+      likelihood: ``ensemble-mean`` (paper) or ``member-average``.
+      ddof: novelty std convention (0 paper, 1 original code).
+      which: checkpoint of the policy: ``best``, ``final`` or an epoch.
+      policy_seed: seed of a multi-seed run directory (None: its only seed).
+      seed: session seed (initial states, operator randomness).
+      max_episodes: stop after this many episodes, practice included (0: practice + 5 × demos).
+      horizon: control steps per episode (0: the task's).
+    """
+
+    task: str
+    policy: str
+    base_demos: str
+    lambda_: float
+    eta: float
+    operator: str
+    thresholds_file: str | None = None
+    mode: str = "informed"
+    demos: int = 10
+    batch: int = 0
+    fixed_base: bool = False
+    dagger: bool = False
+    practice: int = 3
+    prompt: int = 5
+    accept_fraction: float = 0.05
+    reject_count: int | None = None
+    window: int = 10
+    windows: int = 3
+    retrieval: str = "l2"
+    likelihood: str = "ensemble-mean"
+    ddof: int = 0
+    which: str = "best"
+    policy_seed: int | None = None
+    seed: int = 0
+    max_episodes: int = 0
+    horizon: int = 0
+
+    def __post_init__(self) -> None:
+        checks = (
+            (self.mode in MODES, f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}"),
+            (self.demos >= 1, f"--demos must be >= 1, got {self.demos}"),
+            (self.batch >= 0, f"--batch must be >= 0, got {self.batch}"),
+            (self.practice >= 0, f"--practice must be >= 0, got {self.practice}"),
+            (self.prompt >= 0, f"--prompt must be >= 0, got {self.prompt}"),
+            (self.window >= 1, f"--window must be >= 1, got {self.window}"),
+            (self.windows >= 1, f"--windows must be >= 1, got {self.windows}"),
+            (
+                self.retrieval in RETRIEVALS,
+                f"--retrieval must be one of {', '.join(RETRIEVALS)}, got {self.retrieval!r}",
+            ),
+            (self.max_episodes >= 0, f"--max-episodes must be >= 0, got {self.max_episodes}"),
+            (self.horizon >= 0, f"--horizon must be >= 0, got {self.horizon}"),
+            (self.seed >= 0, f"--seed must be >= 0, got {self.seed}"),
+            (":" in self.operator, f"operator must look like KIND:NAME, got {self.operator!r}"),
+        )
+        for ok, msg in checks:
+            if not ok:
+                raise ElicitError(msg)
+        for name, v in (("lambda", self.lambda_), ("eta", self.eta)):
+            if not (math.isfinite(v) and v > 0):
+                raise ElicitError(f"{name} must be a finite number > 0, got {v}")
+        self.rule()  # validates the fraction and the count
+        self.score_config()
+
+    @property
+    def episode_limit(self) -> int:
+        """Most episodes the session records (practice included)."""
+        return self.max_episodes or self.practice + 5 * self.demos
+
+    def rule(self) -> Any:
+        """The accept/reject rule."""
+        from elicit_jax.elicit.rules import AcceptRule
+
+        return AcceptRule(fraction=self.accept_fraction, count=self.reject_count)
+
+    def score_config(self) -> Any:
+        """The :class:`~elicit_jax.compat.measures.ScoreConfig` of the live scorer."""
+        from elicit_jax.compat.measures import ScoreConfig
+
+        return ScoreConfig(
+            likelihood=self.likelihood,  # type: ignore[arg-type]
+            ddof=self.ddof,
+            lambda_=self.lambda_,
+            eta=self.eta,
+            accept_fraction=self.accept_fraction,
+        )
+
+    def init_seed(self, episode: int) -> int:
+        """Simulator seed of episode ``episode``'s initial state."""
+        return self.seed * SEED_STRIDE + episode
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (``lambda_`` written as ``lambda``)."""
+        d = dataclasses.asdict(self)
+        d["lambda"] = d.pop("lambda_")
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SessionConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        d = dict(data)
+        if "lambda" in d:
+            d["lambda_"] = d.pop("lambda")
+        unknown = set(d) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ElicitError(f"unknown session config key(s): {', '.join(sorted(unknown))}")
+        return cls(**d)
+
+    def differences(self, other: SessionConfig) -> list[str]:
+        """Names of the settings (not input paths) that differ from ``other``."""
+        a, b = self.to_dict(), other.to_dict()
+        skip = (*PATH_FIELDS, *EXTENDABLE)
+        return sorted(k for k in a if k not in skip and a[k] != b.get(k))
