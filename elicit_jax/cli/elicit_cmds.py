@@ -22,6 +22,8 @@ def _given(**values: Any) -> dict[str, Any]:
 def _stored_config(out: Path) -> dict[str, Any]:
     from elicit_jax.elicit.store import SessionStore
 
+    if not (out / "artifact.json").is_file():
+        raise ElicitError("holds no session to resume", out)
     return dict(SessionStore(out).header().get("config", {}))
 
 
@@ -117,8 +119,11 @@ def elicit_cmd(
     if resume:
         config_dict = {**_stored_config(out), **given}
     else:
-        missing = [f"--{k.replace('_', '-')}" for k in ("task", "policy", "base_demos", "operator")
-                   if k not in given]  # fmt: skip
+        missing = [
+            f"--{k.replace('_', '-')}"
+            for k in ("task", "policy", "base_demos", "operator")
+            if k not in given
+        ]
         if resolved is None:
             missing.append("thresholds (--thresholds, --lambda/--eta or --preset)")
         if missing:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import zlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -16,7 +17,6 @@ from elicit_jax.errors import ElicitError
 
 MODES = ("informed", "naive")
 RETRIEVALS = ("l2", "dtw")
-SEED_STRIDE = 100_000
 PATH_FIELDS = ("policy", "base_demos", "thresholds_file")
 """Fields naming input files: a resumed session compares the files' hashes, not the paths."""
 EXTENDABLE = ("demos", "max_episodes")
@@ -135,8 +135,10 @@ class SessionConfig:
         )
 
     def init_seed(self, episode: int) -> int:
-        """Simulator seed of episode ``episode``'s initial state."""
-        return self.seed * SEED_STRIDE + episode
+        """Simulator seed of episode ``episode``'s initial state: a hash of the session seed
+        and the index (31 bits), so sessions do not replay ``collect``'s initial states
+        (``seed * 100000 + attempt``) and a resumed session repeats its own."""
+        return zlib.crc32(f"session|{self.seed}|{episode}".encode()) & 0x7FFFFFFF
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (``lambda_`` written as ``lambda``)."""

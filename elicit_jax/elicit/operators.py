@@ -17,9 +17,11 @@ intervener watches two signs of trouble and takes over at the first:
 
 1. *no progress*: the end effector (``robot0_eef_pos``) moved less than ``stall_distance``
    (1 cm) over the last ``stall_steps`` (20) robot-controlled steps;
-2. *off the base's route*: the state is further than ``route_distance`` (1.5) from every
-   state of the base demonstrations, in the RMS over dimensions of the base-normalised
-   difference (units of the base data's standard deviations).
+2. *off the base's route*: the state is further than ``route_distance`` (5) from every
+   state of the base demonstrations, in Euclidean distance of base-normalised states (each
+   dimension in units of the base data's standard deviation). Measured on square-nut with
+   10 base demonstrations: new same-style episodes stay below 4.5, a weak policy's states
+   reach 4–7.
 
 On taking over it restarts its scripted operator from the current state (the operator's
 phases start again from the first and follow the state from there) and keeps control for at
@@ -118,12 +120,12 @@ class InterventionRule:
 
     stall_steps: int = 20
     stall_distance: float = 0.01
-    route_distance: float = 1.5
+    route_distance: float = 5.0
     hold_steps: int = 30
 
 
 class RouteDistance:
-    """Distance of a state to the nearest base state (RMS of base-normalised differences)."""
+    """Euclidean distance of a state to the nearest base state, dims in base-std units."""
 
     def __init__(self, base_obs: np.ndarray) -> None:
         self.mean, self.std = normalizer(base_obs)
@@ -133,7 +135,7 @@ class RouteDistance:
     def __call__(self, obs: np.ndarray) -> float:
         x = (np.asarray(obs, np.float64) - self.mean) / self.std
         d2 = self.sq - 2.0 * (self.points @ x.astype(np.float32)) + float(x @ x)
-        return float(np.sqrt(max(float(d2.min()), 0.0) / len(x)))
+        return float(np.sqrt(max(float(d2.min()), 0.0)))
 
 
 class ScriptedIntervener:

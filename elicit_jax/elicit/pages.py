@@ -146,11 +146,17 @@ def write_demo_page(
     windows = html_table(
         ["#", "steps", "1−M", "base demo", "base steps", "what differs"],
         [
-            (i + 1, f"{f.start}–{f.stop - 1}", f"{f.incompatibility:.2f}", f.base_episode,
-             f"{f.base_start}–{f.base_stop - 1}", f.text.split(": ", 1)[-1])
+            (
+                i + 1,
+                f"{f.start}–{f.stop - 1}",
+                f"{f.incompatibility:.2f}",
+                f.base_episode,
+                f"{f.base_start}–{f.base_stop - 1}",
+                f.text.split(": ", 1)[-1],
+            )
             for i, f in enumerate(feedback)
         ],
-    )  # fmt: skip
+    )
     body = (
         f"<h1>{html.escape(title)}</h1>"
         f'<p class="{html.escape(verdict)}"><b>{html.escape(verdict.upper())}</b></p>'

@@ -302,9 +302,10 @@ def _open_store(
         diffs = config.differences(SessionConfig.from_dict(old.get("config", {})))
         recorded = old.get("inputs", {})
         diffs += [
-            f"{k} file" for k, p in inputs.items()
+            f"{k} file"
+            for k, p in inputs.items()
             if recorded.get(k, {}).get("sha256") != file_sha256(p)
-        ]  # fmt: skip
+        ]
         if not overwrite and diffs:
             raise ElicitError(
                 f"holds a session with different settings ({', '.join(diffs)}); re-run with its "

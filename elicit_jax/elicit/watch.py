@@ -220,9 +220,10 @@ class Watcher:
     def pending(self) -> list[Path]:
         """Items not yet handled in their current state."""
         return [
-            p for p in candidates(self.inbox, self.out)
+            p
+            for p in candidates(self.inbox, self.out)
             if (p.name, repr(signature(p))) not in self.handled
-        ]  # fmt: skip
+        ]
 
     def scan(self, now: float | None = None) -> int:
         """Judge every settled, unhandled item once; returns demonstrations judged."""
@@ -320,9 +321,15 @@ class Watcher:
         else:
             verdict = "rejected" if self.rule.rejects(n_inc, length) else "accepted"
         feedback = explain_episode(
-            m, demos.obs[s:t], demos.action[s:t], self.base, window=c.window, k=c.windows,
-            method=c.retrieval, stats=self.stats,
-        )  # fmt: skip
+            m,
+            demos.obs[s:t],
+            demos.action[s:t],
+            self.base,
+            window=c.window,
+            k=c.windows,
+            method=c.retrieval,
+            stats=self.stats,
+        )
         shown = feedback if verdict == "rejected" else []
         text = summary_text(verdict, n_inc, length, self.rule.describe(), shown)
         if verdict == "failed":

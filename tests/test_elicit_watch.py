@@ -1,0 +1,185 @@
+"""``elicit-jax watch``: robomimic files and LeRobot episodes landing in a folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+from fixtures_data import write_lerobot_v21, write_robomimic
+
+from elicit_jax.data.demos import from_episodes, write_demos
+
+W = (
+    np.random.default_rng(42).normal(size=(23, 7)) / 4
+)  # the base operator's policy: a = tanh(obs W)
+
+
+def _episode(rng, t=40, style="base"):
+    obs = rng.normal(size=(t, 23)).astype(np.float32)
+    act = np.tanh(obs @ W) * (1.0 if style == "base" else -1.0)
+    return obs, act.astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+
+    d = tmp_path_factory.mktemp("watch")
+    rng = np.random.default_rng(0)
+    eps = []
+    for _ in range(20):
+        obs, act = _episode(rng)
+        eps.append({"obs": obs, "action": act})
+    base = from_episodes(eps, operators="base")
+    write_demos(d / "base.parquet", base)
+    cfg = TrainConfig(
+        ensemble_size=3,
+        hidden=(64, 64),
+        dropout=0.0,
+        epochs=80,
+        batch_size=64,
+        checkpoint_every=80,
+        progress_every=50,
+        seeds=(0,),
+        val_fraction=0.0,
+    )
+    train_policy(base, cfg, d / "run", quiet=True)
+    return d
+
+
+def _robomimic_demo(obs, act):
+    return {
+        "actions": act.astype(np.float64),
+        "rewards": np.r_[np.zeros(len(act) - 1), 1.0],
+        "obs/robot0_eef_pos": obs[:, 0:3],
+        "obs/robot0_eef_quat": obs[:, 3:7],
+        "obs/robot0_gripper_qpos": obs[:, 7:9],
+        "obs/object": obs[:, 9:23],
+    }
+
+
+def _lerobot(root, episodes):
+    eps = []
+    for i, (obs, act) in enumerate(episodes):
+        flags = np.zeros(len(obs), bool)
+        flags[-1] = True
+        eps.append(
+            {
+                "episode_index": i,
+                "state": obs,
+                "action": act,
+                "reward": flags.astype(np.float32),
+                "success_flags": flags,
+                "task_index": 0,
+            }
+        )
+    write_lerobot_v21(root, eps, ["stack"])
+    info = json.loads((root / "meta" / "info.json").read_text())
+    info["features"]["observation.state"]["shape"] = [23]
+    info["features"]["action"]["shape"] = [7]
+    (root / "meta" / "info.json").write_text(json.dumps(info))
+
+
+def _main(monkeypatch, capsys, *args):
+    from elicit_jax.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
+    code = 0
+    try:
+        main()
+    except SystemExit as e:
+        code = e.code or 0
+    return (code, *capsys.readouterr())
+
+
+def test_watch_robomimic_and_lerobot_inbox(setup, tmp_path, monkeypatch, capsys):
+    rng = np.random.default_rng(1)
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    good, bad = _episode(rng), _episode(rng, style="other")
+    write_robomimic(
+        inbox / "op1.hdf5",
+        {"demo_0": _robomimic_demo(*good), "demo_1": _robomimic_demo(*bad)},
+    )
+    _lerobot(inbox / "op2", [_episode(rng), _episode(rng, style="other")])
+    (inbox / "op3.hdf5.part").write_bytes(b"still copying")
+    (inbox / "broken.hdf5").write_bytes(b"\x89HDF\r\n\x1a\n cut short")
+    args = [
+        "watch",
+        inbox,
+        "--policy",
+        setup / "run",
+        "--base-demos",
+        setup / "base.parquet",
+        "--lambda",
+        "0.1",
+        "--eta",
+        "10",
+        "--once",
+        "--settle",
+        "0.2",
+        "--poll",
+        "0.1",
+    ]
+    code, out, err = _main(monkeypatch, capsys, *args)
+    assert code == 0, err
+    lines = [x for x in out.splitlines() if " / " in x]
+    verdicts = {x.split(":")[0]: x.split(": ", 1)[1].split(":")[0] for x in lines}
+    assert verdicts == {
+        "op1.hdf5 / demo_0": "accepted",
+        "op1.hdf5 / demo_1": "rejected",
+        "op2 / 0": "accepted",
+        "op2 / 1": "rejected",
+    }
+    assert "broken.hdf5" in out and out.count("error:") == 1 and "op3" not in out
+    rejected = next(x for x in lines if "demo_1" in x)
+    assert "worst steps" in rejected and "compare base demo" in rejected
+    pages = inbox / "verdicts"
+    for stem in ("op1.hdf5__demo_0", "op1.hdf5__demo_1", "op2__0", "op2__1"):
+        page = (pages / f"{stem}.html").read_text()
+        assert "data:image/png;base64," in page and (pages / f"{stem}.png").stat().st_size > 1000
+    log = [json.loads(x) for x in (pages / "verdicts.jsonl").read_text().splitlines()]
+    assert len(log) == 5 and sum("error" in r for r in log) == 1
+    # a restart judges nothing again; a LeRobot folder that grows gets its new episode judged
+    code, out, _ = _main(monkeypatch, capsys, *args)
+    assert code == 0 and "judged 0 demonstrations" in out
+    shutil.rmtree(inbox / "op2")
+    rng2 = np.random.default_rng(1)
+    _episode(rng2), _episode(rng2, style="other")  # the same first two episodes again
+    _lerobot(inbox / "op2", [_episode(rng2), _episode(rng2, style="other"), _episode(rng2)])
+    code, out, _ = _main(monkeypatch, capsys, *args)
+    assert code == 0 and "judged 1 demonstrations" in out and "op2 / 2: accepted" in out
+
+
+def test_a_file_still_being_written_is_not_read(setup, tmp_path):
+    from elicit_jax.elicit.watch import WatchConfig, Watcher
+
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    full = tmp_path / "full.hdf5"
+    rng = np.random.default_rng(2)
+    write_robomimic(full, {"demo_0": _robomimic_demo(*_episode(rng))})
+    data = full.read_bytes()
+    messages = []
+    w = Watcher(
+        WatchConfig(
+            inbox=str(inbox),
+            policy=str(setup / "run"),
+            base_demos=str(setup / "base.parquet"),
+            lambda_=0.1,
+            eta=10.0,
+            settle=1.0,
+        ),
+        echo=messages.append,
+    )
+    target = inbox / "new.hdf5"
+    target.write_bytes(data[: len(data) // 2])  # the recorder has written half of it
+    assert w.scan(now=0.0) == 0 and w.scan(now=0.6) == 0
+    target.write_bytes(data)  # ... now all of it: the clock starts again
+    assert w.scan(now=0.9) == 0 and w.scan(now=1.5) == 0
+    assert w.scan(now=2.0) == 1
+    assert len(messages) == 1 and "accepted" in messages[0] and "error" not in messages[0]
