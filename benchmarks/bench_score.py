@@ -75,25 +75,27 @@ def _best(fn, repeats: int) -> float:
 
 
 def _torch_models(policy):
+    """The policy's members as PyTorch modules (same weights; sizes read from the params)."""
     import numpy as np
     import torch
     from torch import nn
 
     params = policy.params
+    trunk = params["Trunk_0"]
+    n_layers = sum(1 for k in trunk if k.startswith("Dense_"))
     models = []
-    for k in range(K):
+    for k in range(np.asarray(params["Dense_0"]["kernel"]).shape[0]):
         layers = []
-        for i in range(2):
-            dense = params["Trunk_0"][f"Dense_{i}"]
-            norm = params["Trunk_0"][f"LayerNorm_{i}"]
+        for i in range(n_layers):
+            dense, norm = trunk[f"Dense_{i}"], trunk[f"LayerNorm_{i}"]
             lin = nn.Linear(*np.asarray(dense["kernel"][k]).shape)
             lin.weight.data = torch.from_numpy(np.asarray(dense["kernel"][k]).T.copy())
             lin.bias.data = torch.from_numpy(np.asarray(dense["bias"][k]).copy())
-            ln = nn.LayerNorm(HIDDEN, eps=1e-6)
+            ln = nn.LayerNorm(lin.out_features, eps=1e-6)
             ln.weight.data = torch.from_numpy(np.asarray(norm["scale"][k]).copy())
             ln.bias.data = torch.from_numpy(np.asarray(norm["bias"][k]).copy())
-            layers += [lin, ln, nn.ReLU()] + ([nn.Dropout(0.5)] if i == 0 else [])
-        head = nn.Linear(HIDDEN, ACT)
+            layers += [lin, ln, nn.ReLU()] + ([nn.Dropout(0.5)] if i < n_layers - 1 else [])
+        head = nn.Linear(*np.asarray(params["Dense_0"]["kernel"][k]).shape)
         head.weight.data = torch.from_numpy(np.asarray(params["Dense_0"]["kernel"][k]).T.copy())
         head.bias.data = torch.from_numpy(np.asarray(params["Dense_0"]["bias"][k]).copy())
         models.append(nn.Sequential(*layers, head, nn.Tanh()).eval())
