@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -246,6 +247,14 @@ def test_retraining_between_batches(nut, tmp_path):
         "start",
         "done",
     ]
+    # killed while training batch 2 (an atomic directory write: no half policy) -> resume trains it
+    shutil.rmtree(tmp_path / "b" / "policies" / "batch2")
+    _, rec = _run(nut, tmp_path / "b", "scripted:same-style", practice=0, batch=1)
+    assert [(e.batch, e.status) for e in rec.events if type(e).__name__ == "RetrainEvent"] == [
+        (2, "start"),
+        (2, "done"),
+    ]
+    assert (tmp_path / "b" / "policies" / "batch2" / "artifact.json").exists()
     _run(nut, tmp_path / "f", "scripted:same-style", practice=0, batch=1, fixed_base=True, demos=2)
     heads = SessionStore(tmp_path / "f").episode_headers()
     assert [h["policy_batch"] for h in heads] == [0, 0]
@@ -262,7 +271,57 @@ def _cli(*args: str, **kw) -> subprocess.Popen:
     )
 
 
+def _same_episodes(a: SessionStore, b: SessionStore) -> list[dict]:
+    """Assert two sessions recorded the same episodes (seeds, verdicts, actions)."""
+    ha, hb = a.episode_headers(), b.episode_headers()
+    assert [h["index"] for h in ha] == list(range(len(ha)))  # nothing lost, nothing twice
+    key = ("index", "episode_kind", "init_seed", "operator_seed", "verdict", "length")
+    assert [[h[k] for k in key] for h in ha] == [[h[k] for k in key] for h in hb]
+    for h in ha:  # same actions: the operator's randomness resumed exactly
+        np.testing.assert_array_equal(
+            a.read_episode(h["index"]).action, b.read_episode(h["index"]).action
+        )
+    return ha
+
+
+class Crash(Exception):
+    pass
+
+
+class CrashingOperator(Recorder):
+    """Dies at step ``at`` of episode ``episode`` (like a kill in the middle of it)."""
+
+    def __init__(self, inner, episode, at):
+        super().__init__(inner)
+        self.episode, self.at = episode, at
+
+    def act(self, observation):
+        if (observation.episode, observation.step) == (self.episode, self.at):
+            raise Crash
+        return self.inner.act(observation)
+
+
+def test_a_crash_mid_episode_loses_only_that_episode(nut, tmp_path):
+    from elicit_jax.data.demos import read_demos
+
+    kw = dict(mode="naive", demos=2, practice=1)
+    setup, op, _ = open_session(_config(nut, "scripted:conflict-flip-pause", **kw), tmp_path / "c")
+    with pytest.raises(Crash):
+        run_session(setup, CrashingOperator(op, episode=2, at=150))
+    assert [p.name for p in SessionStore(tmp_path / "c").episode_files()] == [
+        "e000000.parquet",
+        "e000001.parquet",
+    ]
+    session, _ = _run(nut, tmp_path / "c", "scripted:conflict-flip-pause", **kw)  # resumes
+    _run(nut, tmp_path / "ref", "scripted:conflict-flip-pause", **kw)
+    _same_episodes(SessionStore(tmp_path / "c"), SessionStore(tmp_path / "ref"))
+    assert session.progress.counts.accepted == 2
+    assert read_demos(tmp_path / "c" / "demos.parquet").n_episodes == 2
+
+
 def test_kill_9_mid_session_and_resume_loses_only_the_episode_in_progress(nut, tmp_path):
+    from elicit_jax.data.demos import read_demos
+
     out = tmp_path / "killed"
     args = [
         "elicit",
@@ -277,12 +336,12 @@ def test_kill_9_mid_session_and_resume_loses_only_the_episode_in_progress(nut, t
         "--eta",
         str(nut.eta),
         "--operator",
-        "scripted:same-style",
+        "scripted:conflict-flip-pause",
+        "--mode",
+        "naive",
         "--demos",
-        "4",
+        "3",
         "--practice",
-        "1",
-        "--prompt",
         "1",
         "-o",
         str(out),
@@ -293,31 +352,26 @@ def test_kill_9_mid_session_and_resume_loses_only_the_episode_in_progress(nut, t
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.01)
+    time.sleep(0.15)  # into the next episode (about 0.5 s long)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    done_before = sorted(p.name for p in (out / "episodes").glob("e*.parquet"))
-    assert 2 <= len(done_before) <= 3
+    assert 2 <= len(list((out / "episodes").glob("e*.parquet"))) <= 3
     again = _cli(*args)
     stdout, stderr = again.communicate(timeout=180)
     assert again.returncode == 0, stderr
     assert "resuming the session" in stdout
-    # the same session run without interruption, in process
     _run(
-        nut, tmp_path / "ref", "scripted:same-style", demos=4, practice=1, prompt=1, max_episodes=0
+        nut,
+        tmp_path / "ref",
+        "scripted:conflict-flip-pause",
+        mode="naive",
+        demos=3,
+        practice=1,
+        max_episodes=0,
     )
-    a, b = SessionStore(out), SessionStore(tmp_path / "ref")
-    ha, hb = a.episode_headers(), b.episode_headers()
-    assert [h["index"] for h in ha] == list(range(len(ha)))  # nothing lost, nothing twice
-    key = ("index", "episode_kind", "init_seed", "operator_seed", "verdict", "length")
-    assert [[h[k] for k in key] for h in ha] == [[h[k] for k in key] for h in hb]
-    for h in ha:  # same actions: the operator's randomness resumed exactly
-        np.testing.assert_array_equal(
-            a.read_episode(h["index"]).action, b.read_episode(h["index"]).action
-        )
-    from elicit_jax.data.demos import read_demos
-
+    _same_episodes(SessionStore(out), SessionStore(tmp_path / "ref"))
     demos = read_demos(out / "demos.parquet")
-    assert demos.n_episodes == 4 and len(set(demos.extra["session_episode"])) == 4
+    assert demos.n_episodes == 3 and len(set(demos.extra["session_episode"])) == 3
     assert not list(out.rglob(".*.tmp"))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import jax
 import numpy as np
@@ -163,7 +164,8 @@ def test_live_scorer_refuses_an_lstm():
     from elicit_jax.elicit.live import check_live_policy
 
     with pytest.raises(ElicitError, match="feed-forward"):
-        check_live_policy(_policy("lstm", hidden=(8, 8)))
+        check_live_policy(SimpleNamespace(kind="lstm"))
+    check_live_policy(SimpleNamespace(kind="mdn"))
 
 
 def _record(index=0, n=6, scored_from=2):

@@ -46,7 +46,7 @@ class Counts:
     Attributes:
       practice: practice episodes done.
       accepted: demonstrations accepted (they form the session's demos artifact).
-      rejected: demonstrations rejected by the rule (informed mode) .
+      rejected: demonstrations rejected by the rule (informed mode).
       failed: demonstrations that did not complete the task (never accepted).
       unused: DAgger episodes the robot finished with no intervention (nothing to store).
       episodes: all episodes recorded, practice included.

@@ -70,6 +70,7 @@ class Session:
         self.end_reason = ""
         self._sim: Any = None
         self._buf: dict[str, list[Any]] = {}
+        self._robot_action: tuple[int, np.ndarray] | None = None
         self._prompted = False
 
     # --- public driving API ----------------------------------------------------------------
@@ -172,10 +173,13 @@ class Session:
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def _policy_action(self, obs: np.ndarray) -> np.ndarray:
-        zeros = np.zeros(self.setup.action_dim, np.float32)
-        return self.setup.scorer.score(self.setup.policy, obs, zeros).policy_action.astype(
-            np.float32
-        )
+        """The current policy's action at this step's state (computed once per step)."""
+        step = len(self._buf["obs"])
+        if self._robot_action is None or self._robot_action[0] != step:
+            zeros = np.zeros(self.setup.action_dim, np.float32)
+            a = self.setup.scorer.score(self.setup.policy, obs, zeros).policy_action
+            self._robot_action = (step, a.astype(np.float32))
+        return self._robot_action[1]
 
     def _score(self, obs: np.ndarray, action: np.ndarray) -> None:
         t = time.perf_counter()
@@ -183,8 +187,9 @@ class Session:
         ms = 1e3 * (time.perf_counter() - t)
         buf = self._buf
         buf["score"].append((s.likelihood, s.novelty, s.compatibility, s.incompatible, ms))
+        self._n_scored += 1
+        self._n_incompatible += int(s.incompatible)
         if self._indicator:
-            scored = [x for x in buf["score"] if np.isfinite(x[2])]
             self._emit(
                 IndicatorEvent(
                     step=len(buf["obs"]) - 1,
@@ -192,8 +197,8 @@ class Session:
                     novelty=s.novelty,
                     compatibility=s.compatibility,
                     incompatible=s.incompatible,
-                    incompatible_so_far=sum(bool(x[3]) for x in scored),
-                    allowed=self.setup.rule.allowed(len(scored)),
+                    incompatible_so_far=self._n_incompatible,
+                    allowed=self.setup.rule.allowed(self._n_scored),
                 )
             )
 
@@ -229,6 +234,8 @@ class Session:
         self._buf = {
             k: [] for k in ("obs", "action", "operator", "qpos", "qvel", "time_s", "score")
         }
+        self._n_scored = self._n_incompatible = 0
+        self._robot_action = None
         self._t0 = time.perf_counter()
         self._started = time.time()
         self._emit(
