@@ -12,42 +12,44 @@ from fixtures_data import write_lerobot_v21, write_robomimic
 
 from elicit_jax.data.demos import from_episodes, write_demos
 
-W = (
-    np.random.default_rng(42).normal(size=(23, 7)) / 4
-)  # the base operator's policy: a = tanh(obs W)
+POLICIES: dict = {}
 
 
-def _episode(rng, t=40, style="base"):
-    obs = rng.normal(size=(t, 23)).astype(np.float32)
-    act = np.tanh(obs @ W) * (1.0 if style == "base" else -1.0)
+def _episode(rng, t=40, style="base", dims=(23, 7)):
+    """States at random; actions of the policy trained for ``dims`` ("base": exactly the
+    policy's own, so every pair is compatible) or their opposite ("other")."""
+    import jax.numpy as jnp
+
+    obs = rng.normal(size=(t, dims[0])).astype(np.float32)
+    _, act = POLICIES[dims].act((), jnp.asarray(obs))
+    act = np.clip(np.asarray(act), -0.99, 0.99) * (1.0 if style == "base" else -1.0)
     return obs, act.astype(np.float32)
+
+
+def _base_and_policy(d, dims):
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+
+    rng = np.random.default_rng(0)
+    eps = [
+        {"obs": rng.normal(size=(40, dims[0])), "action": rng.uniform(-1, 1, (40, dims[1]))}
+        for _ in range(6)
+    ]
+    base = from_episodes(eps, operators="base")
+    write_demos(d / "base.parquet", base)
+    cfg = TrainConfig(ensemble_size=3, hidden=(32, 32), epochs=1, checkpoint_every=1, seeds=(0,))
+    train_policy(base, cfg, d / "run", quiet=True)
+    POLICIES[dims] = load_policy(d / "run")
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    from elicit_jax.policy.config import TrainConfig
-    from elicit_jax.policy.train import train_policy
-
+    """A robomimic-shaped (23-D obs, 7-D action) and a LeRobot-shaped (6, 6) base + policy."""
     d = tmp_path_factory.mktemp("watch")
-    rng = np.random.default_rng(0)
-    eps = []
-    for _ in range(20):
-        obs, act = _episode(rng)
-        eps.append({"obs": obs, "action": act})
-    base = from_episodes(eps, operators="base")
-    write_demos(d / "base.parquet", base)
-    cfg = TrainConfig(
-        ensemble_size=3,
-        hidden=(64, 64),
-        dropout=0.0,
-        epochs=80,
-        batch_size=64,
-        checkpoint_every=80,
-        progress_every=50,
-        seeds=(0,),
-        val_fraction=0.0,
-    )
-    train_policy(base, cfg, d / "run", quiet=True)
+    for name, dims in (("rm", (23, 7)), ("lr", (6, 6))):
+        (d / name).mkdir()
+        _base_and_policy(d / name, dims)
     return d
 
 
@@ -78,10 +80,6 @@ def _lerobot(root, episodes):
             }
         )
     write_lerobot_v21(root, eps, ["stack"])
-    info = json.loads((root / "meta" / "info.json").read_text())
-    info["features"]["observation.state"]["shape"] = [23]
-    info["features"]["action"]["shape"] = [7]
-    (root / "meta" / "info.json").write_text(json.dumps(info))
 
 
 def _main(monkeypatch, capsys, *args):
@@ -96,25 +94,14 @@ def _main(monkeypatch, capsys, *args):
     return (code, *capsys.readouterr())
 
 
-def test_watch_robomimic_and_lerobot_inbox(setup, tmp_path, monkeypatch, capsys):
-    rng = np.random.default_rng(1)
-    inbox = tmp_path / "inbox"
-    inbox.mkdir()
-    good, bad = _episode(rng), _episode(rng, style="other")
-    write_robomimic(
-        inbox / "op1.hdf5",
-        {"demo_0": _robomimic_demo(*good), "demo_1": _robomimic_demo(*bad)},
-    )
-    _lerobot(inbox / "op2", [_episode(rng), _episode(rng, style="other")])
-    (inbox / "op3.hdf5.part").write_bytes(b"still copying")
-    (inbox / "broken.hdf5").write_bytes(b"\x89HDF\r\n\x1a\n cut short")
-    args = [
+def _watch_args(inbox, d):
+    return [
         "watch",
         inbox,
         "--policy",
-        setup / "run",
+        d / "run",
         "--base-demos",
-        setup / "base.parquet",
+        d / "base.parquet",
         "--lambda",
         "0.1",
         "--eta",
@@ -125,34 +112,61 @@ def test_watch_robomimic_and_lerobot_inbox(setup, tmp_path, monkeypatch, capsys)
         "--poll",
         "0.1",
     ]
+
+
+def _verdicts(out):
+    lines = [x for x in out.splitlines() if " / " in x]
+    return {x.split(":")[0]: x.split(": ", 1)[1].split(":")[0] for x in lines}, lines
+
+
+def test_watch_a_robomimic_inbox(setup, tmp_path, monkeypatch, capsys):
+    rng = np.random.default_rng(1)
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    good, bad = _episode(rng), _episode(rng, style="other")
+    write_robomimic(
+        inbox / "op1.hdf5",
+        {"demo_0": _robomimic_demo(*good), "demo_1": _robomimic_demo(*bad)},
+    )
+    (inbox / "op3.hdf5.part").write_bytes(b"still copying")
+    (inbox / "broken.hdf5").write_bytes(b"\x89HDF\r\n\x1a\n cut short")
+    args = _watch_args(inbox, setup / "rm")
     code, out, err = _main(monkeypatch, capsys, *args)
     assert code == 0, err
-    lines = [x for x in out.splitlines() if " / " in x]
-    verdicts = {x.split(":")[0]: x.split(": ", 1)[1].split(":")[0] for x in lines}
-    assert verdicts == {
-        "op1.hdf5 / demo_0": "accepted",
-        "op1.hdf5 / demo_1": "rejected",
-        "op2 / 0": "accepted",
-        "op2 / 1": "rejected",
-    }
+    verdicts, lines = _verdicts(out)
+    assert verdicts == {"op1.hdf5 / demo_0": "accepted", "op1.hdf5 / demo_1": "rejected"}
     assert "broken.hdf5" in out and out.count("error:") == 1 and "op3" not in out
     rejected = next(x for x in lines if "demo_1" in x)
     assert "worst steps" in rejected and "compare base demo" in rejected
     pages = inbox / "verdicts"
-    for stem in ("op1.hdf5__demo_0", "op1.hdf5__demo_1", "op2__0", "op2__1"):
+    for stem in ("op1.hdf5__demo_0", "op1.hdf5__demo_1"):
         page = (pages / f"{stem}.html").read_text()
         assert "data:image/png;base64," in page and (pages / f"{stem}.png").stat().st_size > 1000
     log = [json.loads(x) for x in (pages / "verdicts.jsonl").read_text().splitlines()]
-    assert len(log) == 5 and sum("error" in r for r in log) == 1
-    # a restart judges nothing again; a LeRobot folder that grows gets its new episode judged
-    code, out, _ = _main(monkeypatch, capsys, *args)
+    assert len(log) == 3 and sum("error" in r for r in log) == 1
+    code, out, _ = _main(monkeypatch, capsys, *args)  # a restart judges nothing again
     assert code == 0 and "judged 0 demonstrations" in out
-    shutil.rmtree(inbox / "op2")
-    rng2 = np.random.default_rng(1)
-    _episode(rng2), _episode(rng2, style="other")  # the same first two episodes again
-    _lerobot(inbox / "op2", [_episode(rng2), _episode(rng2, style="other"), _episode(rng2)])
+
+
+def test_watch_a_lerobot_folder_that_grows(setup, tmp_path, monkeypatch, capsys):
+    def episodes(n):
+        rng = np.random.default_rng(1)
+        styles = ["base", "other", "base"]
+        return [_episode(rng, style=styles[i], dims=(6, 6)) for i in range(n)]
+
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    _lerobot(inbox / "op2", episodes(2))
+    args = _watch_args(inbox, setup / "lr")
+    code, out, err = _main(monkeypatch, capsys, *args)
+    assert code == 0, err
+    assert _verdicts(out)[0] == {"op2 / 0": "accepted", "op2 / 1": "rejected"}
+    assert (inbox / "verdicts" / "op2__1.html").exists()
+    shutil.rmtree(inbox / "op2")  # the recorder adds an episode: only the new one is judged
+    _lerobot(inbox / "op2", episodes(3))
     code, out, _ = _main(monkeypatch, capsys, *args)
-    assert code == 0 and "judged 1 demonstrations" in out and "op2 / 2: accepted" in out
+    assert code == 0 and "judged 1 demonstrations" in out
+    assert _verdicts(out)[0] == {"op2 / 2": "accepted"}
 
 
 def test_a_file_still_being_written_is_not_read(setup, tmp_path):
@@ -168,8 +182,8 @@ def test_a_file_still_being_written_is_not_read(setup, tmp_path):
     w = Watcher(
         WatchConfig(
             inbox=str(inbox),
-            policy=str(setup / "run"),
-            base_demos=str(setup / "base.parquet"),
+            policy=str(setup / "rm" / "run"),
+            base_demos=str(setup / "rm" / "base.parquet"),
             lambda_=0.1,
             eta=10.0,
             settle=1.0,
