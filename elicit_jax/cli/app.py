@@ -86,7 +86,8 @@ app = typer.Typer(
     help=(
         "Measure and elicit demonstrations compatible with a base policy.\n\n"
         "Stages pass Parquet artifacts: import/collect -> train -> score -> fit-thresholds "
-        "-> filter -> train -> evaluate. Run any command with --help for an example."
+        "-> filter -> train -> evaluate; elicit and watch judge demonstrations as they are "
+        "recorded. Run any command with --help for an example."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,

@@ -77,10 +77,15 @@ def _figure(demos: list[dict[str, Any]], base_len: float, dagger: bool) -> bytes
     colors = {"accepted": "#1a7f37", "rejected": "#b42318", "failed": "#999999"}
     c = [colors.get(r["verdict"], "#555555") for r in demos]
     frac = [r["fraction_incompatible"] or 0.0 for r in demos]
-    axes[0].scatter(order, frac, c=c, s=22)
+    edge = ["#b42318" if r["rule_verdict"] == "reject" else "none" for r in demos]
+    axes[0].scatter(order, frac, c=c, s=30, edgecolors=edge, linewidths=1.5)
     axes[0].plot(order, frac, color="#888", lw=0.8)
     axes[0].set_ylabel("fraction incompatible")
-    axes[0].set_title("green accepted, red rejected, grey failed", fontsize=9)
+    axes[0].set_title(
+        "green accepted, red rejected, grey failed; red ring: the rule rejects (naive mode: "
+        "recorded, not applied)",
+        fontsize=9,
+    )
     axes[1].scatter(order, [r["length"] for r in demos], c=c, s=22)
     axes[1].axhline(base_len, color="#1f77b4", ls="--", lw=1, label="base mean length")
     axes[1].set_ylabel("length (steps)")
