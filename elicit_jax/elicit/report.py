@@ -181,7 +181,10 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ["episodes", counts.episodes],
         [
             "mean length (accepted) vs base",
-            f"{np.mean(lengths):.0f} vs {data['base_length']:.0f}" if lengths else "-",
+            f"{np.mean(lengths):.0f} vs "
+            + ("-" if np.isnan(data["base_length"]) else f"{data['base_length']:.0f}")
+            if lengths
+            else "-",
         ],
         ["mean intervention rate", _pct(float(np.mean(rates))) if rates else "-"],
     ]

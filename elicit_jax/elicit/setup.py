@@ -271,6 +271,14 @@ def task_action_names(task: Any) -> tuple[str, ...]:
     return tuple(ACTION_NAMES)
 
 
+def _absolute_inputs(config: SessionConfig) -> SessionConfig:
+    """The config with its input paths made absolute (a session resumes from anywhere)."""
+    paths = {k: getattr(config, k) for k in ("policy", "base_demos", "thresholds_file")}
+    return dataclasses.replace(
+        config, **{k: str(Path(v).absolute()) for k, v in paths.items() if v is not None}
+    )
+
+
 def _inputs(config: SessionConfig) -> dict[str, str]:
     out = {"policy": config.policy, "base_demos": config.base_demos}
     if config.thresholds_file:
@@ -351,6 +359,7 @@ def open_session(
 
     if resume and overwrite:
         raise ElicitError("choose one of --resume and --overwrite")
+    config = _absolute_inputs(config)
     task = make_task(config.task, **({"horizon": config.horizon} if config.horizon else {}))
     base = read_demos(config.base_demos)
     policy = load_policy(config.policy, config.which, seed=config.policy_seed)
