@@ -231,9 +231,10 @@ def test_dagger_stores_only_the_operators_interventions(nut, tmp_path):
 def test_retraining_between_batches(nut, tmp_path):
     from elicit_jax.artifact import read_header
 
-    _, rec = _run(nut, tmp_path / "b", "scripted:same-style", practice=0, batch=1)
+    session, rec = _run(nut, tmp_path / "b", "scripted:same-style", practice=0, batch=1)
     heads = SessionStore(tmp_path / "b").episode_headers()
     assert [h["policy_batch"] for h in heads] == [0, 1]  # the 2nd demo is scored by π_1
+    assert session.setup.scorer.traces == 1  # π_1 scored with the same compiled function
     assert [h["batch"] for h in heads] == [1, 2]
     for b in (1, 2):
         run = read_header(tmp_path / "b" / "policies" / f"batch{b}")
