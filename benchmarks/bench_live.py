@@ -109,7 +109,7 @@ def bench_size(hidden: int, steps: int, rounds: int) -> dict:
         obs_mean=mean,
         obs_std=std,
     )
-    scorer = LiveScorer(ScoreConfig(likelihood="member-average", ddof=1))
+    scorer = LiveScorer(ScoreConfig(likelihood="member-average", ddof=1), policy)
     models = _torch_models(policy)
     tm, ts = torch.from_numpy(mean), torch.from_numpy(std)
     obs_t, act_t = torch.from_numpy(obs), torch.from_numpy(act)

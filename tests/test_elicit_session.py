@@ -421,7 +421,9 @@ def test_cli_bad_inputs_info_and_report(nut, tmp_path, monkeypatch, capsys):
         match="missing thresholds",
     )
     bad(
-        *common,
+        *head,
+        "--base-demos",
+        nut.base,
         "--operator",
         "scripted:base",
         "--lambda",

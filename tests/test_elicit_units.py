@@ -145,7 +145,7 @@ def test_live_scorer_matches_the_batch_scorer_and_compiles_once(likelihood, ddof
     act = rng.uniform(-1, 1, size=(20, 3)).astype(np.float32)
     demos = from_episodes([{"obs": obs, "action": act}])
     config = ScoreConfig(likelihood=likelihood, ddof=ddof, lambda_=0.3, eta=0.2)
-    scorer = LiveScorer(config)
+    scorer = LiveScorer(config, _policy(seed=0), bounds=(-1.0, 1.0))
     for policy in (_policy(seed=0), _policy(seed=1)):  # a retrained policy: same architecture
         ref = score_demos(policy, demos, config)
         for i in range(20):

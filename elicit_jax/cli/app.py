@@ -19,6 +19,7 @@ DATA = "1. Bring demonstrations"
 POLICY = "2. Base policy"
 COMPAT = "3. Compatibility"
 HAND_BACK = "4. Hand back and evaluate"
+ELICIT = "5. Elicit demonstrations"
 PIPELINES = "Pipelines"
 INSPECT = "Inspect"
 COMMAND_ORDER = (
@@ -33,6 +34,8 @@ COMMAND_ORDER = (
     "map",
     "export",
     "evaluate",
+    "elicit",
+    "watch",
     "quickstart",
     "pipeline",
     "report",

@@ -8,7 +8,7 @@ from typing import Any
 import typer
 
 from elicit_jax.cli import data_cmds
-from elicit_jax.cli.app import app
+from elicit_jax.cli.app import ELICIT, app
 from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
 from elicit_jax.errors import ElicitError
 
@@ -27,7 +27,7 @@ def _stored_config(out: Path) -> dict[str, Any]:
     return dict(SessionStore(out).header().get("config", {}))
 
 
-@app.command("elicit")
+@app.command("elicit", rich_help_panel=ELICIT)
 def elicit_cmd(
     out: Path = typer.Option(..., "-o", "--out", help="Session directory (created or resumed)."),
     task: str = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`)."),
@@ -133,7 +133,7 @@ def elicit_cmd(
     elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
 
 
-@app.command("watch")
+@app.command("watch", rich_help_panel=ELICIT)
 def watch_cmd(
     inbox: Path = typer.Argument(..., help="Folder where demonstrations land."),
     policy: Path = typer.Option(..., "--policy", help="Policy to score against."),
@@ -165,6 +165,7 @@ def watch_cmd(
     clip_actions: bool = data_cmds._CLIP,
     warn_actions: bool = data_cmds._WARN,
     action_bounds: str = data_cmds._ACTION_BOUNDS,
+    skip_bad_episodes: bool = data_cmds._SKIP_BAD,
 ) -> None:
     """Give a verdict and feedback for each demonstration that lands in INBOX.
 
@@ -194,6 +195,7 @@ def watch_cmd(
         clip_actions=clip_actions,
         warn_actions=warn_actions,
         action_bounds=action_bounds,
+        skip_bad_episodes=skip_bad_episodes,
     )
     options = tuple(
         (f.name, getattr(imp, f.name))

@@ -8,11 +8,11 @@ L2 retrieval, retraining after each batch scored against the new policy.
 from __future__ import annotations
 
 import dataclasses
-import math
 import zlib
 from collections.abc import Mapping
 from typing import Any
 
+from elicit_jax.compat.measures import check_thresholds
 from elicit_jax.errors import ElicitError
 
 MODES = ("informed", "naive")
@@ -105,9 +105,7 @@ class SessionConfig:
         for ok, msg in checks:
             if not ok:
                 raise ElicitError(msg)
-        for name, v in (("lambda", self.lambda_), ("eta", self.eta)):
-            if not (math.isfinite(v) and v > 0):
-                raise ElicitError(f"{name} must be a finite number > 0, got {v}")
+        check_thresholds(self.lambda_, self.eta)
         self.rule()  # validates the fraction and the count
         self.score_config()
 

@@ -1,18 +1,21 @@
 """Live compatibility at control rate: ONE compiled single-state scorer per session.
 
-:class:`LiveScorer` jits, once, a function of ``(policy, obs (O,), action (A,), λ, η)`` that
-runs the ensemble on one state and applies the per-pair scorer
-:func:`elicit_jax.compat.measures.score_pair` — the same definitions ``elicit-jax score``
-uses. The policy and the thresholds are arguments, not constants, so a retrained policy of
-the same architecture (π_new between batches), a new episode or new thresholds reuse the
-compiled function: nothing recompiles during a session (:attr:`LiveScorer.traces` counts
-the traces, and stays 1). Everything comes back in one small host transfer.
+:class:`LiveScorer` jits, once, a function of ``(policy, obs (O,), action (A,), inputs,
+step)`` that runs the batch scorer's own per-chunk function
+(:mod:`elicit_jax.compat.score`: the policy's members, then
+:func:`elicit_jax.compat.measures.score_pair`) on a chunk of ONE pair — so a live score is
+``elicit-jax score``'s score, with the same definitions and options (likelihood kind, ddof,
+clipping bounds, action scaling, MC-dropout). The policy and the numbers (thresholds,
+bounds, weights) are arguments, not constants, so a retrained policy of the same
+architecture (π_new between batches), a new episode or new thresholds reuse the compiled
+function: nothing recompiles during a session (:attr:`LiveScorer.traces` counts the traces
+and stays 1). Everything comes back in one small host transfer.
 
 Only feed-forward policies (``mlp``, ``mdn``) can be scored one state at a time; an LSTM's
 score depends on the whole history and is refused with a clear error.
 
 Example:
-    >>> scorer = LiveScorer(ScoreConfig(lambda_=0.4, eta=0.05))
+    >>> scorer = LiveScorer(ScoreConfig(lambda_=0.4, eta=0.05), policy)
     >>> s = scorer.score(policy, obs, action)     # StepScore(likelihood, novelty, ...)
 """
 
@@ -23,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.compat.measures import ScoreConfig, score_pair
+from elicit_jax.compat.measures import ScoreConfig, check_thresholds
 from elicit_jax.errors import ElicitError
 
 
@@ -60,30 +63,43 @@ def check_live_policy(policy: Any, source: str = "<policy>") -> None:
 class LiveScorer:
     """One compiled single-state scorer (see the module docstring).
 
+    Args:
+      config: the score config (likelihood kind, ddof, clip, action scale, MC-dropout; its
+        thresholds are the defaults of :meth:`score`).
+      policy: the policy the scorer starts with (its action weights, for ``action_scale``).
+      bounds: the demonstrations' action bounds ``(low, high)``, the ``member-average``
+        clipping range unless ``config.clip`` is set (as ``score`` does).
+      source: the policy's name in error messages.
+
     Attributes:
-      config: the score config (likelihood kind, ddof, clip; its thresholds are defaults).
       traces: times the scoring function was traced (1 after the first call, if nothing
         recompiled).
     """
 
-    def __init__(self, config: ScoreConfig) -> None:
+    def __init__(
+        self,
+        config: ScoreConfig,
+        policy: Any,
+        bounds: tuple[Any, Any] | None = None,
+        source: str = "<policy>",
+    ) -> None:
         import jax
+        import jax.numpy as jnp
+
+        from elicit_jax.compat.score import _score_rows, _static, score_inputs
 
         self.config = config
         self.traces = 0
+        self.inputs = score_inputs(policy, config, bounds, source)
+        static = _static(config)
 
-        def one(policy: Any, obs: Any, action: Any, lam: Any, eta: Any) -> Any:
-            import jax.numpy as jnp
-
+        def one(policy: Any, obs: Any, action: Any, inputs: Any, step: Any) -> Any:
             self.traces += 1
-            members = policy.members(obs[None])[:, 0]  # (K, A)
-            spread = policy.spread(obs[None])
-            spread = None if spread is None else spread[0]
-            s = score_pair(members, action, lam, eta, config, spread=spread)
+            s = _score_rows(policy, obs[None], action[None], inputs, step, static)
             head = jnp.stack(
-                [s.likelihood, s.novelty, s.compatibility, s.incompatible.astype(jnp.float32)]
-            )
-            return jnp.concatenate([head.astype(jnp.float32), s.mean.astype(jnp.float32)])
+                [s.likelihood[0], s.novelty[0], s.compatibility[0], s.incompatible[0]]
+            ).astype(jnp.float32)
+            return jnp.concatenate([head, s.mean[0].astype(jnp.float32)])
 
         self._fn = jax.jit(one)
 
@@ -94,6 +110,7 @@ class LiveScorer:
         action: np.ndarray,
         lambda_: float | None = None,
         eta: float | None = None,
+        step: int = 0,
     ) -> StepScore:
         """Score ``action (A,)`` at state ``obs (O,)`` under ``policy``.
 
@@ -104,12 +121,35 @@ class LiveScorer:
             ``policy_action``).
           lambda_: λ (default the config's).
           eta: η (default the config's).
+          step: the pair's index (keys the MC-dropout masks, as a row index does in
+            ``score``).
+
+        Raises:
+          ElicitError: the policy's prediction is not finite (a NaN would read as M = 1).
         """
-        lam = np.float32(self.config.lambda_ if lambda_ is None else lambda_)
-        et = np.float32(self.config.eta if eta is None else eta)
+        import jax.numpy as jnp
+
+        inputs = self.inputs
+        if lambda_ is not None or eta is not None:
+            lam, et = check_thresholds(
+                self.config.lambda_ if lambda_ is None else lambda_,
+                self.config.eta if eta is None else eta,
+            )
+            inputs = inputs.replace(lam=jnp.float32(lam), eta=jnp.float32(et))
         out = np.asarray(
-            self._fn(policy, np.asarray(obs, np.float32), np.asarray(action, np.float32), lam, et)
+            self._fn(
+                policy,
+                np.asarray(obs, np.float32),
+                np.asarray(action, np.float32),
+                inputs,
+                np.int32(step),
+            )
         )
+        if not np.isfinite(out[:2]).all():
+            raise ElicitError(
+                "the policy's prediction is not finite (NaN or inf): the checkpoint is corrupt "
+                "or its training diverged"
+            )
         return StepScore(
             likelihood=float(out[0]),
             novelty=float(out[1]),

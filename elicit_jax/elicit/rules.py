@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from elicit_jax.compat.measures import rejects
+from elicit_jax.compat.measures import check_accept_fraction, rejects
 from elicit_jax.errors import ElicitError
 
 
@@ -29,8 +29,7 @@ class AcceptRule:
     count: int | None = None
 
     def __post_init__(self) -> None:
-        if not 0 <= self.fraction < 1:
-            raise ElicitError(f"accept fraction must be in [0, 1), got {self.fraction}")
+        check_accept_fraction(self.fraction)
         if self.count is not None and self.count < 0:
             raise ElicitError(f"--reject-count must be >= 0, got {self.count}")
 

@@ -183,7 +183,8 @@ class Session:
 
     def _score(self, obs: np.ndarray, action: np.ndarray) -> None:
         t = time.perf_counter()
-        s = self.setup.scorer.score(self.setup.policy, obs, action)
+        step = len(self._buf["obs"]) - 1
+        s = self.setup.scorer.score(self.setup.policy, obs, action, step=step)
         ms = 1e3 * (time.perf_counter() - t)
         buf = self._buf
         buf["score"].append((s.likelihood, s.novelty, s.compatibility, s.incompatible, ms))

@@ -395,7 +395,12 @@ def open_session(
         base_policy=policy,
         policy=policy,
         train_config=train_config,
-        scorer=LiveScorer(config.score_config()),
+        scorer=LiveScorer(
+            config.score_config(),
+            policy,
+            bounds=(base.action_low, base.action_high),
+            source=config.policy,
+        ),
         rule=config.rule(),
         action_names=task_action_names(task),
         quiet=quiet,

@@ -27,13 +27,21 @@ demonstrations are rebuilt from the episode files whenever they changed.
 from __future__ import annotations
 
 import dataclasses
+import re
 import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import DIR_HEADER, make_header, read_header, write_json, write_parquet
+from elicit_jax.artifact import (
+    DIR_HEADER,
+    clean_stale_temporaries,
+    make_header,
+    read_header,
+    write_json,
+    write_parquet,
+)
 from elicit_jax.elicit.events import FieldDifference, WindowFeedback, to_jsonable
 from elicit_jax.errors import ElicitError
 
@@ -45,6 +53,8 @@ POLICIES_DIR = "policies"
 DEMOS_FILE = "demos.parquet"
 MANIFEST_FILE = "manifest.json"
 _SCORES = ("likelihood", "novelty", "compatibility")
+_TEMP = re.compile(r"^\.(.+?)\.(?:p\d+-[0-9a-f]{8}\..*\.tmp|old-\d+)$")
+"""A temporary of :func:`elicit_jax.artifact.atomic_path`; group 1 is the target's name."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,13 +206,14 @@ class SessionStore:
         shutil.rmtree(self.root)
 
     def clean_temporaries(self) -> list[Path]:
-        """Remove temporaries of writes a crash interrupted; returns what was removed."""
-        removed = []
+        """Remove temporaries of writes a killed session left (only those of processes that
+        no longer exist: :func:`elicit_jax.artifact.clean_stale_temporaries`)."""
+        removed: list[Path] = []
         for d in (self.root, self.episodes_dir, self.root / POLICIES_DIR):
             if d.is_dir():
-                for p in d.glob(".*.tmp"):
-                    shutil.rmtree(p, ignore_errors=True)
-                    removed.append(p)
+                targets = {m.group(1) for p in d.iterdir() if (m := _TEMP.match(p.name))}
+                for name in sorted(targets):
+                    removed += clean_stale_temporaries(d / name)
         return removed
 
     def episode_path(self, index: int) -> Path:
