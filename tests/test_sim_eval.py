@@ -188,3 +188,55 @@ def test_evaluate_errors(work):
         ],
     )
     assert result.exit_code != 0 and "no checkpoint '999'" in str(result.exception)
+
+
+def test_rollouts_record_the_states_the_policy_acted_in(work):
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.evaluate import rollout_mujoco_policy
+    from elicit_jax.sim.rollout_mujoco import BatchSim
+
+    task = make_task("reach-pillar")
+    policy = load_policy(work / "runs", 100, seed=0)
+    seeds = eval_seeds(EvalConfig(rollouts=6))
+    out = rollout_mujoco_policy(task, policy, seeds, 40, record_states=True)
+    assert out["states"].shape == (6, 40, 23) and out["state_mask"].shape == (6, 40)
+    with BatchSim(task, 6) as sim:
+        np.testing.assert_allclose(out["states"][:, 0], sim.reset_seeds(seeds), atol=1e-6)
+    # a rollout acts until its success (steps_to_success actions) or for the whole horizon
+    acted = out["state_mask"].sum(axis=1)
+    np.testing.assert_array_equal(acted, np.where(out["success"], out["steps_to_success"], 40))
+    assert all(out["state_mask"][i, : acted[i]].all() for i in range(6))
+
+
+def test_demo_score_on_real_rollouts_cross_validates_across_checkpoints(work):
+    from elicit_jax.curation.demo_score import DemoScoreConfig, collect_rollouts, score_demos
+    from elicit_jax.curation.demo_score import train_demo_score
+
+    base = DemoScoreConfig(task="reach-pillar", rollouts=16, steps=200, eval_every=50)
+    full = collect_rollouts(work / "runs", base)
+    assert full.epochs.tolist() == [100, 200]  # every saved epoch of the first seed
+    lengths = np.bincount(full.rollout, minlength=len(full.success))
+    # a horizon of the median success time makes about half of the rollouts fail
+    cfg = DemoScoreConfig(**{**base.__dict__, "horizon": int(np.median(lengths[full.success]))})
+    rollouts = collect_rollouts(work / "runs", cfg)
+    assert 0 < rollouts.success.mean() < 1
+    model = train_demo_score(rollouts, cfg)
+    assert model is not None
+    assert model.report["validation_epoch"] == 200 and model.report["chosen_train_epoch"] == 100
+    demos = read_demos(work / "base.parquet")
+    scores = score_demos(demos, model, {})
+    assert scores.trusted and len(scores.score) == 40
+    assert ((scores.score >= 0) & (scores.score <= 1)).all()
+
+
+def test_cli_filter_demo_score_end_to_end(work, tmp_path):
+    out = tmp_path / "kept.parquet"
+    res = _ok(["filter", "--method", "demo-score", "--policy", str(work / "runs"),
+               "--demos", str(work / "base.parquet"), "--rollouts", "8", "-o", str(out)])  # fmt: skip
+    assert "checkpoint 100:" in res.output and "checkpoint 200:" in res.output
+    assert (tmp_path / "kept.episode-scores.parquet").exists()
+    kept = read_demos(out)
+    assert 0 < kept.n_episodes <= 40
+    header = read_header(out)
+    assert header["config"]["curate"]["demo_score"]["task"] == "reach-pillar"  # from the demos

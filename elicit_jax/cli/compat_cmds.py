@@ -204,13 +204,17 @@ def fit_thresholds_cmd(
 
 @app.command("filter", rich_help_panel=COMPAT)
 def filter_cmd(
-    scores: Path = typer.Option(..., "--scores", help="Scores of --demos."),
+    scores: Path | None = typer.Option(
+        None, "--scores", help="Scores of --demos (deminf/demo-score: only with --rate m)."
+    ),
     demos: Path = typer.Option(..., "--demos", help="New demonstrations D_new."),
     out: Path = typer.Option(..., "-o", "--out", help="Filtered demos artifact (.parquet)."),
     base: Path | None = typer.Option(None, "--base", help="D_base, kept whole, placed first."),
     level: str = typer.Option("pair", "--level", help="pair or episode."),
     method: str = typer.Option(
-        "m", "--method", help="m | random | shortest | longest | likelihood | novelty."
+        "m",
+        "--method",
+        help="m | random | shortest | longest | likelihood | novelty | deminf | demo-score.",
     ),
     pair_mode: str = typer.Option(
         "renumber", "--pair-mode", help="After dropping pairs: renumber steps or split episodes."
@@ -229,11 +233,31 @@ def filter_cmd(
     source: Path | None = typer.Option(
         None, "--source", help="Original dataset for --export (default: recorded at import)."
     ),
+    rate: str = typer.Option(
+        "own", "--rate", help="deminf/demo-score: own (their own cut) or m (M-filter's amount)."
+    ),
+    drop_fraction: float = typer.Option(
+        0.2, "--drop-fraction", help="deminf's own cut: lowest fraction of demos."
+    ),
+    policy: Path | None = typer.Option(
+        None, "--policy", help="demo-score: training run to roll out (trained on the data)."
+    ),
+    task: str | None = typer.Option(None, "--task", help="demo-score: task [the demos' task]."),
+    rollouts: int = typer.Option(100, "--rollouts", help="demo-score: rollouts per checkpoint."),
+    policy_seed: int | None = typer.Option(
+        None, "--policy-seed", help="demo-score: training seed of --policy [its first]."
+    ),
 ) -> None:
     """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.
 
     Baselines drop as many pairs/episodes as the M filter would. Dropped rows and reasons
     go to OUT.dropped.parquet.
+
+    deminf and demo-score (docs/curation.md) score whole demos and drop the lowest: at their
+    own cut (--rate own: deminf the lowest --drop-fraction, demo-score below its classifier's
+    threshold), or as many pairs (--level pair) / demos (--level episode) as the M-filter
+    would (--rate m, needs --scores and thresholds). Per-demo scores go to
+    OUT.episode-scores.parquet.
 
     With --export robomimic (or lerobot) the kept episodes are also written as a new mask key
     in a copy of the original robomimic file (or a LeRobot dataset / episode list).
@@ -243,10 +267,24 @@ def filter_cmd(
 
     Example: elicit-jax filter --scores scores.parquet --demos new.parquet -o kept.parquet
     --level episode --export robomimic --mask-key compatible --export-out compatible.hdf5
+
+    Example: elicit-jax filter --method deminf --demos new.parquet --base base.parquet
+    -o kept.parquet
+
+    Example: elicit-jax filter --method demo-score --policy runs/naive --demos new.parquet
+    -o kept.parquet --rate m --scores scores.parquet --thresholds thresholds.json
     """
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
 
     resolved = _resolve(thresholds, lambda_, eta)
+    if method in ("deminf", "demo-score"):
+        if export is not None:
+            raise ElicitError("--export works with the M-filter and its baselines only")
+        _curate(method, demos, out, base, level, scores, resolved, rate, drop_fraction,
+                policy, task, rollouts, policy_seed)  # fmt: skip
+        return
+    if scores is None:
+        raise ElicitError(f"--method {method} filters by compatibility scores: give --scores")
     config = FilterConfig(
         level=level,  # type: ignore[arg-type]
         method=method,
@@ -272,6 +310,59 @@ def filter_cmd(
     )
     if r.export is not None:
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
+
+
+def _curate(
+    method: str,
+    demos: Path,
+    out: Path,
+    base: Path | None,
+    level: str,
+    scores: Path | None,
+    thresholds: tuple[float, float] | None,
+    rate: str,
+    drop_fraction: float,
+    policy: Path | None,
+    task: str | None,
+    rollouts: int,
+    policy_seed: int | None,
+) -> None:
+    """``filter --method deminf|demo-score``: build the config, make ONE library call, print."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.curation.demo_score import DemoScoreConfig
+    from elicit_jax.curation.select import CurateConfig, curate_file, scores_path_for
+
+    if level not in ("pair", "episode"):
+        raise ElicitError(f"unknown level '{level}' (choose pair or episode)")
+    demo_score = DemoScoreConfig(
+        task=task or str(read_header(demos).get("task", "")),
+        rollouts=rollouts,
+        policy_seed=policy_seed,
+    )
+    lam, eta = thresholds if thresholds else (None, None)
+    result, per_demo = curate_file(
+        CurateConfig(method=method, demo_score=demo_score),
+        demos,
+        out,
+        rate=rate,  # type: ignore[arg-type]
+        drop_fraction=drop_fraction,
+        level=level,  # type: ignore[arg-type]
+        scores_path=scores,
+        lambda_=lam,
+        eta=eta,
+        base_path=base,
+        policy_path=policy,
+        progress=lambda epoch, rate_: typer.echo(
+            f"demo-score: checkpoint {epoch}: {100 * rate_:.0f}% of rollouts succeeded"
+        ),
+    )
+    if not per_demo.trusted:
+        typer.echo(f"warning: {method} had no signal: {per_demo.report.get('why')}", err=True)
+    typer.echo(
+        f"{out}: dropped {result.pairs_dropped}/{result.pairs_in} pairs of D_new "
+        f"({result.episodes_in} -> {result.episodes_out} episodes; {result.reason}); "
+        f"log: {result.log_path}; per-demo scores: {scores_path_for(out)}"
+    )
 
 
 @app.command("map", rich_help_panel=COMPAT)

@@ -77,7 +77,12 @@ def resolve_backend(backend: str) -> str:
 
 
 def rollout_mujoco_policy(
-    task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int = 0
+    task: Any,
+    policy: Any,
+    seeds: np.ndarray,
+    horizon: int,
+    threads: int = 0,
+    record_states: bool = False,
 ) -> dict[str, np.ndarray]:
     """Roll out ``policy`` on C MuJoCo: one batched policy call per control step.
 
@@ -85,11 +90,14 @@ def rollout_mujoco_policy(
 
     Returns:
       dict of ``success (B,)``, ``steps_to_success (B,)`` (horizon when never), ``ret (B,)``,
-      ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success).
+      ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success);
+      with ``record_states`` also ``states (B, horizon, 23)`` and ``state_mask (B, horizon)``.
     """
     from elicit_jax.sim.rollout_mujoco import rollout_policy
 
-    return rollout_policy(task, _jitted_act(), policy, seeds, horizon, threads or None)
+    return rollout_policy(
+        task, _jitted_act(), policy, seeds, horizon, threads or None, record_states
+    )
 
 
 @functools.cache

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.runtime import available_cpus
-from elicit_jax.sim.env import N_GRIPPER_Q, Task
+from elicit_jax.sim.env import N_GRIPPER_Q, OBS_DIM, Task
 
 
 def _bad_warnings(d: Any) -> int:
@@ -158,6 +158,7 @@ def rollout_policy(
     seeds: np.ndarray,
     horizon: int,
     threads: int | None = None,
+    record_states: bool = False,
 ) -> dict[str, np.ndarray]:
     """Roll a policy out on C MuJoCo from seeded initial states: one batched policy call per
     control step for every environment still running, then the physics in the thread pool.
@@ -171,13 +172,20 @@ def rollout_policy(
       act: jitted ``act(policy, carry, obs (B, 23)) -> (carry, action (B, 7))``.
       seeds: (B,) initial-state seeds.
       horizon: control steps.
+      record_states: also return the states the policy acted in.
 
     Returns:
       dict of ``success (B,)``, ``steps_to_success (B,)`` (horizon when never), ``ret (B,)``,
-      ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success).
+      ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success);
+      with ``record_states`` also ``states (B, horizon, 23)`` float32 and ``state_mask
+      (B, horizon)``, true where the rollout was still running (not yet successful, not
+      diverged) and the policy acted in that state.
     """
     seeds = np.asarray(seeds)
     b = len(seeds)
+    if record_states:
+        states = np.zeros((b, horizon, OBS_DIM), np.float32)
+        state_mask = np.zeros((b, horizon), bool)
     with BatchSim(task, b, threads) as sim:
         obs = sim.reset_seeds(seeds)
         carry = policy.init_carry(b)
@@ -186,15 +194,21 @@ def rollout_policy(
         for t in range(horizon):
             if done.all():
                 break
+            if record_states:
+                states[:, t] = obs
+                state_mask[:, t] = ~done & ~sim.unstable
             carry, action = act(policy, carry, obs.astype(np.float32))
             obs = sim.step(np.asarray(action, np.float64), active=~done)
             newly = sim.success & ~done
             steps[newly] = t + 1
             done |= sim.success
-        return {
+        out = {
             "success": done,
             "steps_to_success": steps,
             "ret": done.astype(np.float64),
             "final_obs": obs,
             "unstable": sim.unstable.copy(),
         }
+    if record_states:
+        out |= {"states": states, "state_mask": state_mask}
+    return out
