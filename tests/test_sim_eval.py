@@ -210,8 +210,12 @@ def test_rollouts_record_the_states_the_policy_acted_in(work):
 
 
 def test_demo_score_on_real_rollouts_cross_validates_across_checkpoints(work):
-    from elicit_jax.curation.demo_score import DemoScoreConfig, collect_rollouts, score_demos
-    from elicit_jax.curation.demo_score import train_demo_score
+    from elicit_jax.curation.demo_score import (
+        DemoScoreConfig,
+        collect_rollouts,
+        score_demos,
+        train_demo_score,
+    )
 
     base = DemoScoreConfig(task="reach-pillar", rollouts=16, steps=200, eval_every=50)
     full = collect_rollouts(work / "runs", base)
@@ -232,8 +236,8 @@ def test_demo_score_on_real_rollouts_cross_validates_across_checkpoints(work):
 
 def test_cli_filter_demo_score_end_to_end(work, tmp_path):
     out = tmp_path / "kept.parquet"
-    res = _ok(["filter", "--method", "demo-score", "--policy", str(work / "runs"),
-               "--demos", str(work / "base.parquet"), "--rollouts", "8", "-o", str(out)])  # fmt: skip
+    res = _ok(["filter", "--method", "demo-score", "--policy", str(work / "runs"), "--demos",
+               str(work / "base.parquet"), "--rollouts", "8", "-o", str(out)])  # fmt: skip
     assert "checkpoint 100:" in res.output and "checkpoint 200:" in res.output
     assert (tmp_path / "kept.episode-scores.parquet").exists()
     kept = read_demos(out)
