@@ -114,3 +114,71 @@ def test_cli_reports_a_bad_definition_in_one_line(tmp_path):
         f"error: {bad}: [pipeline]: unknown key(s) sedes (allowed: collect_seed, description, "
         "methods, models, name, profile, seeds)"
     ]
+
+
+CURATION = (
+    TINY.replace('name = "tiny"', 'name = "tiny-curation"').replace(
+        'methods = ["base", "naive", "filtered"]',
+        'methods = ["base", "naive", "filtered", "deminf", "deminf-matched", "demo-score",\n'
+        '           "demo-score-matched"]',
+    )
+    + """
+[deminf]
+ks = [3]
+
+[demo_score]
+rollouts = 4
+steps = 100
+eval_every = 50
+
+[sensitivity]
+points = 2
+seeds = [7]
+eval_seed = 1
+"""
+)
+
+
+@pytest.mark.slow
+def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_path):
+    import numpy as np
+
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.curation.episodes import read_episode_scores
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(CURATION)
+    out = tmp_path / "run"
+    first = run(spec, out)
+    assert first.result.skipped == []
+    data = gather(out)
+    methods = {"base", "naive", "filtered", "deminf", "deminf-matched", "demo-score",
+               "demo-score-matched"}  # fmt: skip
+    assert {r.method for r in data.results} == methods
+    assert {(c.method, c.model) for c in data.curation} == {("deminf", None), ("demo-score", "mlp")}
+    # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
+    lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
+    _, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
+    budget = int(((pairs["likelihood"] >= lam) & (pairs["novelty"] < eta)).sum())
+    deminf = read_episode_scores(out / "curation/reach-pillar/deminf-conflict-right.parquet")
+    cum = np.cumsum(deminf.length[np.argsort(deminf.score, kind="stable")])
+    want = int(cum[np.searchsorted(cum, budget)]) if budget else 0
+    (row,) = [f for f in data.filters if f.method == "deminf-matched"]
+    assert row.pairs_total - row.pairs_kept == want
+    (own,) = [f for f in data.filters if f.method == "deminf"]
+    assert own.episodes_total - own.episodes_kept == round(0.2 * 6)
+    # the λ study: held-out seed 7, evaluation seed 1, λ at both ends of the fitted margin
+    assert {r.seed for r in data.heldout} == {7}
+    assert {(r.method, r.point) for r in data.heldout} == {
+        ("base", None), ("naive", None), ("filtered", 0), ("filtered", 1)
+    }  # fmt: skip
+    lo, hi = read_thresholds(out / "thresholds/reach-pillar/mlp.json")[2]["report"]["lambda_range"]
+    assert sorted(p.lambda_ for p in data.lambda_points) == pytest.approx([lo, hi])
+    main_states = {r.init_states for r in data.results}
+    assert len(main_states) == 1 and main_states.isdisjoint({r.init_states for r in data.heldout})
+    md = first.report_md.read_text()
+    assert "Naive − Base" in md and "DemInf (M's amount) − Naive" in md
+    assert "λ sensitivity" in md and (out / "report/maps/lambda-sensitivity.png").exists()
+    assert "Curation baselines" in md
+    assert run(spec, out).result.ran == []

@@ -329,11 +329,13 @@ def _curate(
 ) -> None:
     """``filter --method deminf|demo-score``: build the config, make ONE library call, print."""
     from elicit_jax.artifact import read_header
+    from elicit_jax.curation.deminf import DemInfConfig
     from elicit_jax.curation.demo_score import DemoScoreConfig
     from elicit_jax.curation.select import CurateConfig, curate_file, scores_path_for
 
     if level not in ("pair", "episode"):
         raise ElicitError(f"unknown level '{level}' (choose pair or episode)")
+    deminf = DemInfConfig(drop_fraction=drop_fraction)
     demo_score = DemoScoreConfig(
         task=task or str(read_header(demos).get("task", "")),
         rollouts=rollouts,
@@ -341,11 +343,10 @@ def _curate(
     )
     lam, eta = thresholds if thresholds else (None, None)
     result, per_demo = curate_file(
-        CurateConfig(method=method, demo_score=demo_score),
+        CurateConfig(method=method, deminf=deminf, demo_score=demo_score),
         demos,
         out,
         rate=rate,  # type: ignore[arg-type]
-        drop_fraction=drop_fraction,
         level=level,  # type: ignore[arg-type]
         scores_path=scores,
         lambda_=lam,

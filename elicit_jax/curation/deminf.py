@@ -42,12 +42,15 @@ class DemInfConfig:
 
     Attributes:
       ks: neighbour counts; each pair's term is averaged over them.
+      drop_fraction: the method's own cut: the lowest-scoring fraction of D_new's
+        demonstrations (DemInf ranks and prescribes no threshold; 0.2 is our default).
       jitter: standard deviation of the tie-breaking noise, in standardised units.
       seed: seed of that noise.
       chunk: query rows per step of the neighbour search.
     """
 
     ks: tuple[int, ...] = (5, 6, 7)
+    drop_fraction: float = 0.2
     jitter: float = 1e-5
     seed: int = 0
     chunk: int = 256
@@ -56,6 +59,8 @@ class DemInfConfig:
         object.__setattr__(self, "ks", tuple(int(k) for k in self.ks))
         if not self.ks or min(self.ks) < 1:
             raise ElicitError(f"deminf: ks must be positive neighbour counts, got {self.ks}")
+        if not 0.0 <= self.drop_fraction < 1.0:
+            raise ElicitError(f"deminf: drop_fraction must be in [0, 1), got {self.drop_fraction}")
         if self.jitter < 0:
             raise ElicitError(f"deminf: jitter must be >= 0, got {self.jitter}")
 

@@ -213,7 +213,6 @@ def curate_file(
     out_path: str | Path,
     *,
     rate: Literal["own", "m"] = "own",
-    drop_fraction: float = 0.2,
     level: Literal["pair", "episode"] = "pair",
     scores_path: str | Path | None = None,
     lambda_: float | None = None,
@@ -231,7 +230,6 @@ def curate_file(
       out_path: the curated ``demos`` artifact.
       rate: ``own`` (the method's own cut) or ``m`` (drop as much as the M-filter would on
         ``scores_path``, at ``level``).
-      drop_fraction: DemInf's own cut: the lowest fraction of demonstrations.
       level: the M-filter budget: ``pair`` (its incompatible pairs) or ``episode`` (its
         rejected demonstrations).
       scores_path: the compatibility scores of D_new (``rate="m"``).
@@ -245,7 +243,7 @@ def curate_file(
         raise ElicitError(f"unknown rate '{rate}' (own or m)")
     if rate == "m" and scores_path is None:
         raise ElicitError("--rate m drops as much as the M-filter: give --scores of D_new")
-    rule: OwnRule | MatchedRule = OwnRule(drop_fraction)
+    rule: OwnRule | MatchedRule = OwnRule(config.deminf.drop_fraction)
     if rate == "m":
         rule = matched_rule(scores_path, level, lambda_, eta)  # type: ignore[arg-type]
     scores = curation_scores(config, demos_path, base_path, policy_path, progress)

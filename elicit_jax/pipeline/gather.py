@@ -17,7 +17,9 @@ import numpy as np
 from elicit_jax.artifact import read_header, read_json
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.tables import (
+    CurationRow,
     FilterRow,
+    LambdaPoint,
     LengthRow,
     ReportData,
     ResultRow,
@@ -85,15 +87,55 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
 def _filter_row(stage: Mapping[str, Any], path: Path) -> FilterRow:
     h = read_header(path)
     cfg = stage["config"]
+    method = cfg["method"]
+    if "/heldout/" in stage["id"]:  # the λ-sensitivity study's filters
+        method = f"M-Filtered at λ = {h['thresholds']['lambda']:.4g} (sensitivity)"
     return FilterRow(
         task=cfg["task"],
         model=cfg["model"],
-        method=cfg["method"],
+        method=method,
         operator=cfg["operator"],
         pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
         pairs_total=int(h["pairs_in"]),
         episodes_kept=int(h["episodes_out"]),
         episodes_total=int(h["episodes_in"]),
+        note="" if h.get("trusted", True) else "no signal: kept every demo",
+    )
+
+
+def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
+    from elicit_jax.curation.episodes import read_episode_scores
+
+    scores = read_episode_scores(path)
+    cfg = stage["config"]
+    report = dict(scores.report)
+    if "deminf" in cfg:
+        report["drop_fraction"] = cfg["deminf"].get("drop_fraction")
+    return CurationRow(
+        task=cfg["task"],
+        model=cfg.get("model"),
+        method=scores.method,
+        operator=cfg["operator"],
+        scores=tuple(float(v) for v in scores.score),
+        threshold=scores.threshold,
+        trusted=scores.trusted,
+        report=report,
+    )
+
+
+def _lambda_point(stage: Mapping[str, Any], path: Path) -> LambdaPoint:
+    data = read_json(path)
+    rep = data.get("report", {})
+    lo, hi = rep["lambda_range"]
+    cfg = stage["config"]
+    return LambdaPoint(
+        task=cfg["task"],
+        model=cfg["model"],
+        point=int(rep["point"]),
+        lambda_=float(data["lambda"]),
+        fitted=float(rep["fitted_lambda"]),
+        low=float(lo),
+        high=float(hi),
     )
 
 
@@ -114,6 +156,7 @@ def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
     rows = []
     for seed, g in per.groupby("seed", sort=True):
         best = g.loc[g["success"].idxmax()]
+        chosen = frame[(frame["seed"] == seed) & (frame["checkpoint"] == best["checkpoint"])]
         rows.append(
             ResultRow(
                 task=config["evaluate"]["task"],
@@ -125,9 +168,20 @@ def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
                 mean_length=float(best["length"]),
                 n_rollouts=int(best["n"]),
                 checkpoint=str(best["checkpoint"]),
+                init_states=init_states_id(chosen["init_seed"].to_numpy()),
+                study=str(config.get("study", "main")),
+                point=config.get("point"),
             )
         )
     return rows
+
+
+def init_states_id(init_seeds: np.ndarray) -> str:
+    """A short fingerprint of the ordered initial-state seeds of a set of rollouts (paired
+    comparisons require equal fingerprints)."""
+    import hashlib
+
+    return hashlib.sha256(np.asarray(init_seeds, np.int64).tobytes()).hexdigest()[:16]
 
 
 def _training_note(train: Mapping[str, Any]) -> str:
@@ -161,7 +215,7 @@ def gather(run_dir: str | Path) -> ReportData:
     manifest = read_manifest(run_dir)
     cfg = manifest["config"]
     results: list[ResultRow] = []
-    thresholds, lengths, filters, maps = [], [], [], []
+    thresholds, lengths, filters, maps, curation, points = [], [], [], [], [], []
     configs: dict[str, dict[str, Any]] = {}
     missing = []
     for stage in manifest["stages"]:
@@ -177,8 +231,12 @@ def gather(run_dir: str | Path) -> ReportData:
             lengths += _length_rows(stage, path)
         elif kind == "fit-thresholds":
             thresholds.append(_threshold_row(stage, path))
-        elif kind == "filter":
+        elif kind in ("filter", "curate"):
             filters.append(_filter_row(stage, path))
+        elif kind in ("deminf", "demo-score"):
+            curation.append(_curation_row(stage, path))
+        elif kind == "lambda-point":
+            points.append(_lambda_point(stage, path))
         elif kind == "map":
             c = stage["config"]
             maps.append((f"{c['task']}, {c['model']}: compatibility map per operator", str(path)))
@@ -197,7 +255,10 @@ def gather(run_dir: str | Path) -> ReportData:
         description=cfg.get("description", ""),
         run_dir=str(run_dir),
         spec_text=cfg.get("spec_text", ""),
-        results=tuple(results),
+        results=tuple(r for r in results if r.study == "main"),
+        heldout=tuple(r for r in results if r.study != "main"),
+        lambda_points=tuple(points),
+        curation=tuple(curation),
         thresholds=tuple(thresholds),
         lengths=tuple(lengths),
         filters=tuple(filters),

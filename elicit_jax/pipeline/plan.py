@@ -8,6 +8,13 @@ D_base ∪ D_new (naive); score D_new and the contrast sets with the first seed'
 (λ, η) on the contrast scores, filter D_new (M-filter and baseline filters), retrain on
 D_base ∪ filtered (all seeds), evaluate every policy (all seeds and checkpoints); draw the
 maps; one report.
+
+The curation baselines add, per operator, a ``deminf`` stage (per task: DemInf needs no
+policy) or a ``demo-score`` stage (per task × model: it rolls out the naive policy of that
+operator), whose per-demonstration scores ``curate`` stages cut at the method's own rule or at
+the M-filter's budget. A ``[sensitivity]`` table adds the λ study: ``lambda-point`` stages place
+λ across the fit's margin, and base, naive and M-filtered policies per point are trained on
+held-out seeds and evaluated on held-out initial states.
 """
 
 from __future__ import annotations
@@ -15,10 +22,12 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.graph import Graph, Stage
-from elicit_jax.pipeline.spec import METHODS, PipelineSpec, TaskSpec
+from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
 
 FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
+M_FILTER_METHODS = tuple(m for m in FILTER_METHODS if m not in CURATION_METHODS)
 COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
 
@@ -48,12 +57,21 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     needs_scores = any(m in FILTER_METHODS for m in spec.methods)
     for task in spec.tasks:
         stages += _collect_stages(spec, task, resolve)
+        stages += _deminf_stages(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, needs_scores, resolve)
-    report_inputs = {
-        s.id: s.id for s in stages if s.kind in ("collect", "fit-thresholds", "evaluate", "map")
-    }
-    report_inputs |= {s.id: s.id for s in stages if s.kind == "filter"}
+    report_kinds = (
+        "collect",
+        "fit-thresholds",
+        "evaluate",
+        "map",
+        "filter",
+        "curate",
+        "deminf",
+        "demo-score",
+        "lambda-point",
+    )
+    report_inputs = {s.id: s.id for s in stages if s.kind in report_kinds}
     stages.append(
         Stage(
             id="report",
@@ -111,72 +129,159 @@ def _collect_stages(spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver)
     return out
 
 
+def _deminf_stages(spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver) -> list[Stage]:
+    """DemInf scores of each D_new over D_base ∪ D_new (no policy: one stage per task)."""
+    if not any(m.startswith("deminf") for m in spec.methods):
+        return []
+    t = task.name
+    return [
+        Stage(
+            id=f"deminf/{t}/{op}",
+            kind="deminf",
+            output=f"curation/{t}/deminf-{op}.parquet",
+            config=resolve("deminf", {**spec.section("deminf"), "task": t, "operator": op}),
+            inputs={"demos0": f"collect/{t}/base", "demos1": f"collect/{t}/new/{op}"},
+            label=f"deminf {t} D_new of {op}",
+        )
+        for op in task.operators
+    ]
+
+
+class _Cell:
+    """Stage builders of one task × model cell."""
+
+    def __init__(
+        self, spec: PipelineSpec, task: TaskSpec, model: str, resolve: ConfigResolver
+    ) -> None:
+        self.spec, self.task, self.model, self.resolve = spec, task, model, resolve
+        self.t = task.name
+        self.cell = f"{task.name}/{model}"
+        self.where = {"task": task.name, "model": model}
+
+    def train(
+        self,
+        method: str,
+        op: str | None,
+        extra: Mapping[str, str],
+        seeds: tuple[int, ...] | None = None,
+        prefix: str = "",
+        meta: Mapping[str, Any] | None = None,
+    ) -> Stage:
+        seeds = seeds or self.spec.seeds
+        suffix = prefix + (method if op is None else f"{method}/{op}")
+        raw = {**self.spec.section("train"), **self.where, "seeds": list(seeds)}
+        raw |= {"profile": self.spec.profile, "method": method, "operator": op, **(meta or {})}
+        return Stage(
+            id=f"train/{self.cell}/{suffix}",
+            kind="train",
+            output=f"policies/{self.cell}/{suffix.replace('/', '-')}",
+            config=self.resolve("train", raw),
+            inputs={"demos0": f"collect/{self.t}/base", **extra},
+            label=f"train {self.t} {self.model} {suffix} (seeds {_seeds(seeds)})",
+        )
+
+    def evaluate(
+        self,
+        train_stage: Stage,
+        method: str,
+        op: str | None,
+        held_out: bool = False,
+        prefix: str = "",
+        meta: Mapping[str, Any] | None = None,
+    ) -> Stage:
+        """Evaluate every seed and checkpoint of a training run (the held-out study: its seeds
+        and initial states)."""
+        sens = self.spec.sensitivity
+        seeds = sens.seeds if held_out and sens else self.spec.seeds
+        suffix = prefix.replace("/", "-") + (method if op is None else f"{method}-{op}")
+        raw = {**self.spec.section("evaluate"), **self.where, "seeds": list(seeds)}
+        raw |= {"profile": self.spec.profile, "method": method, "operator": op, **(meta or {})}
+        if held_out and sens:
+            raw["seed"] = sens.eval_seed
+        return Stage(
+            id=f"evaluate/{self.cell}/{suffix}",
+            kind="evaluate",
+            output=f"evals/{self.cell}/{suffix}.parquet",
+            config=self.resolve("evaluate", raw),
+            inputs={"policy": train_stage.id},
+            label=f"evaluate {self.t} {self.model} {suffix}",
+        )
+
+    def filter(
+        self, method: str, op: str, score: Stage, thresholds: str, prefix: str = ""
+    ) -> Stage:
+        """An M-filter or baseline filter of one D_new under the thresholds of a stage."""
+        return Stage(
+            id=f"filter/{self.cell}/{prefix}{method}/{op}",
+            kind="filter",
+            output=f"filtered/{self.cell}/{prefix.replace('/', '-')}{method}-{op}",
+            config=self.resolve(
+                "filter",
+                {**self.spec.section("filter"), **self.where, "method": method, "operator": op},
+            ),
+            inputs={"scores": score.id, "thresholds": thresholds, "demos": self.new(op)},
+            seed=self.spec.collect_seed,
+            label=f"filter {self.t} {self.model} {op} ({prefix}{method})",
+        )
+
+    def curate(self, method: str, op: str, scores: str, score: Stage, fit: Stage) -> Stage:
+        """DemInf / Demo-SCORE cut of one D_new: own rule, or the M-filter's budget."""
+        raw = {**self.where, "method": method, "operator": op}
+        raw |= {"filter": self.spec.section("filter"), "deminf": self.spec.section("deminf")}
+        return Stage(
+            id=f"filter/{self.cell}/{method}/{op}",
+            kind="curate",
+            output=f"filtered/{self.cell}/{method}-{op}",
+            config=self.resolve("curate", raw),
+            inputs={
+                "episode_scores": scores,
+                "scores": score.id,
+                "thresholds": fit.id,
+                "demos": self.new(op),
+            },
+            label=f"curate {self.t} {self.model} {op} ({method})",
+        )
+
+    def new(self, op: str) -> str:
+        return f"collect/{self.t}/new/{op}"
+
+
 def _cell_stages(
     spec: PipelineSpec, task: TaskSpec, model: str, needs_scores: bool, resolve: ConfigResolver
 ) -> list[Stage]:
-    t = task.name
-    cell = f"{t}/{model}"
-    base_data = f"collect/{t}/base"
-    where = {"task": t, "model": model}
-    score_seed = spec.seeds[0]
+    c = _Cell(spec, task, model, resolve)
     stages: list[Stage] = []
-
-    def train(method: str, op: str | None, extra: Mapping[str, str]) -> Stage:
-        suffix = method if op is None else f"{method}/{op}"
-        raw = {**spec.section("train"), **where, "seeds": list(spec.seeds)}
-        raw |= {"profile": spec.profile, "method": method, "operator": op}
-        return Stage(
-            id=f"train/{cell}/{suffix}",
-            kind="train",
-            output=f"policies/{cell}/{suffix.replace('/', '-')}",
-            config=resolve("train", raw),
-            inputs={"demos0": base_data, **extra},
-            label=f"train {t} {model} {suffix} (seeds {_seeds(spec)})",
-        )
-
-    def evaluate(train_stage: Stage, method: str, op: str | None) -> Stage:
-        suffix = method if op is None else f"{method}-{op}"
-        raw = {**spec.section("evaluate"), **where, "seeds": list(spec.seeds)}
-        raw |= {"profile": spec.profile, "method": method, "operator": op}
-        return Stage(
-            id=f"evaluate/{cell}/{suffix}",
-            kind="evaluate",
-            output=f"evals/{cell}/{suffix}.parquet",
-            config=resolve("evaluate", raw),
-            inputs={"policy": train_stage.id},
-            label=f"evaluate {t} {model} {suffix}",
-        )
-
-    base = train("base", None, {})
-    stages += [base, evaluate(base, "base", None)]
+    base = c.train("base", None, {})
+    stages += [base, c.evaluate(base, "base", None)]
+    naive: dict[str, Stage] = {}
     for op in task.operators:
         if "naive" in spec.methods:
-            naive = train("naive", op, {"demos1": f"collect/{t}/new/{op}"})
-            stages += [naive, evaluate(naive, "naive", op)]
+            naive[op] = c.train("naive", op, {"demos1": c.new(op)})
+            stages += [naive[op], c.evaluate(naive[op], "naive", op)]
     if not needs_scores:
         return stages
-    score_raw = {**spec.section("score"), **where, "policy_seed": score_seed}
+    score_raw = {**spec.section("score"), **c.where, "policy_seed": spec.seeds[0]}
     contrast = Stage(
-        id=f"score/{cell}/contrast",
+        id=f"score/{c.cell}/contrast",
         kind="score",
-        output=f"scores/{cell}/contrast",
+        output=f"scores/{c.cell}/contrast",
         config=resolve("score", {**score_raw, "set": "contrast"}),
         inputs={
             "policy": base.id,
-            "demos0": f"collect/{t}/holdout",
-            "demos1": f"collect/{t}/incompatible",
+            "demos0": f"collect/{c.t}/holdout",
+            "demos1": f"collect/{c.t}/incompatible",
         },
-        label=f"score {t} {model} contrast sets",
+        label=f"score {c.t} {model} contrast sets",
     )
     fit = Stage(
-        id=f"fit-thresholds/{cell}",
+        id=f"fit-thresholds/{c.cell}",
         kind="fit-thresholds",
-        output=f"thresholds/{cell}.json",
+        output=f"thresholds/{c.cell}.json",
         config=resolve(
             "fit-thresholds",
             {
                 **spec.section("thresholds"),
-                **where,
+                **c.where,
                 "compatible_operator": task.base_operator,
                 "incompatible_operator": task.incompatible_operator,
                 "holdout_seed": collect_seed(spec, task, "holdout"),
@@ -184,52 +289,101 @@ def _cell_stages(
             },
         ),
         inputs={"scores": contrast.id},
-        label=f"fit thresholds {t} {model}",
+        label=f"fit thresholds {c.t} {model}",
     )
     stages += [contrast, fit]
     map_inputs = {"thresholds": fit.id, "scores:contrast": contrast.id}
+    scores: dict[str, Stage] = {}
     for op in task.operators:
-        score = Stage(
-            id=f"score/{cell}/{op}",
+        score = scores[op] = Stage(
+            id=f"score/{c.cell}/{op}",
             kind="score",
-            output=f"scores/{cell}/new-{op}",
+            output=f"scores/{c.cell}/new-{op}",
             config=resolve("score", {**score_raw, "set": op}),
-            inputs={"policy": base.id, "demos0": f"collect/{t}/new/{op}"},
-            label=f"score {t} {model} D_new of {op}",
+            inputs={"policy": base.id, "demos0": c.new(op)},
+            label=f"score {c.t} {model} D_new of {op}",
         )
         stages.append(score)
         map_inputs[f"scores:{op}"] = score.id
+        demo_score = None
+        if any(m.startswith("demo-score") for m in spec.methods):
+            demo_score = _demo_score_stage(c, op, naive[op])
+            stages.append(demo_score)
         for method in (m for m in FILTER_METHODS if m in spec.methods):
-            inputs = {"scores": score.id, "thresholds": fit.id, "demos": f"collect/{t}/new/{op}"}
-            filt = Stage(
-                id=f"filter/{cell}/{method}/{op}",
-                kind="filter",
-                output=f"filtered/{cell}/{method}-{op}",
-                config=resolve(
-                    "filter",
-                    {**spec.section("filter"), **where, "method": method, "operator": op},
-                ),
-                inputs=inputs,
-                seed=spec.collect_seed,
-                label=f"filter {t} {model} {op} ({method})",
-            )
-            trained = train(method, op, {"demos1": filt.id})
-            stages += [filt, trained, evaluate(trained, method, op)]
+            if method in CURATION_METHODS:
+                per_demo = f"deminf/{c.t}/{op}" if method.startswith("deminf") else demo_score
+                filt = c.curate(method, op, getattr(per_demo, "id", per_demo), score, fit)
+            else:
+                filt = c.filter(method, op, score, fit.id)
+            trained = c.train(method, op, {"demos1": filt.id})
+            stages += [filt, trained, c.evaluate(trained, method, op)]
     stages.append(
         Stage(
-            id=f"map/{cell}",
+            id=f"map/{c.cell}",
             kind="map",
-            output=f"maps/{t}-{model}.png",
+            output=f"maps/{c.t}-{model}.png",
             config=resolve(
                 "map",
-                {**where, "operators": list(task.operators), "base_operator": task.base_operator},
+                {**c.where, "operators": list(task.operators), "base_operator": task.base_operator},
             ),
             inputs=map_inputs,
-            label=f"map {t} {model}",
+            label=f"map {c.t} {model}",
         )
     )
+    if spec.sensitivity is not None:
+        stages += _sensitivity_stages(c, scores, fit)
     return stages
 
 
-def _seeds(spec: PipelineSpec) -> str:
-    return ",".join(str(s) for s in spec.seeds)
+def _demo_score_stage(c: _Cell, op: str, naive: Stage) -> Stage:
+    raw = {**c.spec.section("demo_score"), **c.where, "operator": op}
+    raw |= {"policy_seed": c.spec.seeds[0]}
+    return Stage(
+        id=f"demo-score/{c.cell}/{op}",
+        kind="demo-score",
+        output=f"curation/{c.cell}/demo-score-{op}.parquet",
+        config=c.resolve("demo-score", raw),
+        inputs={"policy": naive.id, "demos": c.new(op)},
+        label=f"demo-score {c.t} {c.model} D_new of {op} (rollouts of its naive policy)",
+    )
+
+
+def _sensitivity_stages(c: _Cell, scores: Mapping[str, Stage], fit: Stage) -> list[Stage]:
+    """Base, naive and M-filtered at each λ point, on held-out training and evaluation seeds."""
+    sens = c.spec.sensitivity
+    assert sens is not None
+    ops = sens.operators or c.task.operators
+    unknown = [op for op in ops if op not in c.task.operators]
+    if unknown:
+        raise ElicitError(
+            f"[sensitivity] operators {', '.join(unknown)} are not operators of {c.t}"
+        )
+    seeds = sens.seeds
+    meta = {"study": "sensitivity"}
+    base = c.train("base", None, {}, seeds, "heldout/", meta)
+    stages = [base, c.evaluate(base, "base", None, True, "heldout/", meta)]
+    for op in ops:
+        naive = c.train("naive", op, {"demos1": c.new(op)}, seeds, "heldout/", meta)
+        stages += [naive, c.evaluate(naive, "naive", op, True, "heldout/", meta)]
+    for k in range(sens.points):
+        point = Stage(
+            id=f"lambda-point/{c.cell}/{k}",
+            kind="lambda-point",
+            output=f"thresholds/{c.cell}-lambda{k}.json",
+            config=c.resolve("lambda-point", {**c.where, "point": k, "points": sens.points}),
+            inputs={"thresholds": fit.id},
+            label=f"λ point {k + 1}/{sens.points} of {c.t} {c.model}",
+        )
+        stages.append(point)
+        prefix = f"heldout/lambda{k}/"
+        for op in ops:
+            filt = c.filter("filtered", op, scores[op], point.id, prefix)
+            point_meta = {**meta, "point": k}
+            trained = c.train("filtered", op, {"demos1": filt.id}, seeds, prefix, point_meta)
+            held = c.evaluate(trained, "filtered", op, True, prefix, point_meta)
+            stages += [filt, trained, held]
+    return stages
+
+
+def _seeds(seeds: tuple[int, ...]) -> str:
+    return ",".join(str(s) for s in seeds)

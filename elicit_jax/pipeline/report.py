@@ -8,20 +8,25 @@ external asset.
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, dumps
 from elicit_jax.pipeline.tables import (
+    INTERVAL_NOTE,
     ReportData,
     Table,
+    curation_table,
     decisions_table,
+    difference_tables,
     filter_table,
     length_table,
     models_table,
     results_tables,
     rollout_length_table,
+    sensitivity_tables,
     threshold_table,
 )
 
@@ -43,8 +48,15 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
     """Ordered (title, content) blocks shared by both renderers; content is a Table, text,
     a list of maps or a code block (``("code", text)``)."""
     blocks: list[tuple[str, Any]] = []
-    for title, table in results_tables(data) + models_table(data):
+    diffs = difference_tables(data)
+    for (title, table), diff in zip(results_tables(data), diffs, strict=True):
+        blocks += [(title, table), diff]
+    for title, table in models_table(data):
         blocks.append((title, table))
+    for title, table in sensitivity_tables(data):
+        blocks.append((title, table))
+    if data.figures:
+        blocks.append(("λ sensitivity", list(data.figures)))
     blocks.append(("Mean rollout length and selected checkpoints", rollout_length_table(data)))
     if data.thresholds:
         blocks.append(
@@ -53,6 +65,13 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
         blocks.append(("Contrast-set decisions under the thresholds", decisions_table(data)))
     if data.filters:
         blocks.append(("What the filters kept", filter_table(data)))
+    if data.curation:
+        blocks.append(
+            (
+                "Curation baselines: per-demonstration scores (DemInf, Demo-SCORE)",
+                curation_table(data),
+            )
+        )
     if data.maps:
         blocks.append(("Compatibility maps (per operator)", list(data.maps)))
     if data.lengths:
@@ -72,6 +91,8 @@ def _intro(data: ReportData) -> list[str]:
     if data.description:
         lines.append(data.description)
     lines += list(data.notes)
+    if data.results or data.heldout:
+        lines.append(f"Differences between policies: {INTERVAL_NOTE}")
     return lines
 
 
@@ -141,12 +162,15 @@ def write_report(data: ReportData, out_dir: str | Path) -> tuple[Path, Path]:
     """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``maps/*.png`` and
     ``artifact.json``; returns the Markdown and HTML paths."""
     from elicit_jax.artifact import make_header
+    from elicit_jax.pipeline.figures import sensitivity_figure
 
     out_dir = Path(out_dir)
     with atomic_path(out_dir) as tmp:
         (tmp / "maps").mkdir(parents=True)
         for _, png in data.maps:
             (tmp / "maps" / Path(png).name).write_bytes(Path(png).read_bytes())
+        figures = sensitivity_figure(data, tmp / "maps" / "lambda-sensitivity.png")
+        data = dataclasses.replace(data, figures=tuple(figures))
         (tmp / "report.md").write_text(render_markdown(data, map_dir="maps/"))
         (tmp / "report.html").write_text(render_html(data))
         header = make_header(

@@ -6,7 +6,10 @@ compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.
     [pipeline]                      # name, description, profile, seeds, models, methods
     [[task]]                        # one table per task: operators and demo counts
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # stage overrides
+    [deminf] [demo_score]           # settings of the two curation baselines
+    [sensitivity]                   # optional: outcome vs λ across the fitted margin
     [profiles.cpu.train]            # overrides applied only under that profile
+    [profiles.cpu.pipeline]         # seeds, models, methods under that profile
     [task.profiles.cpu]             # per-task overrides under that profile (after the above)
 
 Section keys are passed to the stage's library config by field name; unknown fields are
@@ -26,7 +29,17 @@ from typing import Any
 from elicit_jax.errors import ElicitError
 
 PROFILES = ("paper", "cpu")
-SECTIONS = ("collect", "train", "score", "thresholds", "filter", "evaluate", "report")
+SECTIONS = (
+    "collect",
+    "train",
+    "score",
+    "thresholds",
+    "filter",
+    "evaluate",
+    "report",
+    "deminf",
+    "demo_score",
+)
 METHODS = (
     "base",
     "naive",
@@ -37,8 +50,15 @@ METHODS = (
     "shortest",
     "likelihood",
     "novelty",
+    "deminf",
+    "deminf-matched",
+    "demo-score",
+    "demo-score-matched",
 )
-_TOP_KEYS = {"pipeline", "task", "profiles", *SECTIONS}
+CURATION_METHODS = ("deminf", "deminf-matched", "demo-score", "demo-score-matched")
+_PROFILE_PIPELINE_KEYS = {"seeds", "models", "methods", "collect_seed"}
+_SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators"}
+_TOP_KEYS = {"pipeline", "task", "profiles", "sensitivity", *SECTIONS}
 _PIPELINE_KEYS = {"name", "description", "profile", "seeds", "models", "methods", "collect_seed"}
 _TASK_KEYS = {
     "name",
@@ -81,6 +101,25 @@ class TaskSpec:
 
 
 @dataclasses.dataclass(frozen=True)
+class SensitivitySpec:
+    """The λ-sensitivity study: the filtering outcome at several λ across the fitted margin,
+    trained and evaluated on seeds the main study does not use.
+
+    Attributes:
+      points: λ values, evenly spaced over the λ range of the fit's margin (both ends
+        included; the fitted λ lies inside).
+      seeds: training seeds, disjoint from the study's.
+      eval_seed: evaluation initial-state set, other than the study's.
+      operators: the operators studied (default: every operator of the task).
+    """
+
+    points: int = 5
+    seeds: tuple[int, ...] = (100, 101, 102)
+    eval_seed: int = 1
+    operators: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
 class PipelineSpec:
     """A parsed pipeline definition under one profile.
 
@@ -96,6 +135,7 @@ class PipelineSpec:
       sections: stage name -> config overrides (profile overrides already merged in).
       source: where the definition was read from.
       text: the definition's exact text, reproduced in reports.
+      sensitivity: the λ-sensitivity study, if the definition asks for one.
     """
 
     name: str
@@ -109,6 +149,7 @@ class PipelineSpec:
     sections: Mapping[str, Mapping[str, Any]]
     source: str
     text: str
+    sensitivity: SensitivitySpec | None = None
 
     def section(self, name: str) -> dict[str, Any]:
         """A copy of the overrides for stage ``name`` (empty if none)."""
@@ -194,7 +235,10 @@ def parse_spec(
             f"unknown profile '{profile}' (choose from {', '.join(PROFILES)})", source
         )
     overrides = data.get("profiles", {}).get(profile, {})
-    _check_keys(overrides, {*SECTIONS, "task"}, f"[profiles.{profile}]", source)
+    _check_keys(overrides, {*SECTIONS, "task", "pipeline"}, f"[profiles.{profile}]", source)
+    head_over = _table(overrides, "pipeline", source)
+    _check_keys(head_over, _PROFILE_PIPELINE_KEYS, f"[profiles.{profile}.pipeline]", source)
+    head = {**head, **head_over}
     for prof in data.get("profiles", {}):
         if prof not in PROFILES:
             raise ElicitError(f"[profiles.{prof}]: unknown profile name", source)
@@ -215,10 +259,18 @@ def parse_spec(
             raise ElicitError(f"unknown method '{m}' (choose from {', '.join(METHODS)})", source)
     if "base" not in methods:
         raise ElicitError("methods must include 'base' (every comparison is against it)", source)
+    if any(m.startswith("demo-score") for m in methods) and "naive" not in methods:
+        raise ElicitError(
+            "demo-score rolls out the policy trained on D_base ∪ D_new: add 'naive' to methods",
+            source,
+        )
     seeds = tuple(int(s) for s in head.get("seeds", (0,)))
     models = tuple(str(m) for m in head.get("models", ("mlp",)))
     if not seeds or not models:
         raise ElicitError("[pipeline] seeds and models must not be empty", source)
+    if len(set(seeds)) != len(seeds):
+        raise ElicitError("[pipeline] seeds are listed twice", source)
+    sensitivity = _sensitivity(data, seeds, methods, sections["evaluate"], source)
     return PipelineSpec(
         name=str(head.get("name", Path(source).stem)),
         description=str(head.get("description", "")).strip(),
@@ -231,7 +283,44 @@ def parse_spec(
         sections=MappingProxyType(sections),
         source=source,
         text=text,
+        sensitivity=sensitivity,
     )
+
+
+def _sensitivity(
+    data: Mapping[str, Any],
+    seeds: tuple[int, ...],
+    methods: tuple[str, ...],
+    evaluate: Mapping[str, Any],
+    source: str,
+) -> SensitivitySpec | None:
+    """The [sensitivity] table, validated: held-out seeds and evaluation states."""
+    if "sensitivity" not in data:
+        return None
+    raw = _table(data, "sensitivity", source)
+    _check_keys(raw, _SENSITIVITY_KEYS, "[sensitivity]", source)
+    default = SensitivitySpec()
+    spec = SensitivitySpec(
+        points=int(raw.get("points", default.points)),
+        seeds=tuple(int(s) for s in raw.get("seeds", default.seeds)),
+        eval_seed=int(raw.get("eval_seed", default.eval_seed)),
+        operators=tuple(str(o) for o in raw.get("operators", ())),
+    )
+    if spec.points < 2:
+        raise ElicitError(f"[sensitivity] points must be at least 2, got {spec.points}", source)
+    if not spec.seeds or set(spec.seeds) & set(seeds):
+        raise ElicitError(
+            "[sensitivity] seeds must be given and disjoint from [pipeline] seeds (held out)",
+            source,
+        )
+    if spec.eval_seed == int(evaluate.get("seed", 0)):
+        raise ElicitError(
+            "[sensitivity] eval_seed must differ from [evaluate] seed (held-out initial states)",
+            source,
+        )
+    if "naive" not in methods or "filtered" not in methods:
+        raise ElicitError("[sensitivity] compares with the study: methods need naive, filtered")
+    return spec
 
 
 def _check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:

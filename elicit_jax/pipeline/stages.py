@@ -72,7 +72,7 @@ def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
 def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.policy.config import TrainConfig
 
-    meta, over = _split(raw, ("task", "profile", "method", "operator"))
+    meta, over = _split(raw, ("task", "profile", "method", "operator", "study", "point"))
     cfg = TrainConfig.from_profile(meta["profile"], **_fields(TrainConfig, over, "train"))
     return {**meta, "train": cfg.to_dict()}
 
@@ -123,11 +123,47 @@ def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
 def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.sim.evaluate import EvalConfig
 
-    meta, over = _split(raw, ("model", "profile", "method", "operator", "seeds"))
+    meta, over = _split(raw, ("model", "profile", "method", "operator", "seeds", "study", "point"))
     over = {"checkpoints": ["all"], "select": "best", **over}
     over["checkpoints"] = tuple(str(c) for c in over["checkpoints"])
     cfg = EvalConfig(**_fields(EvalConfig, over, "evaluate"))
     return {**meta, "evaluate": dataclasses.asdict(cfg)}
+
+
+def _resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.curation.deminf import DemInfConfig
+
+    meta, over = _split(raw, ("task", "operator"))
+    return {
+        **meta,
+        "deminf": dataclasses.asdict(DemInfConfig(**_fields(DemInfConfig, over, "deminf"))),
+    }
+
+
+def _resolve_demo_score(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.curation.demo_score import DemoScoreConfig
+
+    meta, over = _split(raw, ("model", "operator"))
+    cfg = DemoScoreConfig(**_fields(DemoScoreConfig, over, "demo_score"))
+    return {**meta, "task": cfg.task, "demo_score": dataclasses.asdict(cfg)}
+
+
+def _resolve_curate(raw: dict[str, Any]) -> dict[str, Any]:
+    """Level and accept fraction of the M-filter budget (from [filter]) and DemInf's own cut
+    (from [deminf]); ``rate`` is ``m`` for the ``*-matched`` methods."""
+    from elicit_jax.compat.filtering import FilterConfig
+    from elicit_jax.curation.deminf import DemInfConfig
+
+    meta, _ = _split(raw, ("task", "model", "method", "operator"))
+    filt = FilterConfig(**_fields(FilterConfig, raw.get("filter", {}), "filter"))
+    deminf = DemInfConfig(**_fields(DemInfConfig, raw.get("deminf", {}), "deminf"))
+    return {
+        **meta,
+        "rate": "m" if meta["method"].endswith("-matched") else "own",
+        "level": filt.level,
+        "accept_fraction": filt.accept_fraction,
+        "drop_fraction": deminf.drop_fraction,
+    }
 
 
 _RESOLVERS = {
@@ -137,6 +173,9 @@ _RESOLVERS = {
     "fit-thresholds": _resolve_fit,
     "filter": _resolve_filter,
     "evaluate": _resolve_evaluate,
+    "deminf": _resolve_deminf,
+    "demo-score": _resolve_demo_score,
+    "curate": _resolve_curate,
 }
 
 
@@ -375,6 +414,109 @@ def evaluate_stage(ctx: StageContext) -> None:
         )
 
 
+def deminf_stage(ctx: StageContext) -> None:
+    """DemInf scores of one D_new, estimated over D_base ∪ D_new."""
+    from elicit_jax.curation.deminf import DemInfConfig, deminf_scores
+    from elicit_jax.curation.episodes import write_episode_scores
+    from elicit_jax.data.demos import read_demos
+
+    cfg = DemInfConfig(**ctx.config["deminf"])
+    scores = deminf_scores(read_demos(ctx.inputs["demos1"]), read_demos(ctx.inputs["demos0"]), cfg)
+    write_episode_scores(ctx.output, scores, config=dict(ctx.config), inputs=dict(ctx.inputs))
+
+
+def demo_score_stage(ctx: StageContext) -> None:
+    """Demo-SCORE scores of one D_new from rollouts of its naive policy's checkpoints."""
+    from elicit_jax.curation.demo_score import DemoScoreConfig, demo_score_scores
+    from elicit_jax.curation.episodes import write_episode_scores
+    from elicit_jax.data.demos import read_demos
+
+    raw = dict(ctx.config["demo_score"])
+    cfg = DemoScoreConfig(**raw)
+    scores = demo_score_scores(
+        ctx.inputs["policy"],
+        read_demos(ctx.inputs["demos"]),
+        cfg,
+        progress=lambda epoch, rate: ctx.console.print(
+            f"  demo-score rollouts, epoch {epoch}: {100 * rate:.0f}% success"
+        ),
+    )
+    inputs = {"policy": ctx.inputs["policy"] / "artifact.json", "demos": ctx.inputs["demos"]}
+    write_episode_scores(ctx.output, scores, config=dict(ctx.config), inputs=inputs)
+
+
+def curate_stage(ctx: StageContext) -> None:
+    """Cut one D_new by DemInf / Demo-SCORE scores, at the method's own rule or at the
+    M-filter's budget under the fitted thresholds; same output layout as ``filter``."""
+    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.curation.episodes import OwnRule, read_episode_scores
+    from elicit_jax.curation.select import curate_demos, matched_rule
+
+    cfg = ctx.config
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    scores = read_episode_scores(ctx.inputs["episode_scores"])
+    if cfg["rate"] == "m":
+        rule = matched_rule(
+            ctx.inputs["scores"] / SCORES_FILE, cfg["level"], lam, eta, cfg["accept_fraction"]
+        )
+    else:
+        rule = OwnRule(cfg["drop_fraction"])
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        result = curate_demos(
+            scores,
+            ctx.inputs["demos"],
+            tmp / DEMOS_FILE,
+            rule,
+            config=dict(cfg),
+            inputs={"episode_scores": ctx.inputs["episode_scores"]},
+            allow_empty=True,
+        )
+        files = [] if result.out_path is None else [DEMOS_FILE, result.log_path.name]
+        reason = result.reason + ("; the retraining uses D_base alone" * (not files))
+        header = make_header(
+            "pipeline-filter",
+            1,
+            config=dict(cfg),
+            inputs=dict(ctx.inputs),
+            thresholds={"lambda": lam, "eta": eta},
+            reason=reason,
+            files=files,
+            trusted=scores.trusted,
+            pairs_in=result.pairs_in,
+            pairs_dropped=result.pairs_dropped,
+            episodes_in=result.episodes_in,
+            episodes_out=result.episodes_out,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def lambda_point_stage(ctx: StageContext) -> None:
+    """Thresholds with λ at point k of ``points`` evenly spaced over the fit's margin range
+    (η as fitted), for the sensitivity study."""
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+
+    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
+    lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
+    if fit.get("method", "fit") != "fit" or lo is None:
+        raise ElicitError(
+            "the λ-sensitivity study needs fitted thresholds with a margin, not manual ones",
+            ctx.inputs["thresholds"],
+        )
+    k, n = int(ctx.config["point"]), int(ctx.config["points"])
+    point = float(lo + (hi - lo) * k / (n - 1))
+    header = make_header(
+        THRESHOLDS_KIND,
+        1,
+        config=dict(ctx.config),
+        inputs={"fit": ctx.inputs["thresholds"]},
+        method="sensitivity-point",
+        report={"point": k, "points": n, "lambda_range": [lo, hi], "fitted_lambda": lam},
+        **{"lambda": point, "eta": eta},
+    )
+    write_json(ctx.output, header)
+
+
 def report_stage(ctx: StageContext) -> None:
     """Gather the run's artifacts and write the Markdown + HTML report."""
     from elicit_jax.pipeline.gather import gather
@@ -393,5 +535,9 @@ def real_registry() -> dict[str, StageFn]:
         "score": score_stage,
         "fit-thresholds": fit_stage,
         "filter": filter_stage,
+        "deminf": deminf_stage,
+        "demo-score": demo_score_stage,
+        "curate": curate_stage,
+        "lambda-point": lambda_point_stage,
         "report": report_stage,
     }

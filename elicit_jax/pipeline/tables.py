@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.pipeline.stats import PairedDiff, format_diff, paired_t_interval
+
 METHOD_LABELS = {
     "base": "Base",
     "naive": "Naive",
@@ -24,7 +26,16 @@ METHOD_LABELS = {
     "shortest": "Drop shortest",
     "likelihood": "Likelihood-only",
     "novelty": "Novelty-only",
+    "deminf": "DemInf",
+    "deminf-matched": "DemInf (M's amount)",
+    "demo-score": "Demo-SCORE",
+    "demo-score-matched": "Demo-SCORE (M's amount)",
 }
+INTERVAL_NOTE = (
+    "95% interval of the difference, paired by training seed and initial states (every policy "
+    "is evaluated on the same seeded initial states): Student's t over the per-seed differences "
+    "(see docs/pipelines.md); * marks an interval that excludes 0."
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,6 +51,9 @@ class ResultRow:
     mean_length: float
     n_rollouts: int
     checkpoint: str
+    init_states: str = ""
+    study: str = "main"
+    point: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,6 +93,34 @@ class FilterRow:
     pairs_total: int
     episodes_kept: int
     episodes_total: int
+    note: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class CurationRow:
+    """Per-demonstration scores of one curation baseline on one D_new."""
+
+    task: str
+    model: str | None
+    method: str
+    operator: str
+    scores: tuple[float, ...]
+    threshold: float | None
+    trusted: bool
+    report: Mapping[str, Any]
+
+
+@dataclasses.dataclass(frozen=True)
+class LambdaPoint:
+    """One λ of the sensitivity study: point k of the fit's margin range."""
+
+    task: str
+    model: str
+    point: int
+    lambda_: float
+    fitted: float
+    low: float
+    high: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,7 +136,11 @@ class ReportData:
     thresholds: tuple[ThresholdRow, ...] = ()
     lengths: tuple[LengthRow, ...] = ()
     filters: tuple[FilterRow, ...] = ()
+    curation: tuple[CurationRow, ...] = ()
+    heldout: tuple[ResultRow, ...] = ()
+    lambda_points: tuple[LambdaPoint, ...] = ()
     maps: tuple[tuple[str, str], ...] = ()
+    figures: tuple[tuple[str, str], ...] = ()
     configs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -156,6 +202,56 @@ def results_tables(data: ReportData) -> list[tuple[str, Table]]:
     return out
 
 
+def paired_diff(a: Sequence[ResultRow], b: Sequence[ResultRow]) -> PairedDiff | None:
+    """Paired interval of success(a) − success(b) over the seeds both have; None when there is
+    no common seed or a pair was evaluated on different initial states (not comparable)."""
+    by_seed = {r.seed: r for r in b}
+    pairs = [(r, by_seed[r.seed]) for r in sorted(a, key=lambda r: r.seed) if r.seed in by_seed]
+    if not pairs or any(x.init_states != y.init_states for x, y in pairs):
+        return None
+    return paired_t_interval([x.success for x, _ in pairs], [y.success for _, y in pairs])
+
+
+def _rows(results: Sequence[ResultRow]) -> dict[tuple, list[ResultRow]]:
+    out: dict[tuple, list[ResultRow]] = {}
+    for r in results:
+        out.setdefault((r.task, r.model, r.method, r.operator), []).append(r)
+    return out
+
+
+def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
+    """Beside each results table: every cell's difference from Naive with its paired 95%
+    interval (the Naive column: Naive − Base, does adding this operator's data help?)."""
+    rows_of = _rows(data.results)
+    out = []
+    for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
+        methods = [
+            m
+            for m in METHOD_LABELS
+            if m != "base" and any(k[:3] == (task, model, m) for k in rows_of)
+        ]
+        ops = list(
+            dict.fromkeys(k[3] for k in rows_of if k[:2] == (task, model) and k[3] is not None)
+        )
+        base = rows_of.get((task, model, "base", None), [])
+        rows = []
+        for op in ops:
+            naive = rows_of.get((task, model, "naive", op), [])
+            cells = []
+            for m in methods:
+                mine = rows_of.get((task, model, m, op), [])
+                ref = base if m == "naive" else naive
+                cells.append(format_diff(paired_diff(mine, ref)) if mine and ref else "–")
+            rows.append([op, *cells])
+        header = [
+            "operator",
+            *["Naive − Base" if m == "naive" else f"{METHOD_LABELS[m]} − Naive" for m in methods],
+        ]
+        title = f"{task} — {model}: difference from Naive, points (paired 95% interval)"
+        out.append((title, (header, rows)))
+    return out
+
+
 def models_table(data: ReportData) -> list[tuple[str, Table]]:
     """Per task with several models: rows = base + operators, columns = models (Naive)."""
     cells = _cells(data.results)
@@ -183,6 +279,106 @@ def models_table(data: ReportData) -> list[tuple[str, Table]]:
                 ]
             )
         out.append((f"{task}: model comparison, success % mean (std)", (["", *models], rows)))
+    return out
+
+
+def curation_table(data: ReportData) -> Table:
+    """What each curation baseline saw: its per-demo scores, its own cut, its diagnostics."""
+    header = [
+        "task",
+        "model",
+        "operator",
+        "method",
+        "demo scores min / median / max",
+        "own cut",
+        "diagnostics",
+    ]
+    rows = []
+    for c in data.curation:
+        s = np.asarray(c.scores, float)
+        spread = f"{s.min():.3g} / {np.median(s):.3g} / {s.max():.3g}" if s.size else "–"
+        rep = c.report
+        if c.method == "deminf":
+            cut = f"lowest {100 * rep.get('drop_fraction', 0.2):g}% of demos"
+            base = rep.get("base_demo_scores", {})
+            diag = (
+                f"I(S;A) ≈ {rep.get('mi_estimate', math.nan):.3g} nats over "
+                f"{rep.get('n_pairs', '?')} pairs; D_base demos' mean score "
+                f"{base.get('mean', math.nan):.3g}"
+            )
+        else:
+            cut = "–" if c.threshold is None else f"score <= {c.threshold:.3g}"
+            ckpts = ", ".join(
+                f"{k['epoch']}: {k['successes']}/{k['rollouts']}"
+                for k in rep.get("checkpoints", [])
+            )
+            diag = f"rollout successes per epoch {ckpts}"
+            if c.trusted:
+                diag += (
+                    f"; trained on epoch {rep.get('chosen_train_epoch')}, validated on "
+                    f"{rep.get('validation_epoch')}: rollout balanced accuracy "
+                    f"{rep.get('validation_balanced_accuracy', math.nan):.2f}"
+                )
+        if not c.trusted:
+            diag += f"; NO SIGNAL ({rep.get('why', '')}): nothing dropped"
+        rows.append(
+            [
+                c.task,
+                c.model or "–",
+                c.operator,
+                METHOD_LABELS.get(c.method, c.method),
+                spread,
+                cut,
+                diag,
+            ]
+        )
+    return header, rows
+
+
+def sensitivity_tables(data: ReportData) -> list[tuple[str, Table]]:
+    """Per task × model: held-out success of Base, Naive and M-Filtered at each λ point, with
+    the paired interval of each point's difference from Naive."""
+    rows_of = _rows(data.heldout)
+    out = []
+    for task, model in dict.fromkeys((r.task, r.model) for r in data.heldout):
+        pts = sorted(
+            (p for p in data.lambda_points if (p.task, p.model) == (task, model)),
+            key=lambda p: p.point,
+        )
+        by_point: dict[tuple, list[ResultRow]] = {}
+        for r in data.heldout:
+            if (r.task, r.model, r.method) == (task, model, "filtered"):
+                by_point.setdefault((r.operator, r.point), []).append(r)
+        base = rows_of.get((task, model, "base", None), [])
+        header = [
+            "operator",
+            "Naive",
+            *[f"λ = {p.lambda_:.4g}" for p in pts],
+        ]
+        rows = [[f"base only: {mean_std([r.success for r in base])}", "", *["" for _ in pts]]]
+        ops = list(
+            dict.fromkeys(
+                r.operator
+                for r in data.heldout
+                if r.operator and (r.task, r.model) == (task, model)
+            )
+        )
+        for op in ops:
+            naive = rows_of.get((task, model, "naive", op), [])
+            vs_base = paired_diff(naive, base) if naive and base else None
+            cells = [f"{mean_std([r.success for r in naive])}; vs Base {format_diff(vs_base)}"]
+            for p in pts:
+                mine = by_point.get((op, p.point), [])
+                diff = paired_diff(mine, naive) if mine and naive else None
+                cells.append(f"{mean_std([r.success for r in mine])}; Δ {format_diff(diff)}")
+            rows.append([op, *cells])
+        seeds = sorted({r.seed for r in data.heldout if (r.task, r.model) == (task, model)})
+        lo_hi = f"{pts[0].low:.4g} .. {pts[0].high:.4g}, fitted {pts[0].fitted:.4g}" if pts else "?"
+        title = (
+            f"{task} — {model}: λ sensitivity across the fitted margin (λ {lo_hi}); held-out "
+            f"training seeds {seeds} and initial states; success % mean (std), Δ from Naive"
+        )
+        out.append((title, (header, rows)))
     return out
 
 
@@ -251,7 +447,7 @@ def decisions_table(data: ReportData) -> Table:
 
 def filter_table(data: ReportData) -> Table:
     """Fraction of each D_new that each filter kept."""
-    header = ["task", "model", "operator", "filter", "pairs kept", "episodes kept"]
+    header = ["task", "model", "operator", "filter", "pairs kept", "episodes kept", "note"]
     rows = [
         [
             f.task,
@@ -260,6 +456,7 @@ def filter_table(data: ReportData) -> Table:
             METHOD_LABELS.get(f.method, f.method),
             f"{f.pairs_kept}/{f.pairs_total} ({_pct(f.pairs_kept, f.pairs_total)})",
             f"{f.episodes_kept}/{f.episodes_total}",
+            f.note,
         ]
         for f in data.filters
     ]

@@ -1,0 +1,61 @@
+"""Paired intervals of differences from Naive, checked against hand-computed numbers."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from elicit_jax.pipeline.stats import format_diff, paired_t_interval, t_quantile
+from elicit_jax.pipeline.tables import ReportData, ResultRow, difference_tables, paired_diff
+
+
+def test_t_interval_by_hand():
+    # d = (0.1, 0.1, 0.2, -0.1, 0.2): mean 0.1, sd (n - 1) = sqrt(0.06 / 4) = 0.122474,
+    # se = 0.122474 / sqrt(5) = 0.0547723, t(0.975, 4) = 2.776445 -> half 0.152072
+    d = paired_t_interval([0.5, 0.6, 0.7, 0.4, 0.6], [0.4, 0.5, 0.5, 0.5, 0.4])
+    assert t_quantile(4) == pytest.approx(2.776445, abs=1e-6)
+    assert (d.mean, d.n) == (pytest.approx(0.1), 5)
+    assert d.low == pytest.approx(0.1 - 0.152072, abs=1e-6)
+    assert d.high == pytest.approx(0.1 + 0.152072, abs=1e-6)
+    assert not d.excludes_zero
+    assert format_diff(d) == "+10.0 [-5.2, +25.2]"
+
+
+def test_interval_excluding_zero_is_marked_and_one_seed_has_none():
+    # d = (0.10, 0.20, 0.18): mean 0.16, sd 0.0529150, se 0.0305505, t(0.975, 2) = 4.302653
+    # -> half 0.131448
+    d = paired_t_interval([0.50, 0.56, 0.56], [0.40, 0.36, 0.38])
+    assert d.low == pytest.approx(0.16 - 0.131448, abs=1e-6)
+    assert d.excludes_zero and format_diff(d) == "+16.0 [+2.9, +29.1] *"
+    one = paired_t_interval([0.5], [0.3])
+    assert math.isnan(one.low) and not one.excludes_zero
+    assert format_diff(one) == "+20.0 (1 seed)" and format_diff(None) == "–"
+    with pytest.raises(ValueError):
+        paired_t_interval([0.1, 0.2], [0.1])
+
+
+def _row(method, op, seed, success, states="A"):
+    return ResultRow("t", "mlp", method, op, seed, success, 100.0, 50, "best", states)
+
+
+def test_pairing_uses_common_seeds_and_refuses_different_initial_states():
+    a = [_row("filtered", "x", s, v) for s, v in ((0, 0.5), (1, 0.7), (2, 0.6))]
+    b = [_row("naive", "x", s, v) for s, v in ((1, 0.5), (2, 0.4), (3, 0.9))]
+    d = paired_diff(a, b)  # seeds 1 and 2: d = (0.2, 0.2)
+    assert d.n == 2 and d.mean == pytest.approx(0.2) and d.low == pytest.approx(0.2)
+    b[0] = _row("naive", "x", 1, 0.5, states="B")
+    assert paired_diff(a, b) is None
+    assert paired_diff(a, [_row("naive", "x", 9, 0.5)]) is None
+
+
+def test_difference_table_naive_against_base_and_methods_against_naive():
+    rows = [_row("base", None, s, v) for s, v in enumerate((0.40, 0.36, 0.38))]
+    rows += [_row("naive", "x", s, v) for s, v in enumerate((0.50, 0.56, 0.56))]
+    rows += [_row("filtered", "x", s, v) for s, v in enumerate((0.52, 0.50, 0.54))]
+    data = ReportData("p", "cpu", "", ".", "", tuple(rows))
+    ((title, (header, body)),) = difference_tables(data)
+    assert header == ["operator", "Naive − Base", "M-Filtered − Naive"]
+    # filtered - naive: d = (0.02, -0.06, -0.02), mean -0.02, sd 0.04, half 0.099367
+    assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]"]]
+    assert "paired by training seed and initial states" in title
