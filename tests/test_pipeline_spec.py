@@ -198,3 +198,94 @@ def test_changed_filter_config_affects_only_filter_stages_and_their_dependents()
         "evaluate/reach-pillar/mlp/random-b",
         "report",
     } <= affected
+
+
+def test_profile_pipeline_overrides_and_the_shipped_filtering_seeds():
+    spec = {**MINI, "profiles": {"cpu": {"pipeline": {"seeds": [0, 1, 2, 3, 4]}}}}
+    assert parse_spec(spec).seeds == (0, 1, 2, 3, 4)
+    assert parse_spec(spec, profile="paper").seeds == (0, 1)
+    bad = {**MINI, "profiles": {"cpu": {"pipeline": {"name": "other"}}}}
+    with pytest.raises(ElicitError, match=r"\[profiles.cpu.pipeline\]: unknown key\(s\) name"):
+        parse_spec(bad)
+    assert load_spec("filtering", "cpu").seeds == (0, 1, 2, 3, 4)
+    assert load_spec("filtering", "paper").seeds == (0, 1, 2)
+
+
+def test_curation_stages_and_their_inputs():
+    spec = parse_spec(
+        {
+            **MINI,
+            "pipeline": {
+                **MINI["pipeline"],
+                "methods": ["base", "naive", "filtered", "deminf", "demo-score-matched"],
+            },
+        }
+    )
+    g = build_graph(spec)
+    deminf = g["deminf/reach-pillar/a"]  # one per task: DemInf needs no policy
+    assert dict(deminf.inputs) == {
+        "demos0": "collect/reach-pillar/base",
+        "demos1": "collect/reach-pillar/new/a",
+    }
+    ds = g["demo-score/reach-pillar/mlp/b"]  # rolls out the naive policy of that operator
+    assert ds.inputs["policy"] == "train/reach-pillar/mlp/naive/b"
+    assert ds.config["policy_seed"] == 0
+    cut = g["filter/reach-pillar/mlp/demo-score-matched/b"]
+    assert cut.kind == "curate" and cut.inputs["episode_scores"] == ds.id
+    assert cut.inputs["thresholds"] == "fit-thresholds/reach-pillar/mlp"
+    assert (
+        g["train/reach-pillar/mlp/deminf/a"].inputs["demos1"] == "filter/reach-pillar/mlp/deminf/a"
+    )
+    no_naive = {**MINI, "pipeline": {**MINI["pipeline"], "methods": ["base", "demo-score"]}}
+    with pytest.raises(ElicitError, match="add 'naive' to methods"):
+        parse_spec(no_naive)
+
+
+def test_resolved_curate_config_takes_rate_level_and_deminf_cut():
+    from elicit_jax.pipeline.stages import resolve_config
+
+    spec = parse_spec(
+        {
+            **MINI,
+            "pipeline": {**MINI["pipeline"], "methods": ["base", "naive", "deminf-matched"]},
+            "filter": {"level": "episode"},
+            "deminf": {"drop_fraction": 0.3, "ks": [4]},
+            "task": [
+                {**MINI["task"][0], "operators": ["mild"], "incompatible_operator": "conflict-over"}
+            ],
+        }
+    )
+    g = build_graph(spec, resolve_config)
+    cfg = g["filter/reach-pillar/mlp/deminf-matched/mild"].config
+    assert (cfg["rate"], cfg["level"], cfg["drop_fraction"]) == ("m", "episode", 0.3)
+    assert g["deminf/reach-pillar/mild"].config["deminf"]["ks"] == [4]
+
+
+def test_sensitivity_stages_use_held_out_seeds_and_evaluation_states():
+    sens = {"points": 3, "seeds": [10, 11], "eval_seed": 4, "operators": ["b"]}
+    g = build_graph(parse_spec({**MINI, "sensitivity": sens}))
+    points = [s for s in g if s.kind == "lambda-point"]
+    assert [s.config["point"] for s in points] == [0, 1, 2]
+    assert all(s.inputs["thresholds"] == "fit-thresholds/reach-pillar/mlp" for s in points)
+    ev = g["evaluate/reach-pillar/mlp/heldout-lambda2-filtered-b"]
+    assert ev.config["seeds"] == [10, 11] and ev.config["seed"] == 4 and ev.config["point"] == 2
+    filt = g["filter/reach-pillar/mlp/heldout/lambda2/filtered/b"]
+    assert filt.inputs["thresholds"] == "lambda-point/reach-pillar/mlp/2"
+    assert g["train/reach-pillar/mlp/heldout/naive/b"].config["seeds"] == [10, 11]
+    assert "train/reach-pillar/mlp/heldout/naive/a" not in {s.id for s in g}
+    assert g["evaluate/reach-pillar/mlp/base"].config.get("seed") is None  # the study's own
+
+
+@pytest.mark.parametrize(
+    ("sens", "message"),
+    [
+        ({"seeds": [1]}, "disjoint from"),
+        ({"eval_seed": 0}, "must differ from"),
+        ({"points": 1}, "at least 2"),
+        ({"tasks": ["nowhere"]}, "not \\[\\[task\\]\\]s"),
+        ({"bogus": 1}, "unknown key"),
+    ],
+)
+def test_bad_sensitivity_tables(sens, message):
+    with pytest.raises(ElicitError, match=message):
+        parse_spec({**MINI, "sensitivity": sens})

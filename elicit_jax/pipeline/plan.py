@@ -330,7 +330,8 @@ def _cell_stages(
             label=f"map {c.t} {model}",
         )
     )
-    if spec.sensitivity is not None:
+    sens = spec.sensitivity
+    if sens is not None and (not sens.tasks or task.name in sens.tasks):
         stages += _sensitivity_stages(c, scores, fit)
     return stages
 

@@ -57,7 +57,7 @@ METHODS = (
 )
 CURATION_METHODS = ("deminf", "deminf-matched", "demo-score", "demo-score-matched")
 _PROFILE_PIPELINE_KEYS = {"seeds", "models", "methods", "collect_seed"}
-_SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators"}
+_SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators", "tasks"}
 _TOP_KEYS = {"pipeline", "task", "profiles", "sensitivity", *SECTIONS}
 _PIPELINE_KEYS = {"name", "description", "profile", "seeds", "models", "methods", "collect_seed"}
 _TASK_KEYS = {
@@ -111,12 +111,14 @@ class SensitivitySpec:
       seeds: training seeds, disjoint from the study's.
       eval_seed: evaluation initial-state set, other than the study's.
       operators: the operators studied (default: every operator of the task).
+      tasks: the tasks studied (default: every task of the definition).
     """
 
     points: int = 5
     seeds: tuple[int, ...] = (100, 101, 102)
     eval_seed: int = 1
     operators: tuple[str, ...] = ()
+    tasks: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -271,6 +273,10 @@ def parse_spec(
     if len(set(seeds)) != len(seeds):
         raise ElicitError("[pipeline] seeds are listed twice", source)
     sensitivity = _sensitivity(data, seeds, methods, sections["evaluate"], source)
+    if sensitivity is not None:
+        unknown = sorted(set(sensitivity.tasks) - {t.name for t in tasks})
+        if unknown:
+            raise ElicitError(f"[sensitivity] tasks {', '.join(unknown)} are not [[task]]s", source)
     return PipelineSpec(
         name=str(head.get("name", Path(source).stem)),
         description=str(head.get("description", "")).strip(),
@@ -305,6 +311,7 @@ def _sensitivity(
         seeds=tuple(int(s) for s in raw.get("seeds", default.seeds)),
         eval_seed=int(raw.get("eval_seed", default.eval_seed)),
         operators=tuple(str(o) for o in raw.get("operators", ())),
+        tasks=tuple(str(t) for t in raw.get("tasks", ())),
     )
     if spec.points < 2:
         raise ElicitError(f"[sensitivity] points must be at least 2, got {spec.points}", source)
@@ -319,7 +326,9 @@ def _sensitivity(
             source,
         )
     if "naive" not in methods or "filtered" not in methods:
-        raise ElicitError("[sensitivity] compares with the study: methods need naive, filtered")
+        raise ElicitError(
+            "[sensitivity] compares with the study: methods need naive and filtered", source
+        )
     return spec
 
 
