@@ -119,8 +119,8 @@ def test_cli_reports_a_bad_definition_in_one_line(tmp_path):
 CURATION = (
     TINY.replace('name = "tiny"', 'name = "tiny-curation"').replace(
         'methods = ["base", "naive", "filtered"]',
-        'methods = ["base", "naive", "filtered", "deminf", "deminf-matched", "demo-score",\n'
-        '           "demo-score-matched"]',
+        'methods = ["base", "naive", "filtered", "filtered-valley", "deminf", "deminf-matched",\n'
+        '           "demo-score", "demo-score-matched"]',
     )
     + """
 [deminf]
@@ -153,8 +153,10 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     first = run(spec, out)
     assert first.result.skipped == []
     data = gather(out)
-    methods = {"base", "naive", "filtered", "deminf", "deminf-matched", "demo-score",
-               "demo-score-matched"}  # fmt: skip
+    methods = {
+        *("base", "naive", "filtered", "filtered-valley"),
+        *("deminf", "deminf-matched", "demo-score", "demo-score-matched"),
+    }
     assert {r.method for r in data.results} == methods
     assert {(c.method, c.model) for c in data.curation} == {("deminf", None), ("demo-score", "mlp")}
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
@@ -181,4 +183,50 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     assert "Naive − Base" in md and "DemInf (M's amount) − Naive" in md
     assert "λ sensitivity" in md and (out / "report/maps/lambda-sensitivity.png").exists()
     assert "Curation baselines" in md
+    # the valley rule: λ inside the fitted margin, η as fitted
+    valley, _, _ = read_thresholds(out / "thresholds/reach-pillar/mlp-valley.json")
+    assert lo <= valley <= hi and "valley rule" in md
     assert run(spec, out).result.ran == []
+
+
+MODELS = """# tiny models study (MDN and LSTM ensembles), as pipelines/models.toml
+[pipeline]
+name = "tiny-models"
+profile = "cpu"
+seeds = [0, 1]
+models = ["mdn", "lstm"]
+methods = ["base", "naive"]
+
+[[task]]
+name = "reach-pillar"
+operators = ["conflict-right"]
+base_episodes = 5
+new_episodes = 5
+holdout_episodes = 2
+incompatible_operator = "conflict-over"
+incompatible_episodes = 2
+
+[train]
+hidden = [16, 16]
+ensemble_size = 2
+epochs = 4
+checkpoint_every = 2
+progress_every = 2
+batch_size = 64
+
+[evaluate]
+rollouts = 3
+"""
+
+
+@pytest.mark.slow
+def test_tiny_models_study_trains_and_evaluates_mdn_and_lstm(tmp_path):
+    spec = tmp_path / "models.toml"
+    spec.write_text(MODELS)
+    outcome = run(spec, tmp_path / "run")
+    data = gather(tmp_path / "run")
+    assert {(r.model, r.method, r.seed) for r in data.results} == {
+        (m, k, s) for m in ("mdn", "lstm") for k in ("base", "naive") for s in (0, 1)
+    }
+    md = outcome.report_md.read_text()
+    assert "reach-pillar: model comparison" in md and "Naive − Base" in md

@@ -8,6 +8,7 @@ report of a partial run is still correct about what it shows.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,27 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
         f"'{cfg['incompatible_operator']}' (collect seed {cfg['incompatible_seed']}, disjoint "
         "from every D_new)" + ("" if method == "fit" else "; thresholds set by hand, not fitted"),
         metrics=report,
+    )
+
+
+def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+    data = read_json(path)
+    rep = dict(data.get("report", {}))
+    lo, hi = rep.get("lambda_range", (math.nan, math.nan))
+    note = rep.get("note") or (
+        f"density of familiar new pairs {rep.get('density_ratio_chosen_to_fitted', math.nan):.2g}"
+        f"× that at the fitted λ; {100 * rep.get('familiar_share_between', 0):.1f}% of them "
+        "lie between the two"
+    )
+    return ThresholdRow(
+        task=stage["config"]["task"],
+        model=stage["config"]["model"],
+        lambda_=float(data["lambda"]),
+        eta=float(data["eta"]),
+        compatible=f"valley rule: λ moved from the fitted {rep.get('fitted_lambda', math.nan):.4g} "
+        f"to the sparsest point of D_new's familiar pairs inside the margin {lo:.4g} .. {hi:.4g}",
+        incompatible=note,
+        metrics={},
     )
 
 
@@ -231,6 +253,8 @@ def gather(run_dir: str | Path) -> ReportData:
             lengths += _length_rows(stage, path)
         elif kind == "fit-thresholds":
             thresholds.append(_threshold_row(stage, path))
+        elif kind == "lambda-valley":
+            thresholds.append(_valley_row(stage, path))
         elif kind in ("filter", "curate"):
             filters.append(_filter_row(stage, path))
         elif kind in ("deminf", "demo-score"):

@@ -56,7 +56,7 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     stages: list[Stage] = []
     needs_scores = any(m in FILTER_METHODS for m in spec.methods)
     for task in spec.tasks:
-        stages += _collect_stages(spec, task, resolve)
+        stages += _collect_stages(spec, task, resolve, needs_scores)
         stages += _deminf_stages(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, needs_scores, resolve)
@@ -70,6 +70,7 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
         "deminf",
         "demo-score",
         "lambda-point",
+        "lambda-valley",
     )
     report_inputs = {s.id: s.id for s in stages if s.kind in report_kinds}
     stages.append(
@@ -93,17 +94,22 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     return Graph(stages)
 
 
-def _collect_stages(spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver) -> list[Stage]:
-    sets = [
-        ("base", task.base_operator, task.base_episodes, "base"),
-        ("holdout", task.base_operator, task.holdout_episodes, "contrast-compatible"),
-        (
-            "incompatible",
-            task.incompatible_operator,
-            task.incompatible_episodes,
-            "contrast-incompatible",
-        ),
-    ] + [(op, op, task.new_episodes, f"new-{op}") for op in task.operators]
+def _collect_stages(
+    spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver, contrast: bool = True
+) -> list[Stage]:
+    """D_base, each D_new and (when thresholds are fitted) the two contrast sets."""
+    sets = [("base", task.base_operator, task.base_episodes, "base")]
+    if contrast:
+        sets += [
+            ("holdout", task.base_operator, task.holdout_episodes, "contrast-compatible"),
+            (
+                "incompatible",
+                task.incompatible_operator,
+                task.incompatible_episodes,
+                "contrast-incompatible",
+            ),
+        ]
+    sets += [(op, op, task.new_episodes, f"new-{op}") for op in task.operators]
     out = []
     for role, operator, episodes, name in sets:
         seed = collect_seed(spec, task, role)
@@ -310,6 +316,8 @@ def _cell_stages(
             demo_score = _demo_score_stage(c, op, naive[op])
             stages.append(demo_score)
         for method in (m for m in FILTER_METHODS if m in spec.methods):
+            if method == "filtered-valley":
+                continue  # needs every operator's scores: below
             if method in CURATION_METHODS:
                 per_demo = f"deminf/{c.t}/{op}" if method.startswith("deminf") else demo_score
                 filt = c.curate(method, op, getattr(per_demo, "id", per_demo), score, fit)
@@ -317,6 +325,20 @@ def _cell_stages(
                 filt = c.filter(method, op, score, fit.id)
             trained = c.train(method, op, {"demos1": filt.id})
             stages += [filt, trained, c.evaluate(trained, method, op)]
+    if "filtered-valley" in spec.methods:
+        valley = Stage(
+            id=f"lambda-valley/{c.cell}",
+            kind="lambda-valley",
+            output=f"thresholds/{c.cell}-valley.json",
+            config=resolve("lambda-valley", {**c.where}),
+            inputs={"thresholds": fit.id, **{f"scores:{op}": s.id for op, s in scores.items()}},
+            label=f"λ by the new-data valley rule {c.t} {model}",
+        )
+        stages.append(valley)
+        for op in task.operators:
+            filt = c.filter("filtered-valley", op, scores[op], valley.id)
+            trained = c.train("filtered-valley", op, {"demos1": filt.id})
+            stages += [filt, trained, c.evaluate(trained, "filtered-valley", op)]
     stages.append(
         Stage(
             id=f"map/{c.cell}",

@@ -50,6 +50,7 @@ METHODS = (
     "shortest",
     "likelihood",
     "novelty",
+    "filtered-valley",
     "deminf",
     "deminf-matched",
     "demo-score",

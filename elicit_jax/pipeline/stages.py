@@ -23,6 +23,7 @@ from elicit_jax.pipeline.runner import StageContext, StageFn
 
 FILTER_METHODS = {
     "filtered": ("m", "pair"),
+    "filtered-valley": ("m", "pair"),
     "filtered-episode": ("m", "episode"),
     "random": ("random", None),
     "longest": ("longest", None),
@@ -517,6 +518,41 @@ def lambda_point_stage(ctx: StageContext) -> None:
     write_json(ctx.output, header)
 
 
+def lambda_valley_stage(ctx: StageContext) -> None:
+    """Thresholds with λ moved, inside the fit's margin, to the sparsest point of the familiar
+    pairs of every D_new (:mod:`elicit_jax.compat.valley`); η as fitted."""
+    import numpy as np
+
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+    from elicit_jax.compat.valley import valley_lambda
+
+    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
+    lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
+    if fit.get("method", "fit") != "fit" or lo is None:
+        raise ElicitError(
+            "the valley rule moves a fitted λ inside its margin; these thresholds were not fitted",
+            ctx.inputs["thresholds"],
+        )
+    cols = ("likelihood", "novelty")
+    parts = [
+        read_scores(p / SCORES_FILE, cols)[1] for n, p in ctx.inputs.items() if n != "thresholds"
+    ]
+    ell = np.concatenate([p["likelihood"] for p in parts])
+    nu = np.concatenate([p["novelty"] for p in parts])
+    new_lam, report = valley_lambda(ell, nu, eta, lo, hi, lam)
+    header = make_header(
+        THRESHOLDS_KIND,
+        1,
+        config=dict(ctx.config),
+        inputs=dict(ctx.inputs),
+        method="new-data-valley",
+        report=report,
+        **{"lambda": new_lam, "eta": eta},
+    )
+    write_json(ctx.output, header)
+
+
 def report_stage(ctx: StageContext) -> None:
     """Gather the run's artifacts and write the Markdown + HTML report."""
     from elicit_jax.pipeline.gather import gather
@@ -539,5 +575,6 @@ def real_registry() -> dict[str, StageFn]:
         "demo-score": demo_score_stage,
         "curate": curate_stage,
         "lambda-point": lambda_point_stage,
+        "lambda-valley": lambda_valley_stage,
         "report": report_stage,
     }

@@ -26,6 +26,7 @@ METHOD_LABELS = {
     "shortest": "Drop shortest",
     "likelihood": "Likelihood-only",
     "novelty": "Novelty-only",
+    "filtered-valley": "M-Filtered (valley λ)",
     "deminf": "DemInf",
     "deminf-matched": "DemInf (M's amount)",
     "demo-score": "Demo-SCORE",
