@@ -66,7 +66,7 @@ def test_classifier_separates_success_from_failure_states():
 def test_demo_score_cross_validates_and_drops_failure_like_demos():
     rng = np.random.default_rng(1)
     rollouts = _toy_rollouts(rng)
-    model = train_demo_score(rollouts, DemoScoreConfig(**FAST))
+    model = train_demo_score(rollouts, DemoScoreConfig(classifier=FAST))
     rep = model.report
     assert rep["validation_epoch"] == 30  # the last checkpoint validates
     assert [c["train_epoch"] for c in rep["candidates"]] == [10, 20]
@@ -88,7 +88,7 @@ def test_demo_score_cross_validates_and_drops_failure_like_demos():
 def test_no_signal_when_every_candidate_is_one_class():
     rng = np.random.default_rng(2)
     rollouts = _toy_rollouts(rng, success_rates=(0.0, 1.0, 0.5))
-    assert train_demo_score(rollouts, DemoScoreConfig(**FAST)) is None
+    assert train_demo_score(rollouts, DemoScoreConfig(classifier=FAST)) is None
     new = from_episodes([{"obs": np.zeros((5, 2)), "action": np.zeros((5, 1))}], operators="a")
     scores = score_demos(new, None, {"checkpoints": []})
     assert not scores.trusted and "all successes or all failures" in scores.report["why"]
@@ -100,4 +100,6 @@ def test_config_validation():
     with pytest.raises(ElicitError, match="rollouts"):
         DemoScoreConfig(rollouts=1)
     with pytest.raises(ElicitError, match="eval_every"):
-        DemoScoreConfig(steps=10, eval_every=50)
+        DemoScoreConfig(classifier={"steps": 10, "eval_every": 50})
+    with pytest.raises(ElicitError, match=r"classifier\] unknown option\(s\) stepz"):
+        DemoScoreConfig(classifier={"stepz": 10})

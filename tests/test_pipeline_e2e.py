@@ -128,6 +128,8 @@ ks = [3]
 
 [demo_score]
 rollouts = 4
+
+[demo_score.classifier]
 steps = 100
 eval_every = 50
 

@@ -1,6 +1,8 @@
 """collect and evaluate end to end: artifacts, a tiny policy that learns reach-pillar, both
 backends with the policy in the loop."""
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -217,12 +219,14 @@ def test_demo_score_on_real_rollouts_cross_validates_across_checkpoints(work):
         train_demo_score,
     )
 
-    base = DemoScoreConfig(task="reach-pillar", rollouts=16, steps=200, eval_every=50)
+    fast = {"steps": 200, "eval_every": 50}
+    base = DemoScoreConfig(task="reach-pillar", rollouts=16, classifier=fast)
     full = collect_rollouts(work / "runs", base)
     assert full.epochs.tolist() == [100, 200]  # every saved epoch of the first seed
     lengths = np.bincount(full.rollout, minlength=len(full.success))
     # a horizon of the median success time makes about half of the rollouts fail
-    cfg = DemoScoreConfig(**{**base.__dict__, "horizon": int(np.median(lengths[full.success]))})
+    horizon = int(np.median(lengths[full.success]))
+    cfg = dataclasses.replace(base, horizon=horizon)
     rollouts = collect_rollouts(work / "runs", cfg)
     assert 0 < rollouts.success.mean() < 1
     model = train_demo_score(rollouts, cfg)

@@ -242,10 +242,12 @@ def filter_cmd(
     policy: Path | None = typer.Option(
         None, "--policy", help="demo-score: training run to roll out (trained on the data)."
     ),
-    task: str | None = typer.Option(None, "--task", help="demo-score: task [the demos' task]."),
+    task: str | None = typer.Option(
+        None, "--task", help="demo-score: task (default: the demos' task)."
+    ),
     rollouts: int = typer.Option(100, "--rollouts", help="demo-score: rollouts per checkpoint."),
     policy_seed: int | None = typer.Option(
-        None, "--policy-seed", help="demo-score: training seed of --policy [its first]."
+        None, "--policy-seed", help="demo-score: training seed of --policy (default: its first)."
     ),
 ) -> None:
     """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.

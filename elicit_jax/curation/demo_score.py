@@ -24,7 +24,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +39,7 @@ SEED_STRIDE = 100_000
 
 @dataclasses.dataclass(frozen=True)
 class DemoScoreConfig:
-    """Demo-SCORE settings (classifier fields as in :class:`ClassifierConfig`).
+    """Demo-SCORE settings.
 
     Attributes:
       task: the task to roll out on.
@@ -51,6 +51,8 @@ class DemoScoreConfig:
         evaluation's own, which use seeds < 50).
       horizon: control steps (0: the task's).
       threads: C MuJoCo threads (0: one per CPU).
+      classifier: the state classifier and its training (a mapping of its fields is accepted,
+        as a ``[demo_score.classifier]`` table of a pipeline definition gives).
     """
 
     task: str = "square-nut"
@@ -60,34 +62,21 @@ class DemoScoreConfig:
     seed: int = 50
     horizon: int = 0
     threads: int = 0
-    hidden: tuple[int, ...] = (8, 8)
-    dropout: float = 0.3
-    lr: float = 1e-3
-    weight_decay: float = 0.1
-    batch_size: int = 1024
-    steps: int = 2000
-    eval_every: int = 50
-    success_weight: float = 4.0
-    classifier_seed: int = 0
+    classifier: ClassifierConfig = dataclasses.field(default_factory=ClassifierConfig)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "checkpoints", tuple(int(c) for c in self.checkpoints))
+        if isinstance(self.classifier, Mapping):
+            names = {f.name for f in dataclasses.fields(ClassifierConfig)}
+            unknown = sorted(set(self.classifier) - names)
+            if unknown:
+                raise ElicitError(
+                    f"[demo_score.classifier] unknown option(s) {', '.join(unknown)} "
+                    f"(allowed: {', '.join(sorted(names))})"
+                )
+            object.__setattr__(self, "classifier", ClassifierConfig(**self.classifier))
         if self.rollouts < 2:
             raise ElicitError(f"demo-score: rollouts must be at least 2, got {self.rollouts}")
-        self.classifier()  # validates the classifier fields
-
-    def classifier(self) -> ClassifierConfig:
-        return ClassifierConfig(
-            hidden=tuple(self.hidden),
-            dropout=self.dropout,
-            lr=self.lr,
-            weight_decay=self.weight_decay,
-            batch_size=self.batch_size,
-            steps=self.steps,
-            eval_every=self.eval_every,
-            success_weight=self.success_weight,
-            seed=self.classifier_seed,
-        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -215,7 +204,7 @@ def _rollout_means(prob: np.ndarray, rollout: np.ndarray, n: int) -> np.ndarray:
 def train_demo_score(rollouts: Rollouts, config: DemoScoreConfig) -> DemoScoreModel | None:
     """Fit the cross-validated classifier; None when no checkpoint's rollouts hold both a
     success and a failure (nothing to learn from)."""
-    cls = config.classifier()
+    cls = config.classifier
     states = rollouts.states
     mean = states.mean(axis=0)
     std = np.where(states.std(axis=0) > 1e-8, states.std(axis=0), 1.0)

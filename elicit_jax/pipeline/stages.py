@@ -474,7 +474,7 @@ def curate_stage(ctx: StageContext) -> None:
             allow_empty=True,
         )
         files = [] if result.out_path is None else [DEMOS_FILE, result.log_path.name]
-        reason = result.reason + ("; the retraining uses D_base alone" * (not files))
+        reason = result.reason if files else result.reason + "; the retraining uses D_base alone"
         header = make_header(
             "pipeline-filter",
             1,
