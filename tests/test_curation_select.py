@@ -186,7 +186,7 @@ def test_cli_deminf_own_cut_and_matched_to_the_m_filter(files):
     score_file(policy, files / "new.parquet", scores, ScoreConfig(chunk_size=32), progress=False)
     ell = read_scores(scores)[1]["likelihood"]
     lam = float(np.quantile(ell, 0.8))  # with η huge: the top 20% of pairs are M = 0
-    n_inc = int((ell >= lam).sum())
+    n_inc = int((ell > lam).sum())  # the incompatible test is strict: ℓ > λ
     matched = files / "deminf-m.parquet"
     res = runner.invoke(app, [*args, "-o", str(matched), "--rate", "m", "--scores", str(scores),
                               "--lambda", str(lam), "--eta", "1e6"])  # fmt: skip

@@ -145,6 +145,7 @@ eval_seed = 1
 def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_path):
     import numpy as np
 
+    from elicit_jax.compat.measures import is_incompatible
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.curation.episodes import read_episode_scores
@@ -164,7 +165,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
     lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
     _, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
-    budget = int(((pairs["likelihood"] >= lam) & (pairs["novelty"] < eta)).sum())
+    budget = int(is_incompatible(pairs["likelihood"], pairs["novelty"], lam, eta).sum())
     deminf = read_episode_scores(out / "curation/reach-pillar/deminf-conflict-right.parquet")
     cum = np.cumsum(deminf.length[np.argsort(deminf.score, kind="stable")])
     want = int(cum[np.searchsorted(cum, budget)]) if budget else 0

@@ -58,4 +58,4 @@ def test_difference_table_naive_against_base_and_methods_against_naive():
     assert header == ["operator", "Naive − Base", "M-Filtered − Naive"]
     # filtered - naive: d = (0.02, -0.06, -0.02), mean -0.02, sd 0.04, half 0.099367
     assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]"]]
-    assert "paired by training seed and initial states" in title
+    assert "paired 95% interval" in title
