@@ -23,6 +23,7 @@ from flax import struct
 from elicit_jax.policy import models
 
 STD_FLOOR = 1e-6
+MEMBER_LOOP_ROWS = 512  # batches this large run the members one after another
 
 
 @struct.dataclass
@@ -100,14 +101,14 @@ class Policy:
         x = self.normalize(obs)
         module = self.module
         if self.kind == "mlp":
-            return jax.vmap(lambda p: module.apply({"params": p}, x))(self.params)
+            return self._each_member(lambda p: module.apply({"params": p}, x), x.shape[0])
         if self.kind == "mdn":
 
             def one(p: Any) -> jax.Array:
                 logits, means, _ = module.apply({"params": p}, x)
                 return models.mdn_mode(logits, means)
 
-            return jax.vmap(one)(self.params)
+            return self._each_member(one, x.shape[0])
         reset = _reset_mask(x.shape[0], self.reset_every)
         out = jax.vmap(lambda p: models.lstm_sequence(module, p, x[:, None, :], reset))(self.params)
         return out[:, :, 0, :]
@@ -152,8 +153,25 @@ class Policy:
             return None
         x = self.normalize(obs)
         module = self.module
-        std = jax.vmap(lambda p: models.mdn_std(*module.apply({"params": p}, x)))(self.params)
+        std = self._each_member(
+            lambda p: models.mdn_std(*module.apply({"params": p}, x)), x.shape[0]
+        )
         return jnp.mean(std, axis=0)
+
+    def _each_member(self, fn: Any, rows: int) -> Any:
+        """``fn(params_k)`` of every member, stacked on a leading axis K.
+
+        Batches of at least :data:`MEMBER_LOOP_ROWS` rows run the members one after another
+        (``lax.map``), smaller ones all at once (``vmap``). On XLA:CPU the vmapped layout
+        turns a large batch into member-batched matmuls fused with the LayerNorms into one
+        library call, which ran at about half the plain matmul's speed (4096 rows, paper
+        sizes); one member at a time keeps every matmul 2-D and near the matmul's speed. A
+        few rows keep ``vmap``: ``lax.map`` copies each member's weights out of the stack,
+        which costs more than the rows' arithmetic there (a single row: ~3x slower).
+        """
+        if rows >= MEMBER_LOOP_ROWS:
+            return jax.lax.map(fn, self.params)
+        return jax.vmap(fn)(self.params)
 
     def init_carry(self, batch: int) -> Any:
         """Recurrent state for ``batch`` parallel rollouts: ``()`` for feed-forward models;
