@@ -23,7 +23,8 @@ rollout (default 10) so that 1000 MJX rollouts finish in bounded time. Both are 
 MJX with 1000 environments used to hang at 0% CPU: jaxlib 0.10's batched LAPACK kernels (MJX's
 Cholesky solves) split big batches onto XLA's CPU thread pool and block waiting for them, and
 two concurrent solves exhausted the 2-thread pool of a 2-core machine.
-:func:`elicit_jax.runtime.configure` now gives the pool at least 4 threads (``PJRT_NPROC``).
+:func:`elicit_jax.runtime.configure` (``mjx=True``, as here) gives the pool at least 4 threads
+(``PJRT_NPROC``).
 
 Usage: python benchmarks/bench_rollouts.py [--quick] [--sizes 16 50 200 1000]
     [--scaling-horizon 10] [--task square-nut] [--no-compile-times] [--json out.json]
@@ -41,7 +42,7 @@ import time
 
 from elicit_jax.runtime import configure
 
-configure()
+configure(mjx=True)
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -126,7 +127,7 @@ def compile_times(task_name: str, horizon: int) -> dict[str, float]:
     code = "\n".join(
         [
             "import time; t0 = time.perf_counter()",
-            "from elicit_jax.runtime import configure; configure()",
+            "from elicit_jax.runtime import configure; configure(mjx=True)",
             f"import sys; sys.path.insert(0, {here!r})",
             "import bench_rollouts as b, numpy as np, jax",
             "from elicit_jax.sim.rollout_mjx import rollout_mjx",

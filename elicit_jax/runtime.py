@@ -10,7 +10,7 @@ from pathlib import Path
 
 MJX_CPU_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 CACHE_ENV = "ELICIT_JAX_CACHE_DIR"
-MIN_CPU_THREADS = 4
+MJX_MIN_THREADS = 4
 
 
 def default_cache_dir() -> Path:
@@ -21,22 +21,22 @@ def default_cache_dir() -> Path:
     return Path(base) / "elicit-jax" / "jax"
 
 
-def configure(cache_dir: Path | None = None) -> None:
-    """Set XLA flags and JAX's persistent compilation cache through the environment.
+def configure(cache_dir: Path | None = None, *, mjx: bool = False) -> None:
+    """Set XLA flags, XLA's CPU thread count and JAX's compilation cache via the environment.
 
     Must run before JAX is imported. User-set ``XLA_FLAGS``, ``PJRT_NPROC`` and
     ``JAX_COMPILATION_CACHE_DIR`` are left untouched. Without the fusion-emitter flag,
-    MJX on CPU slows down exponentially with kinematic-chain depth (jax 0.10). ``PJRT_NPROC``
-    gives XLA's CPU thread pool at least four threads: jaxlib 0.10's batched LAPACK kernels
-    (MJX's Cholesky solves) split large batches onto that pool and block waiting for them,
-    so on a 2-core machine two concurrent solves deadlock it (MJX with 1000 environments
-    hung at 0% CPU).
+    MJX on CPU slows down exponentially with kinematic-chain depth (jax 0.10).
+    ``PJRT_NPROC`` (XLA's CPU thread pool) is :func:`cpu_threads`: one thread per CPU, so
+    the matmuls of scoring, training and policy calls do not oversubscribe the cores; with
+    ``mjx`` at least :data:`MJX_MIN_THREADS`, which MJX needs (:func:`check_mjx_threads`).
 
     Args:
       cache_dir: cache location; defaults to :func:`default_cache_dir`.
+      mjx: this process will step MJX on the CPU.
     """
     os.environ.setdefault("XLA_FLAGS", MJX_CPU_XLA_FLAGS)
-    os.environ.setdefault("PJRT_NPROC", str(max(MIN_CPU_THREADS, available_cpus())))
+    os.environ.setdefault("PJRT_NPROC", str(cpu_threads(mjx)))
     if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
         path = cache_dir or default_cache_dir()
         try:
@@ -46,6 +46,40 @@ def configure(cache_dir: Path | None = None) -> None:
         os.environ["JAX_COMPILATION_CACHE_DIR"] = str(path)
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+
+
+def cpu_threads(mjx: bool = False) -> int:
+    """XLA CPU threads for a process: one per CPU; at least :data:`MJX_MIN_THREADS` with MJX."""
+    cpus = available_cpus()
+    return max(MJX_MIN_THREADS, cpus) if mjx else cpus
+
+
+def check_mjx_threads() -> None:
+    """Refuse to step MJX on a CPU thread pool too small for it.
+
+    jaxlib 0.10's batched LAPACK kernels (MJX's Cholesky solves) split large batches onto
+    XLA's CPU thread pool and block waiting for them, so on a 2-core machine two concurrent
+    solves deadlock a 2-thread pool (MJX with 1000 environments hung at 0% CPU). The pool
+    must have :data:`MJX_MIN_THREADS` threads; it is sized when JAX starts, from
+    ``PJRT_NPROC`` (default: the CPU count). No check on other platforms.
+
+    Raises:
+      ElicitError: JAX runs on the CPU with a smaller pool.
+    """
+    import jax
+
+    from elicit_jax.errors import ElicitError
+
+    if jax.default_backend() != "cpu":
+        return
+    threads = int(os.environ.get("PJRT_NPROC") or available_cpus())
+    if threads < MJX_MIN_THREADS:
+        raise ElicitError(
+            f"MJX on the CPU needs XLA's CPU thread pool to have at least {MJX_MIN_THREADS} "
+            f"threads (jaxlib's batched LAPACK deadlocks a smaller one); this process has "
+            f"{threads}: set PJRT_NPROC={MJX_MIN_THREADS} before starting it, or use the C "
+            "MuJoCo backend (--backend mujoco)"
+        )
 
 
 def available_cpus() -> int:

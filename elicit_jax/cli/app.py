@@ -108,12 +108,20 @@ def _root(
     _state["debug"] = debug
 
 
+def _steps_mjx(argv: list[str]) -> bool:
+    """The command line asks for the MJX backend (``--backend mjx`` or ``--backend=mjx``):
+    XLA's CPU pool must then be sized for MJX before JAX starts (see
+    :func:`elicit_jax.runtime.check_mjx_threads`)."""
+    pairs = zip(argv, [*argv[1:], ""], strict=True)
+    return any(a == "--backend=mjx" or (a == "--backend" and b == "mjx") for a, b in pairs)
+
+
 def main() -> None:
     """Console-script entry point: set up JAX, run the app, print errors as one line."""
     from elicit_jax import cli as _commands  # noqa: F401  (registers the commands)
     from elicit_jax.runtime import configure
 
-    configure()
+    configure(mjx=_steps_mjx(sys.argv[1:]))
     debug = "--debug" in sys.argv[1:]
     try:
         app()

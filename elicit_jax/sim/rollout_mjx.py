@@ -122,6 +122,9 @@ def rollout_mjx_on_devices(
     """
     import jax
 
+    from elicit_jax.runtime import check_mjx_threads
+
+    check_mjx_threads()
     seeds = np.asarray(seeds)
     devices = devices_for(len(seeds), n_devices)
     pad = (-len(seeds)) % devices

@@ -1,0 +1,52 @@
+"""XLA's CPU thread count per workload: one thread per CPU, at least 4 where MJX runs."""
+
+import os
+
+import pytest
+
+from elicit_jax import runtime
+from elicit_jax.cli.app import _steps_mjx
+from elicit_jax.errors import ElicitError
+
+
+def test_threads_per_workload(monkeypatch):
+    monkeypatch.setattr(runtime, "available_cpus", lambda: 2)
+    assert runtime.cpu_threads() == 2
+    assert runtime.cpu_threads(mjx=True) == runtime.MJX_MIN_THREADS == 4
+    monkeypatch.setattr(runtime, "available_cpus", lambda: 16)
+    assert runtime.cpu_threads(mjx=True) == 16
+
+
+def test_configure_sizes_the_pool_and_keeps_a_user_setting(monkeypatch):
+    monkeypatch.setattr(runtime, "available_cpus", lambda: 2)
+    monkeypatch.delenv("PJRT_NPROC", raising=False)
+    runtime.configure()
+    assert os.environ["PJRT_NPROC"] == "2"
+    monkeypatch.delenv("PJRT_NPROC")
+    runtime.configure(mjx=True)
+    assert os.environ["PJRT_NPROC"] == "4"
+    monkeypatch.setenv("PJRT_NPROC", "3")
+    runtime.configure(mjx=True)
+    assert os.environ["PJRT_NPROC"] == "3"
+
+
+def test_mjx_refuses_a_pool_that_deadlocks_it(monkeypatch):
+    monkeypatch.setenv("PJRT_NPROC", "2")
+    with pytest.raises(ElicitError, match="PJRT_NPROC=4"):
+        runtime.check_mjx_threads()
+    monkeypatch.setenv("PJRT_NPROC", "4")
+    runtime.check_mjx_threads()
+
+
+@pytest.mark.parametrize(
+    ("argv", "mjx"),
+    [
+        (["evaluate", "p", "--backend", "mjx"], True),
+        (["evaluate", "p", "--backend=mjx"], True),
+        (["evaluate", "p", "--backend", "mujoco"], False),
+        (["score", "p", "d", "--out", "mjx"], False),
+        (["train", "--backend"], False),
+    ],
+)
+def test_cli_sizes_the_pool_for_mjx_only_when_asked(argv, mjx):
+    assert _steps_mjx(argv) is mjx
