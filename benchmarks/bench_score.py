@@ -1,27 +1,33 @@
-"""Scoring throughput: our chunked, vmapped, jitted scorer vs the original code's PyTorch loop.
+"""Scoring throughput: our chunked, jitted scorer vs the strongest PyTorch loops we wrote.
 
 Paper sizes: an ensemble of 5 MLPs (2 hidden layers of 1024, LayerNorm, ReLU, tanh head),
-23-D observations, 7-D actions, demonstrations of 90 steps. Three ways to score the same pairs
-with the same weights (our Flax parameters copied into torch):
+23-D observations, 7-D actions, demonstrations of 90 steps. The same pairs are scored with the
+same weights (our Flax parameters copied into torch) by:
 
-* ``ours``: :func:`elicit_jax.compat.score.score_demos` — fixed-size chunks, one compiled
-  function (the compile is timed separately and excluded);
+* ``ours``: :func:`elicit_jax.compat.score.score_demos` at several chunk sizes (compile time
+  measured separately and excluded), and on ONE 90-step episode per call (a small call: live
+  feedback, per-episode scoring);
+* ``ours, streamed``: ``score_file`` Parquet -> Parquet (what ``elicit-jax score`` does);
 * ``torch per-demo``: the original code's approach (kanishkg/elicit ``src/util/util.py:
   get_compatibility`` calling ``src/models/ensemble.py: Ensemble.get_compatibility``), called
   once per 90-step demonstration (CPU, ``torch.no_grad``): one pass over the 5 members for the
-  likelihood (member-average of clamped squared errors) and a second pass for the novelty
-  (unbiased std across members), then M;
-* ``torch per-demo, one pass``: a stronger reference than the original — the same per-demo
-  calls, but both measures from a single member loop;
+  likelihood (member-average of clamped squared errors), a second for the novelty (unbiased
+  std across members), then M;
+* ``torch per-demo, one pass``: the stronger reference: both measures from one member loop;
 * ``torch batched``: the original two-pass loop on large batches (``--torch-batch`` pairs).
 
-Ours is run with the same definitions (``likelihood="member-average"``, ``ddof=1``) so the
-numbers can be compared pair by pair.
+Every PyTorch loop runs with PyTorch's default thread count and with 1 thread; the faster
+setting (median over rounds) is the reference. Ours uses the original code's definitions
+(``likelihood="member-average"``, ``ddof=1``) so the numbers compare pair by pair. A plain fp32
+matmul (``--matmul-n``³) in JAX and in torch gives the attainable GFLOP/s (best of 5 calls per
+round). FLOPs per pair = 5 members × 2 × (23·1024 + 1024·1024 + 1024·7) ≈ 10.8 MFLOP.
 
-Also measured in the same run: a plain fp32 matmul (``--matmul-n``³) in JAX and in torch, as
-the machine's attainable GFLOP/s (best single call of 5 per repeat, so the peak is not
-underestimated on a shared machine). FLOPs per pair = 5 members × 2 × (23·1024 + 1024·1024 +
-1024·7) ≈ 10.8 MFLOP (LayerNorm, activations and the score arithmetic are not counted).
+The contenders are interleaved in each of ``--rounds`` rounds (the order reversed every other
+round); every ratio is taken within a round and reported as the median over rounds with its
+range, so load that drifts between rounds cancels out. Targets (issue #16): best chunk
+>= 1.2x the one-pass per-demo loop, >= 1.5x the batched loop, >= 70% of the JAX matmul;
+chunk 1024 >= 80% of the best chunk; one 90-step episode in <= 2x its FLOP time at the
+matmul's speed.
 
 Run: ``.venv/bin/python benchmarks/bench_score.py [--quick] [--out results/score.md]``
 (needs the ``bench`` extra: ``pip install 'elicit-jax[bench]'``).
@@ -30,12 +36,15 @@ Run: ``.venv/bin/python benchmarks/bench_score.py [--quick] [--out results/score
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import shutil
+import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 OBS, ACT, K, HIDDEN, T = 23, 7, 5, 1024, 90
@@ -49,12 +58,12 @@ def _args() -> argparse.Namespace:
     p.add_argument("--chunks", default="1024,4096,8192", help="our chunk sizes to try")
     p.add_argument("--torch-batch", type=int, default=8192, help="pairs per batched torch call")
     p.add_argument("--matmul-n", type=int, default=2048, help="size of the reference matmul")
-    p.add_argument("--repeats", type=int, default=5, help="timed repeats (best is reported)")
-    p.add_argument("--quick", action="store_true", help="fewer demos and repeats")
-    p.add_argument("--out", type=Path, default=None, help="write a Markdown report here")
+    p.add_argument("--rounds", type=int, default=7, help="interleaved timing rounds")
+    p.add_argument("--quick", action="store_true", help="fewer demos and rounds")
+    p.add_argument("--out", type=Path, default=None, help="write a Markdown report (+ .json)")
     a = p.parse_args()
     if a.quick:
-        a.demos, a.per_demo, a.repeats = 60, 15, 3
+        a.demos, a.per_demo, a.rounds = 60, 15, 5
     return a
 
 
@@ -65,13 +74,46 @@ def _cfg(chunk: int):
     return ScoreConfig(likelihood="member-average", ddof=1, chunk_size=chunk)
 
 
-def _best(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
+TARGETS = {
+    "one_pass": 1.2,  # best chunk / torch per-demo one-pass loop
+    "batched": 1.5,  # best chunk / torch batched loop
+    "matmul": 0.70,  # best chunk GFLOP/s / JAX matmul GFLOP/s
+    "chunk1024": 0.80,  # chunk 1024 / best chunk
+    "episode": 2.0,  # one 90-step episode's time / its FLOP time at the matmul's speed
+}
+
+
+def _best_of(fn: Callable[[], object], calls: int) -> float:
+    """Best wall time of ``calls`` back-to-back calls."""
+    best = float("inf")
+    for _ in range(calls):
         t = time.perf_counter()
         fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def interleaved(
+    jobs: dict[str, tuple[Callable[[], object], int]], rounds: int
+) -> dict[str, list[float]]:
+    """Seconds of every job in every round: ``{name: [s_round0, s_round1, ...]}``.
+
+    Jobs are ``name -> (fn, calls)``; a job's time in a round is its best of ``calls``
+    back-to-back calls (short calls need several). All jobs run once per round, in reverse
+    order every other round, so drifting load hits every job alike.
+    """
+    times: dict[str, list[float]] = {k: [] for k in jobs}
+    names = list(jobs)
+    for r in range(rounds):
+        for name in names if r % 2 == 0 else names[::-1]:
+            fn, calls = jobs[name]
+            times[name].append(_best_of(fn, calls))
+    return times
+
+
+def spread(values: list[float]) -> dict[str, float]:
+    """Median and range of per-round values."""
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
 def _torch_models(policy):
@@ -149,7 +191,6 @@ def main() -> None:
     from elicit_jax.policy.base import init_policy, normalization_stats
 
     a = _args()
-    torch.set_num_threads(os.cpu_count() or 1)
     rng = np.random.default_rng(0)
     eps = [
         {
@@ -159,6 +200,7 @@ def main() -> None:
         for _ in range(a.demos)
     ]
     demos = from_episodes(eps, operators="op")
+    episode = from_episodes(eps[:1], operators="op")
     mean, std = normalization_stats(demos.obs)
     policy = init_policy(
         jax.random.key(0),
@@ -172,21 +214,21 @@ def main() -> None:
         obs_std=std,
     )
     n_pairs = demos.n_steps
-    rows: list[tuple[str, float, str]] = []
-
-    # --- compile ours at each chunk size; copy the weights into torch ---
     n = a.matmul_n
     xa = jax.random.normal(jax.random.key(1), (n, n), jnp.float32)
     mm = jax.jit(lambda x: x @ x)
     mm(xa).block_until_ready()
     xt = torch.randn(n, n)
-    torch.mm(xt, xt)
+
+    # --- compile ours at each chunk size (timed separately); copy the weights into torch ---
     chunks = [int(x) for x in a.chunks.split(",")]
     compile_s, ref = {}, None
     for c in chunks:
         t = time.perf_counter()
         ref = score_demos(policy, demos, _cfg(c))
         compile_s[c] = time.perf_counter() - t
+    stream_chunk = ScoreConfig().chunk_size
+    score_demos(policy, episode, _cfg(stream_chunk))
     models = _torch_models(policy)
     tmean, tstd = torch.from_numpy(np.asarray(mean)), torch.from_numpy(np.asarray(std))
     obs_t, act_t = torch.from_numpy(demos.obs), torch.from_numpy(demos.action)
@@ -196,106 +238,195 @@ def main() -> None:
         float(np.abs(nu_t.numpy() - ref["novelty"]).max()),
     )
 
-    def per_demo():
-        for i in range(a.per_demo):
-            s = slice(i * T, (i + 1) * T)
-            _torch_score(models, tmean, tstd, obs_t[s], act_t[s])
+    def torch_loop(fn, size: int, n_rows: int, threads: int) -> Callable[[], None]:
+        def run() -> None:
+            torch.set_num_threads(threads)
+            for s in range(0, n_rows, size):
+                fn(models, tmean, tstd, obs_t[s : s + size], act_t[s : s + size])
 
-    def per_demo_one_pass():
-        for i in range(a.per_demo):
-            s = slice(i * T, (i + 1) * T)
-            _torch_score_one_pass(models, tmean, tstd, obs_t[s], act_t[s])
+        return run
 
-    def batched():
-        b = a.torch_batch
-        for s in range(0, n_pairs, b):
-            _torch_score(models, tmean, tstd, obs_t[s : s + b], act_t[s : s + b])
-
-    # --- timed: all contenders interleaved in each repeat (the machine is shared), best kept ---
-    jobs = {f"ours{c}": (lambda c=c: score_demos(policy, demos, _cfg(c))) for c in chunks}
     tmp = Path(tempfile.mkdtemp(prefix="bench_score_"))
     write_demos(tmp / "demos.parquet", demos)
 
-    def streamed():
+    def streamed() -> None:
         cfg = _cfg(stream_chunk)
         score_file(policy, tmp / "demos.parquet", tmp / "scores.parquet", cfg, progress=False)
 
-    stream_chunk = ScoreConfig().chunk_size
     streamed()
-    jobs |= {
-        "streamed": streamed,
-        "per_demo": per_demo,
-        "per_demo_one_pass": per_demo_one_pass,
-        "batched": batched,
-        "jax_mm": lambda: mm(xa).block_until_ready(),
-        "torch_mm": lambda: torch.mm(xt, xt),
+    default_threads = torch.get_num_threads()
+    settings = sorted({default_threads, 1}, reverse=True)
+    refs = {
+        "per_demo": (_torch_score, T, a.per_demo * T),
+        "one_pass": (_torch_score_one_pass, T, a.per_demo * T),
+        "batched": (_torch_score, a.torch_batch, n_pairs),
     }
-    best = {k: float("inf") for k in jobs}
-    for _ in range(a.repeats):
-        for k, fn in jobs.items():
-            # matmul calls are short: time 5 back to back so its peak is not underestimated
-            best[k] = min(best[k], _best(fn, 5 if k.endswith("_mm") else 1))
-    ours = {c: (n_pairs / best[f"ours{c}"], compile_s[c]) for c in chunks}
-    best_c = max(ours, key=lambda c: ours[c][0])
-    ours_pps = ours[best_c][0]
-    per_demo_pps = a.per_demo * T / best["per_demo"]
-    one_pass_pps = a.per_demo * T / best["per_demo_one_pass"]
-    batched_pps = n_pairs / best["batched"]
-    jax_mm = 2 * n**3 / best["jax_mm"] / 1e9
-    torch_mm = 2 * n**3 / best["torch_mm"] / 1e9
-
-    def gf(pps: float) -> float:
-        return pps * FLOP_PER_PAIR / 1e9
-
-    for c, (pps, comp) in sorted(ours.items()):
-        rows.append((f"ours, chunk {c}", pps, f"compile+first call {comp:.1f} s"))
-    rows.append(
-        (
-            f"ours, streamed Parquet -> Parquet (score_file, chunk {stream_chunk})",
-            n_pairs / best["streamed"],
-            "includes reading, writing, episode summary",
-        )
-    )
-    rows.append((f"torch per-demo loop ({T}-step demos)", per_demo_pps, "the original code"))
-    rows.append((f"torch per-demo, one pass ({T}-step demos)", one_pass_pps, "stronger reference"))
-    rows.append((f"torch batched loop ({a.torch_batch} pairs/call)", batched_pps, ""))
-    lines = [
-        "# Scoring throughput (pairs/s)",
-        "",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores "
-        f"(shared), jax {jax.__version__}, torch {torch.__version__} "
-        f"({torch.get_num_threads()} threads). Ensemble of {K} MLPs 2x{HIDDEN}, obs {OBS}, "
-        f"act {ACT}; {n_pairs} pairs ({a.demos} demos x {T} steps; the per-demo loop scores "
-        f"the first {a.per_demo}). Best of {a.repeats} interleaved repeats. "
-        f"{FLOP_PER_PAIR / 1e6:.2f} MFLOP/pair. XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}. "
-        f"Load average at the end: {os.getloadavg()[0]:.1f} (other jobs share the cores).",
-        f"Same weights: max |difference| of ℓ and ν, ours vs torch = {err:.2e}.",
-        "",
-        "| scorer | pairs/s | GFLOP/s | note |",
-        "|---|---:|---:|---|",
-    ]
-    lines += [f"| {name} | {pps:,.0f} | {gf(pps):.1f} | {note} |" for name, pps, note in rows]
-    lines += [
-        f"| plain fp32 matmul {n}³, JAX | | {jax_mm:.1f} | |",
-        f"| plain fp32 matmul {n}³, torch | | {torch_mm:.1f} | |",
-        "",
-        "| ratio | value | target |",
-        "|---|---:|---:|",
-        f"| ours (chunk {best_c}) / torch per-demo loop | {ours_pps / per_demo_pps:.1f}x | >= 5x |",
-        f"| ours / torch per-demo, one pass | {ours_pps / one_pass_pps:.1f}x | |",
-        f"| ours / torch batched loop | {ours_pps / batched_pps:.2f}x | >= 1x |",
-        f"| ours GFLOP/s / JAX matmul GFLOP/s | {100 * gf(ours_pps) / jax_mm:.0f}% | >= 60% |",
-        f"| ours GFLOP/s / best matmul GFLOP/s | "
-        f"{100 * gf(ours_pps) / max(jax_mm, torch_mm):.0f}% | |",
-        "",
-        f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`",
-    ]
+    jobs: dict[str, tuple[Callable[[], object], int]] = {
+        f"ours{c}": ((lambda c=c: score_demos(policy, demos, _cfg(c))), 1) for c in chunks
+    }
+    jobs["episode"] = (lambda: score_demos(policy, episode, _cfg(stream_chunk)), 5)
+    jobs["streamed"] = (streamed, 1)
+    for name, (fn, size, rows) in refs.items():
+        for th in settings:
+            jobs[f"{name}_{th}t"] = (torch_loop(fn, size, rows, th), 1)
+            jobs[f"{name}_{th}t"][0]()  # warm up
+    torch.set_num_threads(default_threads)
+    jobs["jax_mm"] = (lambda: mm(xa).block_until_ready(), 5)
+    jobs["torch_mm"] = (lambda: torch.mm(xt, xt), 5)
+    jobs["torch_mm"][0]()
+    secs = interleaved(jobs, a.rounds)
     shutil.rmtree(tmp, ignore_errors=True)
-    text = "\n".join(lines) + "\n"
+
+    # --- per-round figures and ratios ---
+    pps = {f"ours{c}": [n_pairs / t for t in secs[f"ours{c}"]] for c in chunks}
+    pps["streamed"] = [n_pairs / t for t in secs["streamed"]]
+    for name, (_, _, rows) in refs.items():
+        for th in settings:
+            pps[f"{name}_{th}t"] = [rows / t for t in secs[f"{name}_{th}t"]]
+    ref_setting = {
+        name: max(settings, key=lambda th, name=name: statistics.median(pps[f"{name}_{th}t"]))
+        for name in refs
+    }
+    gflops = {k: [2 * n**3 / t / 1e9 for t in secs[k]] for k in ("jax_mm", "torch_mm")}
+    best_c = max(chunks, key=lambda c: statistics.median(pps[f"ours{c}"]))
+    best = pps[f"ours{best_c}"]
+    per_round = {
+        name: [o / r for o, r in zip(best, pps[f"{name}_{ref_setting[name]}t"], strict=True)]
+        for name in refs
+    }
+    per_round["matmul"] = [
+        o * FLOP_PER_PAIR / 1e9 / g for o, g in zip(best, gflops["jax_mm"], strict=True)
+    ]
+    if 1024 in chunks:
+        per_round["chunk1024"] = [o / b for o, b in zip(pps["ours1024"], best, strict=True)]
+    flop_s = [T * FLOP_PER_PAIR / (g * 1e9) for g in gflops["jax_mm"]]
+    per_round["episode"] = [e / f for e, f in zip(secs["episode"], flop_s, strict=True)]
+    result = {
+        "pairs_per_s": {k: spread(v) for k, v in pps.items()},
+        "matmul_gflops": {k: spread(v) for k, v in gflops.items()},
+        "episode_ms": spread([1e3 * t for t in secs["episode"]]),
+        "episode_flop_ms": spread([1e3 * f for f in flop_s]),
+        "ratios": {k: spread(v) for k, v in per_round.items()},
+        "ratio_rounds": per_round,
+        "reference_threads": ref_setting,
+        "best_chunk": best_c,
+        "compile_s": compile_s,
+        "max_abs_diff_vs_torch": err,
+        "machine": {
+            "cpus": os.cpu_count(),
+            "load_avg_1m_end": os.getloadavg()[0],
+            "jax": jax.__version__,
+            "torch": torch.__version__,
+            "torch_default_threads": default_threads,
+            "PJRT_NPROC": os.environ.get("PJRT_NPROC", ""),
+            "XLA_FLAGS": os.environ.get("XLA_FLAGS", ""),
+        },
+        "args": {k: str(v) for k, v in vars(a).items()},
+    }
+    text = to_markdown(result, a, n_pairs, stream_chunk)
     print(text)
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(text)
+        a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
+
+
+def _fmt(d: dict[str, float], f: str = "{:,.0f}", scale: float = 1.0) -> str:
+    """``median [min–max]`` of a :func:`spread`."""
+    m, lo, hi = (f.format(scale * d[k]) for k in ("median", "min", "max"))
+    return f"{m} [{lo}–{hi}]"
+
+
+def _verdict(d: dict[str, float], rounds: list[float], target: float, below: bool) -> str:
+    ok = [v <= target if below else v >= target for v in rounds]
+    med = d["median"] <= target if below else d["median"] >= target
+    if med and all(ok):
+        return "met (every round)"
+    if med:
+        return f"met on the median ({sum(ok)}/{len(ok)} rounds)"
+    return f"**not met** ({sum(ok)}/{len(ok)} rounds)"
+
+
+def to_markdown(res: dict, a: argparse.Namespace, n_pairs: int, stream_chunk: int) -> str:
+    m, p, r = res["machine"], res["pairs_per_s"], res["ratios"]
+    th = res["reference_threads"]
+    rows = [
+        (f"ours, chunk {c}", p[f"ours{c}"], f"compile+first call {res['compile_s'][c]:.1f} s")
+        for c in sorted(res["compile_s"])
+    ]
+    rows.append(
+        (
+            f"ours, streamed Parquet -> Parquet (score_file, chunk {stream_chunk})",
+            p["streamed"],
+            "includes reading, writing, episode summary",
+        )
+    )
+    names = {
+        "per_demo": f"torch per-demo loop ({T}-step demos), the original code",
+        "one_pass": f"torch per-demo, one pass ({T}-step demos)",
+        "batched": f"torch batched loop ({a.torch_batch} pairs/call)",
+    }
+    for key, label in names.items():
+        for t in sorted({int(k.split("_")[-1][:-1]) for k in p if k.startswith(key + "_")}):
+            mark = " **(reference)**" if t == th[key] else ""
+            rows.append((f"{label}, {t} thread{'s' if t > 1 else ''}{mark}", p[f"{key}_{t}t"], ""))
+    gf = FLOP_PER_PAIR / 1e9
+    lines = [
+        "# Scoring throughput (pairs/s)",
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {m['cpus']} CPUs, "
+        f"jax {m['jax']}, torch {m['torch']} (default {m['torch_default_threads']} threads), "
+        f"PJRT_NPROC={m['PJRT_NPROC']}, XLA_FLAGS={m['XLA_FLAGS']!r}. Load average (1 min) at "
+        f"the end: {m['load_avg_1m_end']:.1f}. Ensemble of {K} MLPs 2x{HIDDEN}, obs {OBS}, act "
+        f"{ACT}, {FLOP_PER_PAIR / 1e6:.2f} MFLOP/pair; {n_pairs} pairs ({a.demos} demos x {T} "
+        f"steps; the per-demo loops score the first {a.per_demo}). {a.rounds} interleaved "
+        "rounds; figures are median [min–max] over rounds, ratios are taken within a round.",
+        f"Same weights: max |difference| of ℓ and ν, ours vs torch = "
+        f"{res['max_abs_diff_vs_torch']:.2e}.",
+        "",
+        "| scorer | pairs/s | GFLOP/s (median) | note |",
+        "|---|---:|---:|---|",
+    ]
+    lines += [f"| {n} | {_fmt(v)} | {v['median'] * gf:.1f} | {note} |" for n, v, note in rows]
+    mg = res["matmul_gflops"]
+    lines += [
+        f"| plain fp32 matmul {a.matmul_n}³, JAX | | {_fmt(mg['jax_mm'], '{:.1f}')} | |",
+        f"| plain fp32 matmul {a.matmul_n}³, torch | | {_fmt(mg['torch_mm'], '{:.1f}')} | |",
+        "",
+        f"One {T}-step episode per `score_demos` call: {_fmt(res['episode_ms'], '{:.1f}')} ms; "
+        f"its FLOP time at the JAX matmul's speed: {_fmt(res['episode_flop_ms'], '{:.1f}')} ms.",
+        "",
+        "| target | measured: median [min–max] over rounds | target | verdict |",
+        "|---|---:|---:|---|",
+    ]
+    bc = res["best_chunk"]
+    rr = res["ratio_rounds"]
+    checks = [
+        ("one_pass", f"ours (chunk {bc}) / torch per-demo one-pass loop", "{:.2f}x", 1, False),
+        ("batched", f"ours (chunk {bc}) / torch batched loop", "{:.2f}x", 1, False),
+        ("matmul", f"ours (chunk {bc}) GFLOP/s / JAX matmul GFLOP/s", "{:.0f}%", 100, False),
+        ("chunk1024", f"chunk 1024 / chunk {bc}", "{:.0f}%", 100, False),
+        ("episode", f"one {T}-step episode / its FLOP time", "{:.2f}x", 1, True),
+    ]
+    for key, label, f, scale, below in checks:
+        if key not in r:
+            continue
+        target = TARGETS[key]
+        tgt = ("<= " if below else ">= ") + (
+            f"{100 * target:.0f}%" if scale == 100 else f"{target:g}x"
+        )
+        verdict = _verdict(r[key], rr[key], target, below)
+        lines.append(f"| {label} | {_fmt(r[key], f, scale)} | {tgt} | {verdict} |")
+    lines += [
+        f"| ours (chunk {bc}) / torch per-demo loop (the original code) | "
+        f"{_fmt(r['per_demo'], '{:.2f}x')} | | |",
+        "",
+        "Reference thread settings (faster median): "
+        + ", ".join(f"{k} {v}" for k, v in th.items())
+        + ".",
+        f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`",
+    ]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
