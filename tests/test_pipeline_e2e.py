@@ -45,6 +45,11 @@ batch_size = 128
 
 [evaluate]
 rollouts = 4
+
+# a 16 x 16 model trained 10 epochs on 6 demos: whether its fit is trustworthy is luck of the
+# draw, and not what these tests check
+[thresholds]
+force = true
 """
 
 
