@@ -36,6 +36,7 @@ COMMAND_ORDER = (
     "evaluate",
     "elicit",
     "watch",
+    "serve",
     "quickstart",
     "pipeline",
     "report",

@@ -8,15 +8,10 @@ from typing import Any
 import typer
 
 from elicit_jax.cli import data_cmds
+from elicit_jax.cli import session_options as so
 from elicit_jax.cli.app import ELICIT, app
 from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
 from elicit_jax.errors import ElicitError
-
-_PRESET = typer.Option(None, "--preset", help="Paper thresholds of a task: square-nut, ...")
-
-
-def _given(**values: Any) -> dict[str, Any]:
-    return {k: v for k, v in values.items() if v is not None}
 
 
 def _stored_config(out: Path) -> dict[str, Any]:
@@ -29,46 +24,37 @@ def _stored_config(out: Path) -> dict[str, Any]:
 
 @app.command("elicit", rich_help_panel=ELICIT)
 def elicit_cmd(
+    ctx: typer.Context,
     out: Path = typer.Option(..., "-o", "--out", help="Session directory (created or resumed)."),
-    task: str = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`)."),
-    policy: Path = typer.Option(None, "--policy", help="Base policy (run or seed directory)."),
-    base_demos: Path = typer.Option(None, "--base-demos", help="D_base (demos artifact)."),
+    task: str = so.TASK,
+    policy: Path = so.POLICY,
+    base_demos: Path = so.BASE_DEMOS,
     thresholds: Path | None = _THRESHOLDS,
     lambda_: float | None = _LAMBDA,
     eta: float | None = _ETA,
-    preset: str | None = _PRESET,
+    preset: str | None = so.PRESET,
     operator: str = typer.Option(
         None, "--operator", help="Who demonstrates: scripted:STYLE (a task's scripted operator)."
     ),
-    mode: str = typer.Option(None, "--mode", help="informed (default) or naive (control)."),
-    demos: int = typer.Option(None, "--demos", help="Demonstrations wanted [10]."),
-    batch: int = typer.Option(None, "--batch", help="Retrain after every N accepted [0: never]."),
-    fixed_base: bool = typer.Option(
-        None, "--fixed-base/--no-fixed-base", help="Score every batch against π_base."
-    ),
-    dagger: bool = typer.Option(None, "--dagger/--no-dagger", help="HG-DAgger: robot acts."),
-    practice: int = typer.Option(None, "--practice", help="Practice episodes first [3]."),
-    prompt: int = typer.Option(None, "--prompt", help="Base demos shown in the prompt [5]."),
-    accept_fraction: float = typer.Option(
-        None, "--accept-fraction", help="Reject above this fraction incompatible [0.05]."
-    ),
-    reject_count: int = typer.Option(
-        None, "--reject-count", help="Reject above N incompatible pairs (original code's rule)."
-    ),
-    window: int = typer.Option(None, "--window", help="Feedback window length [10]."),
-    windows: int = typer.Option(None, "--windows", help="Feedback windows on a rejection [3]."),
-    retrieval: str = typer.Option(None, "--retrieval", help="l2 (paper, default) or dtw."),
-    likelihood: str = typer.Option(
-        None, "--likelihood", help="ensemble-mean (paper, default) or member-average."
-    ),
-    ddof: int = typer.Option(None, "--ddof", help="Novelty std convention: 0 paper, 1 code."),
-    which: str = typer.Option(None, "--which", help="Checkpoint: best (default), final, epoch."),
-    policy_seed: int = typer.Option(None, "--policy-seed", help="Seed of a multi-seed run."),
-    seed: int = typer.Option(None, "--seed", help="Session seed (initial states) [0]."),
-    max_episodes: int = typer.Option(
-        None, "--max-episodes", help="Stop after N episodes [practice + 5 x demos]."
-    ),
-    horizon: int = typer.Option(None, "--horizon", help="Steps per episode [the task's]."),
+    mode: str = so.MODE,
+    demos: int = so.DEMOS,
+    batch: int = so.BATCH,
+    fixed_base: bool = so.FIXED_BASE,
+    dagger: bool = so.DAGGER,
+    practice: int = so.PRACTICE,
+    prompt: int = so.PROMPT,
+    accept_fraction: float = so.ACCEPT_FRACTION,
+    reject_count: int = so.REJECT_COUNT,
+    window: int = so.WINDOW,
+    windows: int = so.WINDOWS,
+    retrieval: str = so.RETRIEVAL,
+    likelihood: str = so.LIKELIHOOD,
+    ddof: int = so.DDOF,
+    which: str = so.WHICH,
+    policy_seed: int = so.POLICY_SEED,
+    seed: int = so.SEED,
+    max_episodes: int = so.MAX_EPISODES,
+    horizon: int = so.HORIZON,
     resume: bool = typer.Option(
         False, "--resume", help="Continue the session in OUT with its recorded settings."
     ),
@@ -87,31 +73,7 @@ def elicit_cmd(
     from elicit_jax.elicit.config import SessionConfig
     from elicit_jax.elicit.run import elicit
 
-    given = _given(
-        task=task,
-        policy=None if policy is None else str(policy),
-        base_demos=None if base_demos is None else str(base_demos),
-        operator=operator,
-        mode=mode,
-        demos=demos,
-        batch=batch,
-        fixed_base=fixed_base,
-        dagger=dagger,
-        practice=practice,
-        prompt=prompt,
-        accept_fraction=accept_fraction,
-        reject_count=reject_count,
-        window=window,
-        windows=windows,
-        retrieval=retrieval,
-        likelihood=likelihood,
-        ddof=ddof,
-        which=which,
-        policy_seed=policy_seed,
-        seed=seed,
-        max_episodes=max_episodes,
-        horizon=horizon,
-    )
+    given = so.given(ctx.params)
     resolved = _resolve(thresholds, lambda_, eta, preset)
     if resolved is not None:
         given.update({"lambda": resolved[0], "eta": resolved[1]})
@@ -141,7 +103,7 @@ def watch_cmd(
     thresholds: Path | None = _THRESHOLDS,
     lambda_: float | None = _LAMBDA,
     eta: float | None = _ETA,
-    preset: str | None = _PRESET,
+    preset: str | None = so.PRESET,
     out: Path = typer.Option(None, "-o", "--out", help="Pages and log [INBOX/verdicts]."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
     reject_count: int = typer.Option(None, "--reject-count", help="Reject above N pairs."),

@@ -135,6 +135,12 @@ class Session:
         self._require_running()
         self._finish(success=False)
 
+    @property
+    def sim_data(self) -> Any:
+        """The current episode's MuJoCo ``MjData`` (to read, e.g. body poses to draw; never
+        write it), or None before :meth:`start` and after the session ends."""
+        return None if self._sim is None else self._sim.datas[0]
+
     def add_listener(self, listener: Listener) -> None:
         self.listeners.append(listener)
 

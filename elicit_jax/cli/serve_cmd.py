@@ -1,0 +1,109 @@
+"""``elicit-jax serve``: the browser interface for elicitation sessions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from elicit_jax.cli import session_options as so
+from elicit_jax.cli.app import ELICIT, app
+from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
+from elicit_jax.errors import ElicitError
+
+DEMO_TASK = "reach-pillar"
+
+
+@app.command("serve", rich_help_panel=ELICIT)
+def serve_cmd(
+    ctx: typer.Context,
+    sessions: Path = typer.Option(
+        Path("sessions"), "--sessions", help="Sessions directory (one folder per operator)."
+    ),
+    demo: bool = typer.Option(
+        False,
+        "--demo",
+        help="Built-in reach-pillar base policy, demos and thresholds (built once, cached).",
+    ),
+    host: str = typer.Option("127.0.0.1", "--host", help="Address to bind (others need a token)."),
+    port: int = typer.Option(8765, "--port", help="Port (0: any free one)."),
+    token: str = typer.Option(
+        None, "--token", help="Access token (made up off loopback when not given)."
+    ),
+    max_operators: int = typer.Option(16, "--max-operators", help="Most operators at once."),
+    task: str = so.TASK,
+    policy: Path = so.POLICY,
+    base_demos: Path = so.BASE_DEMOS,
+    thresholds: Path | None = _THRESHOLDS,
+    lambda_: float | None = _LAMBDA,
+    eta: float | None = _ETA,
+    preset: str | None = so.PRESET,
+    mode: str = so.MODE,
+    demos: int = so.DEMOS,
+    batch: int = so.BATCH,
+    fixed_base: bool = so.FIXED_BASE,
+    dagger: bool = so.DAGGER,
+    practice: int = so.PRACTICE,
+    prompt: int = so.PROMPT,
+    accept_fraction: float = so.ACCEPT_FRACTION,
+    reject_count: int = so.REJECT_COUNT,
+    window: int = so.WINDOW,
+    windows: int = so.WINDOWS,
+    retrieval: str = so.RETRIEVAL,
+    likelihood: str = so.LIKELIHOOD,
+    ddof: int = so.DDOF,
+    which: str = so.WHICH,
+    policy_seed: int = so.POLICY_SEED,
+    seed: int = so.SEED,
+    max_episodes: int = so.MAX_EPISODES,
+    horizon: int = so.HORIZON,
+) -> None:
+    """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
+    a name and goes through practice, prompt, demonstrations with the live indicator, and
+    feedback; accepted demonstrations land in SESSIONS/<name>/ (a restart resumes them).
+
+    Example: elicit-jax serve --task square-nut --policy runs/base --base-demos base.parquet
+    --thresholds thresholds.json --sessions sessions/
+
+    Example: elicit-jax serve --demo   (reach-pillar, nothing else needed)
+    """
+    from elicit_jax.elicit.config import SessionConfig
+    from elicit_jax.web.serve import ServeConfig, serve
+
+    given = so.given(ctx.params)
+    resolved = _resolve(thresholds, lambda_, eta, preset)
+    if demo:
+        from elicit_jax.web.demo import DemoRecipe, demo_inputs
+
+        clash = [
+            flag
+            for flag, value in (("--policy", policy), ("--base-demos", base_demos))
+            if value is not None
+        ] + (["thresholds"] if resolved is not None else [])
+        if clash:
+            raise ElicitError(f"--demo brings its own inputs; drop {', '.join(clash)}")
+        if given.get("task", DEMO_TASK) != DEMO_TASK:
+            raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
+        inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), echo=typer.echo)
+        thresholds = inputs.thresholds
+        resolved = _resolve(thresholds, None, None)
+        given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
+        given["base_demos"] = str(inputs.base_demos)
+    missing = [
+        f"--{k.replace('_', '-')}" for k in ("task", "policy", "base_demos") if k not in given
+    ]
+    if resolved is None:
+        missing.append("thresholds (--thresholds, --lambda/--eta or --preset)")
+    if missing:
+        raise ElicitError(f"missing {', '.join(missing)} (or use --demo)")
+    given |= {"lambda": resolved[0], "eta": resolved[1], "operator": "browser:_"}
+    given["thresholds_file"] = None if thresholds is None else str(thresholds)
+    config = ServeConfig(
+        session=SessionConfig.from_dict(given),
+        sessions=str(sessions),
+        host=host,
+        port=port,
+        token=token,
+        max_operators=max_operators,
+    )
+    serve(config, echo=typer.echo)

@@ -1,0 +1,1 @@
+"""The browser interface: an HTTP + WebSocket server over elicitation sessions (transport only)."""

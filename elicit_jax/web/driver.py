@@ -1,0 +1,356 @@
+"""One operator's session on its own thread, stepped at the task's control rate.
+
+An :class:`OperatorDriver` owns a :class:`~elicit_jax.elicit.session.Session` (C MuJoCo
+physics and the live scorer run here, on the server) and drives it from its thread, the way
+:func:`~elicit_jax.elicit.run.run_session` does but paced: one control step every
+``substeps x timestep`` seconds (50 ms on the shipped tasks), with the browser operator's
+latest command. Each episode waits for the page's ``start`` (the operator reads the
+instructions, the prompt or the feedback first); a lost connection pauses the episode until
+the page is back. Everything the page needs to redraw itself after a reload — the scene,
+the prompt, the current episode's indicator history, a pending verdict — is kept, and sent
+again to whichever connection attaches next (:meth:`OperatorDriver.attach`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from elicit_jax.elicit.config import SessionConfig
+from elicit_jax.elicit.events import (
+    DEMONSTRATION,
+    EpisodeEndEvent,
+    EpisodeStartEvent,
+    Event,
+    IndicatorEvent,
+    PhaseEvent,
+    PromptEvent,
+    RetrainEvent,
+    ReviewEvent,
+    SessionEndEvent,
+    to_jsonable,
+)
+from elicit_jax.errors import ElicitError
+from elicit_jax.web import messages
+from elicit_jax.web.protocol import Message, pack_frame
+from elicit_jax.web.scene import body_poses
+
+OPENING, READY, RUNNING, BUSY, DONE, ERROR = "opening", "ready", "running", "busy", "done", "error"
+
+
+class Outbox(Protocol):
+    """Where a driver's messages go (a WebSocket connection); ``send`` is thread-safe."""
+
+    def send(self, message: str | bytes, droppable: bool = False) -> None: ...
+
+
+class OperatorDriver:
+    """Runs the session of operator ``name`` in ``out`` (see the module docstring).
+
+    Args:
+      name: the operator's name.
+      config: the session config (its operator is ``browser:NAME``).
+      out: the session directory (created or resumed).
+      log: where console lines go.
+
+    Attributes:
+      state: ``opening``, ``ready`` (waiting for the page's start), ``running``, ``busy``
+        (retraining), ``done`` or ``error``.
+      message: why, for ``error``.
+      steps: control steps taken (all episodes) since the server started.
+    """
+
+    def __init__(
+        self, name: str, config: SessionConfig, out: Path, log: Callable[[str], None] = print
+    ) -> None:
+        self.name, self.config, self.out, self.log = name, config, Path(out), log
+        self.state, self.message = OPENING, ""
+        self.steps = 0
+        self.session: Any = None
+        self.setup: Any = None
+        self.operator: Any = None
+        self.period = 0.05
+        self._lock = threading.RLock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._outbox: Outbox | None = None
+        self._go = self._give_up = False
+        self._prompt_pending = self._review_pending = False
+        self._index, self._kind, self._step = -1, "", 0
+        self._m = math.nan
+        self._static: list[str] = []
+        self._prompt: list[str | bytes] = []
+        self._phase: list[str] = []
+        self._episode: list[str | bytes] = []
+        self._indicators: list[list[float]] = []
+        self._frame: bytes | None = None
+        self._review: list[str | bytes] = []
+        self._clips: Any = None
+        self._thread = threading.Thread(target=self._run, name=f"operator-{name}", daemon=True)
+
+    # --- control from the server -------------------------------------------------------------
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop stepping (the episode in progress is not recorded) and release the simulator."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def attach(self, outbox: Outbox) -> Outbox | None:
+        """Send everything the page needs to ``outbox`` and make it the operator's page.
+
+        Returns:
+          The page attached before (the caller closes it), or None.
+        """
+        with self._lock:
+            old, self._outbox = self._outbox, outbox
+            for msg in self._snapshot():
+                outbox.send(msg)
+        return old if old is not outbox else None
+
+    def detach(self, outbox: Outbox) -> None:
+        """The page went away: pause the episode until one attaches again."""
+        with self._lock:
+            if self._outbox is not outbox:
+                return
+            self._outbox = None
+            if self.state == RUNNING:
+                self._go = False
+                self.state = READY
+
+    def handle(self, msg: Message) -> None:
+        """Apply one checked message of the page (actions, control, start, give up)."""
+        op = self.operator
+        if msg.type == "action" and op is not None:
+            op.set_action(np.asarray(msg.action, np.float32))
+        elif msg.type == "control" and op is not None:
+            op.set_control(msg.operator)
+        elif msg.type == "start":
+            with self._lock:
+                if self.state == READY:
+                    self._go, self.state = True, RUNNING
+                    self._review_pending = False
+                    if self._kind == DEMONSTRATION:
+                        self._prompt_pending = False
+                    self._push_state()
+            self._wake.set()
+        elif msg.type == "give-up":
+            with self._lock:
+                if self.state in (READY, RUNNING) and self._step > 0:
+                    self._give_up = True
+                    self._go, self.state = True, RUNNING
+            self._wake.set()
+
+    # --- the thread ---------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._open()
+            self._loop()
+        except ElicitError as e:
+            self._fail(str(e))
+        except Exception as e:  # report any failure to the page and the console, keep serving
+            self.log(traceback.format_exc())
+            self._fail(f"{type(e).__name__}: {e}")
+        finally:
+            if self.session is not None:
+                self.session.close()
+
+    def _fail(self, message: str) -> None:
+        with self._lock:
+            self.state, self.message = ERROR, message
+            self._go = False
+            self._send(messages.error(message))
+            self._push_state()
+        self.log(f"operator {self.name}: {message}")
+
+    def _open(self) -> None:
+        from elicit_jax.elicit.session import Session
+        from elicit_jax.elicit.setup import open_session
+        from elicit_jax.web.clips import ClipMaker
+
+        setup, operator, resumed = open_session(self.config, self.out, quiet=True)
+        self.setup, self.operator = setup, operator
+        task = setup.task
+        self.period = float(task.config.substeps * task.config.timestep)
+        self._clips = ClipMaker(task, setup.base)
+        operator.listener = self._on_event
+        self.session = Session(setup, [operator.on_event])
+        if not setup.demos_up_to_date(self.session.progress):
+            setup.write_demos(self.session.progress)
+        with self._lock:
+            self._static = [
+                messages.welcome(self.name, setup, resumed, self.period),
+                messages.scene(task),
+            ]
+            for msg in self._static:
+                self._send(msg)
+        self.log(
+            f"operator {self.name}: session {'resumed' if resumed else 'created'} in {self.out}"
+        )
+        self.session.start()
+        with self._lock:
+            if self.state == OPENING:
+                self.state = READY
+            self._push_state()
+
+    def _loop(self) -> None:
+        next_t: float | None = None
+        while not self._stop.is_set():
+            if self.session.done:
+                with self._lock:
+                    self.state = DONE
+                    self._push_state()
+                self._stop.wait()
+                return
+            if not self._go:
+                next_t = None
+                self._wake.wait(0.25)
+                self._wake.clear()
+                continue
+            now = time.perf_counter()
+            next_t = now if next_t is None else next_t
+            if next_t > now and self._stop.wait(next_t - now):
+                return
+            next_t = max(next_t + self.period, time.perf_counter() - self.period)
+            self._tick()
+
+    def _tick(self) -> None:
+        s = self.session
+        if self._give_up:
+            self._give_up = False
+            s.end_episode()
+        else:
+            obs = s.observation()
+            action = self.operator.act(obs)
+            self._m = math.nan
+            episode = obs.episode
+            s.step(action)
+            self.steps += 1
+            if not self._review_pending and s.sim_data is not None and episode == self._index:
+                self._step = obs.step + 1
+                frame = pack_frame(
+                    body_poses(s.sim_data), episode, self._step, self._m, action is not None
+                )
+                with self._lock:
+                    self._frame = frame
+                    self._send(frame, droppable=True)
+        if self._review_pending and not s.done:
+            with self._lock:
+                if self.state == RUNNING:
+                    self.state = READY
+                self._push_state()
+
+    # --- events (on the driver thread) ----------------------------------------------------------
+    def _on_event(self, event: Event) -> None:
+        with self._lock:
+            if isinstance(event, IndicatorEvent):
+                self._m = event.compatibility
+                self._indicators.append(
+                    [event.step, event.compatibility, float(event.incompatible)]
+                )
+                self._send(messages.event(event))
+            elif isinstance(event, EpisodeStartEvent):
+                self._on_episode_start(event)
+            elif isinstance(event, EpisodeEndEvent):
+                self._on_episode_end(event)
+            elif isinstance(event, PromptEvent):
+                self._prompt = [messages.prompt(event)]
+                self._prompt += self._clips.prompt_clips(event)
+                self._prompt_pending = True
+                self._sendall(self._prompt)
+            elif isinstance(event, ReviewEvent):
+                record = self.setup.store.read_episode(event.episode)
+                review = [messages.review(event, record), *self._clips.review_clips(event, record)]
+                self._review += review
+                self._sendall(review)
+            elif isinstance(event, PhaseEvent):
+                self._phase = [messages.event(event)]
+                self._send(self._phase[0])
+            elif isinstance(event, RetrainEvent):
+                self.state = BUSY if event.status == "start" else READY
+                self._send(messages.event(event))
+                self._push_state()
+            elif isinstance(event, SessionEndEvent):
+                self._send(messages.event(event))
+
+    def _on_episode_start(self, event: EpisodeStartEvent) -> None:
+        self._index, self._kind, self._step = event.episode, event.episode_kind, 0
+        self._give_up = False
+        self.operator.reset(self.config.dagger)
+        self._indicators = []
+        frame = pack_frame(body_poses(self.session.sim_data), event.episode, 0)
+        self._episode = [messages.event(event)]
+        self._frame = frame
+        self._sendall([self._episode[0], frame])
+
+    def _on_episode_end(self, event: EpisodeEndEvent) -> None:
+        self._go = False
+        self._review_pending = True
+        self._step = event.length
+        frame = pack_frame(body_poses(self.session.sim_data), event.episode, event.length, self._m)
+        self._review = [messages.event(event), frame]
+        self._sendall(self._review)
+        row = self.session.progress.rows[-1]
+        c = event.counts
+        self.log(
+            f"operator {self.name}: e{event.episode:04d} {event.episode_kind} "
+            f"{str(row.get('verdict', '')).upper()} in {event.length} steps "
+            f"[{c.accepted}/{c.wanted} accepted, {c.episodes} episodes]"
+        )
+
+    # --- messages -----------------------------------------------------------------------------
+    def _send(self, msg: str | bytes, droppable: bool = False) -> None:
+        if self._outbox is not None:
+            self._outbox.send(msg, droppable)
+
+    def _sendall(self, msgs: list[str | bytes]) -> None:
+        for m in msgs:
+            self._send(m)
+
+    def _push_state(self) -> None:
+        self._send(self._state_message())
+
+    def _state_message(self) -> str:
+        s = self.session
+        progress = None if s is None else s.progress
+        return messages.state(
+            state=self.state,
+            message=self.message,
+            phase=getattr(s, "phase", ""),
+            episode=getattr(self, "_index", -1),
+            episode_kind=getattr(self, "_kind", ""),
+            step=self._step,
+            counts=None if progress is None else to_jsonable(progress.counts),
+            history=[] if progress is None else messages.history(progress.rows),
+            prompt_pending=self._prompt_pending,
+            review_pending=self._review_pending,
+            operator_control=bool(self.operator.in_control) if self.operator else False,
+            steps_per_second=1.0 / self.period,
+        )
+
+    def _snapshot(self) -> list[str | bytes]:
+        out: list[str | bytes] = [*self._static, *self._prompt, *self._phase, *self._episode]
+        if self._indicators:
+            out.append(messages.indicators(self._indicators))
+        if self._frame is not None:
+            out.append(self._frame)
+        if self._review_pending:
+            out += self._review
+        if self.state == ERROR:
+            out.append(messages.error(self.message))
+        out.append(self._state_message())
+        return out

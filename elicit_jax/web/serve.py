@@ -1,0 +1,152 @@
+"""``elicit-jax serve``: check the inputs, bind, print the URL, serve until Ctrl-C, summarise.
+
+Before binding, :func:`preflight` opens a throwaway session with the server's settings, so a
+bad input fails at start with the session's own one-line error (not when the first operator
+arrives), and the scorers are compiled by then. The server binds 127.0.0.1 by default;
+binding any other address requires an access token (:mod:`elicit_jax.web.access`), made up
+and printed once in the URL unless ``--token`` gives one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import socket
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.elicit.config import SessionConfig
+from elicit_jax.errors import ElicitError
+from elicit_jax.web.access import is_loopback, new_token
+from elicit_jax.web.hub import OperatorHub, session_names
+
+
+@dataclasses.dataclass(frozen=True)
+class ServeConfig:
+    """How to serve.
+
+    Attributes:
+      session: the settings every operator's session gets (their operator becomes
+        ``browser:NAME``).
+      sessions: the sessions directory (one subdirectory per operator).
+      host: address to bind (127.0.0.1: this machine only).
+      port: port to bind (0: any free one; the printed URL says which).
+      token: the access token (off loopback: made up when not given).
+      max_operators: most operators at once.
+    """
+
+    session: SessionConfig
+    sessions: str
+    host: str = "127.0.0.1"
+    port: int = 8765
+    token: str | None = None
+    max_operators: int = 16
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.port <= 65535:
+            raise ElicitError(f"--port must be in 0..65535, got {self.port}")
+        if self.max_operators < 1:
+            raise ElicitError(f"--max-operators must be >= 1, got {self.max_operators}")
+        if self.token is not None and len(self.token) < 8:
+            raise ElicitError("--token must be at least 8 characters")
+        if Path(self.sessions).exists() and not Path(self.sessions).is_dir():
+            raise ElicitError("is a file, not a sessions directory", self.sessions)
+
+
+def preflight(template: SessionConfig) -> None:
+    """Open (then delete) a session with ``template``'s settings: the inputs are checked by
+    the session's own code, and the live and prompt scorers are compiled."""
+    import numpy as np
+
+    from elicit_jax.elicit.setup import open_session
+    from elicit_jax.web import operator as browser_operator
+
+    config = dataclasses.replace(template, operator=f"{browser_operator.KIND}:preflight")
+    with tempfile.TemporaryDirectory(prefix="elicit-serve-") as tmp:
+        setup, _, _ = open_session(config, Path(tmp) / "check")
+        zeros_o = np.zeros(setup.obs_dim, np.float32)
+        setup.scorer.score(setup.policy, zeros_o, np.zeros(setup.action_dim, np.float32))
+        if config.mode == "informed" and config.prompt:
+            setup.prompt_event()
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host:port`` (IPv4 or IPv6)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as e:
+        sock.close()
+        raise ElicitError(f"cannot listen on {host}:{port}: {e.strerror}") from None
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def url_of(host: str, port: int, token: str | None) -> str:
+    """The URL operators open."""
+    shown = socket.gethostname() if host in ("0.0.0.0", "::") else host
+    shown = f"[{shown}]" if ":" in shown else shown
+    return f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+
+
+def summary_table(hub: OperatorHub) -> Any:
+    """Per operator served: state, counts."""
+    from rich.table import Table
+
+    table = Table(title=f"operators served ({hub.root})", title_justify="left")
+    for col in ("operator", "state", "accepted", "rejected", "failed", "episodes", "steps"):
+        table.add_column(col, justify="left" if col in ("operator", "state") else "right")
+    for name, d in sorted(hub.drivers.items()):
+        c = d.session.progress.counts if d.session is not None else None
+        cells = (
+            ["-"] * 4
+            if c is None
+            else [f"{c.accepted}/{c.wanted}", c.rejected, c.failed, c.episodes]
+        )
+        table.add_row(name, d.state, *[str(v) for v in cells], str(d.steps))
+    return table
+
+
+def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any = None) -> None:
+    """Serve operators until interrupted (see the module docstring)."""
+    import uvicorn
+    from rich.console import Console
+
+    console = console or Console(highlight=False)
+    root = Path(config.sessions)
+    token = config.token
+    if token is None and not is_loopback(config.host):
+        token = new_token()
+    echo(f"checking the inputs and compiling the scorer for {config.session.task} ...")
+    preflight(config.session)
+    root.mkdir(parents=True, exist_ok=True)
+    hub = OperatorHub(config.session, root, config.max_operators, log=echo)
+    from elicit_jax.web.server import create_app
+
+    app = create_app(hub, token)
+    sock = bind(config.host, config.port)
+    port = sock.getsockname()[1]
+    known = session_names(root)
+    c = config.session
+    echo(
+        f"serving {c.task} ({c.mode}{', HG-DAgger' if c.dagger else ''}; {c.demos} demonstrations "
+        f"wanted per operator) — sessions in {root}"
+        + (f"; {len(known)} to resume: {', '.join(known)}" if known else "")
+    )
+    if token is not None:
+        echo("access token required (it is in the URL below; share it only with operators)")
+    echo(f"open {url_of(config.host, port, token)}   (Ctrl-C stops)")
+    server = uvicorn.Server(
+        uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False, lifespan="on")
+    )
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()
+        hub.shutdown()
+        if hub.drivers:
+            console.print(summary_table(hub))

@@ -1,0 +1,506 @@
+// The operator's page: one WebSocket to the server, screens chosen from the server's state.
+// Screens: welcome (name) → practice → prompt (replays) → demonstrate (live indicator) →
+// review (verdict, flagged windows beside the base segments) → progress → … → done.
+// The server is the authority on the session; the page keeps only what it shows.
+import { View, Player } from './view.js';
+import { Teleop, MOTION_KEYS } from './teleop.js';
+
+const $ = (id) => document.getElementById(id);
+const NAME_KEY = 'elicit-jax-name';
+const NAME_RE = /^[A-Za-z0-9][A-Za-z0-9_-]{0,39}$/;
+const FATAL_CODES = [1003, 1008, 1009, 4001, 4002];
+const GOALS = {
+  'reach-pillar': 'Bring the gripper to the green ball on the far side of the pillar.',
+  'square-nut': 'Pick up the square nut by its handle and drop it over the square peg.',
+  'round-nut': 'Pick up the round nut by its handle and drop it over the round peg.',
+  'hammer-drawer': 'Pick up the hammer and put it into the drawer.',
+};
+
+const S = {
+  name: localStorage.getItem(NAME_KEY),
+  ws: null, retries: 0, fatal: '',
+  welcome: null, state: null, phase: null,
+  episode: null, frames: new Map(), frameInfo: null,
+  indicators: [], lastIndicator: null,
+  prompt: null, promptClips: [], promptIndex: 0, promptDismissed: false,
+  lastEnd: null, review: null, reviewClips: { yours: [], base: [] }, windowIndex: 0,
+  reviewStep: 'review', acked: -1, control: false,
+  screen: '', viewKey: '',
+};
+
+const view = new View($('view'));
+const player = new Player(view, updateReplayBar);
+const teleop = new Teleop([], (a) => send({ type: 'action', a }));
+teleop.onPadButton = (i) => { if (i === 1) toggleControl(); else if (i === 9) onEnter(); };
+window.elicit = { view, state: S, bodyPosition: (name) => view.bodyPosition(name) };
+
+// --- connection -------------------------------------------------------------------------
+function setConn(kind, text) {
+  $('conn').dataset.conn = kind;
+  $('conn').textContent = text;
+}
+
+function send(msg) {
+  if (S.ws && S.ws.readyState === WebSocket.OPEN) S.ws.send(JSON.stringify(msg));
+}
+
+function connect() {
+  if (S.ws || !S.name) return;
+  const token = new URLSearchParams(location.search).get('token');
+  const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
+  const url = `${scheme}://${location.host}/ws${token ? `?token=${encodeURIComponent(token)}` : ''}`;
+  const ws = new WebSocket(url);
+  ws.binaryType = 'arraybuffer';
+  S.ws = ws;
+  setConn('connecting', 'connecting…');
+  ws.onopen = () => {
+    S.retries = 0;
+    setConn('open', 'connected');
+    ws.send(JSON.stringify({ type: 'hello', name: S.name }));
+  };
+  ws.onmessage = (e) => {
+    if (typeof e.data === 'string') onText(JSON.parse(e.data));
+    else onBinary(e.data);
+  };
+  ws.onclose = (e) => {
+    if (S.ws === ws) S.ws = null;
+    teleop.releaseAll();
+    if (e.code === 4000) return fail('This session was opened in another window or tab.');
+    if (FATAL_CODES.includes(e.code)) return fail(e.reason || `connection refused (${e.code})`);
+    if (!S.name) return;
+    setConn('lost', 'reconnecting…');
+    const delay = Math.min(5000, 500 * 2 ** S.retries++);
+    setTimeout(connect, delay);
+  };
+}
+
+function fail(message) {
+  S.fatal = message;
+  setConn('lost', 'disconnected');
+  render();
+}
+
+setInterval(() => send({ type: 'ping', t: Date.now() / 1000 }), 15000);
+
+// --- messages ----------------------------------------------------------------------------
+function onBinary(buf) {
+  const dv = new DataView(buf);
+  const kind = dv.getUint8(0);
+  const nbody = dv.getUint16(2, true);
+  if (kind === 1) {
+    const info = {
+      operator: (dv.getUint8(1) & 1) === 1, episode: dv.getUint32(4, true),
+      step: dv.getUint32(8, true), m: dv.getFloat32(12, true),
+    };
+    const poses = new Float32Array(buf, 16, nbody * 7);
+    S.frames.set(info.episode, poses);
+    for (const k of S.frames.keys()) if (k < info.episode - 2) S.frames.delete(k);
+    S.frameInfo = info;
+    if (S.viewKey === `live:${info.episode}` || S.viewKey === `end:${info.episode}`) view.pose(poses);
+    updateHud();
+  } else if (kind === 2) {
+    const role = dv.getUint8(1), id = dv.getUint32(4, true), T = dv.getUint32(8, true);
+    const data = new Float32Array(buf, 16, T * nbody * 7);
+    const clip = Array.from({ length: T }, (_, t) => data.subarray(t * nbody * 7, (t + 1) * nbody * 7));
+    if (role === 0) S.promptClips[id] = clip;
+    else if (role === 1) S.reviewClips.yours[id] = clip;
+    else S.reviewClips.base[id] = clip;
+    render();
+  }
+}
+
+function onText(msg) {
+  switch (msg.type) {
+    case 'welcome':
+      S.welcome = msg;
+      S.fatal = '';
+      S.prompt = null; S.promptClips = []; S.review = null;
+      S.reviewClips = { yours: [], base: [] }; S.indicators = []; S.lastIndicator = null;
+      S.lastEnd = null; S.frames.clear();
+      document.body.dataset.mode = msg.mode;
+      document.body.dataset.dagger = String(msg.dagger);
+      $('task').textContent = msg.task;
+      $('who').textContent = msg.name;
+      teleop.setNames(msg.action_names);
+      break;
+    case 'scene': view.build(msg); break;
+    case 'event': onEvent(msg.event); break;
+    case 'indicators':
+      S.indicators = msg.items;
+      break;
+    case 'prompt':
+      S.prompt = msg; S.promptClips = []; S.promptIndex = 0; S.promptDismissed = false;
+      break;
+    case 'review':
+      S.review = msg; S.reviewClips = { yours: [], base: [] }; S.windowIndex = 0;
+      break;
+    case 'state':
+      S.state = msg;
+      document.body.dataset.state = msg.state;
+      break;
+    case 'error': S.error = msg.message; break;
+    default: return;
+  }
+  render();
+}
+
+function onEvent(ev) {
+  switch (ev.kind) {
+    case 'phase': S.phase = ev; break;
+    case 'episode-start':
+      S.episode = ev;
+      S.indicators = []; S.lastIndicator = null;
+      S.control = !ev.dagger;
+      teleop.gripperClosed = false;
+      teleop.emit(true);
+      break;
+    case 'indicator':
+      S.indicators.push([ev.step, ev.compatibility, ev.incompatible ? 1 : 0]);
+      S.lastIndicator = ev;
+      updateIndicator();
+      return;
+    case 'episode-end':
+      S.lastEnd = ev;
+      S.reviewStep = 'review';
+      if (S.review && S.review.episode !== ev.episode) S.review = null;
+      break;
+    default: break;
+  }
+}
+
+// --- screens -----------------------------------------------------------------------------
+function informed() { return S.welcome && S.welcome.mode === 'informed'; }
+
+function pickScreen() {
+  if (!S.name) return 'welcome';
+  if (S.fatal) return 'error';
+  const st = S.state;
+  if (!st || !S.welcome) return 'loading';
+  if (st.state === 'error') return 'error';
+  if (st.state === 'opening') return 'loading';
+  const end = S.lastEnd;
+  if (end && S.acked !== end.episode && (st.review_pending || st.state === 'done')) {
+    const judged = end.episode_kind === 'demonstration' && informed();
+    return judged && S.reviewStep === 'review' ? 'review' : 'progress';
+  }
+  if (st.state === 'busy') return 'retrain';
+  if (st.state === 'done') return 'done';
+  const wantPrompt = st.prompt_pending || S.promptRequested;
+  if (st.episode_kind === 'demonstration' && wantPrompt && S.prompt && !S.promptDismissed) return 'prompt';
+  return st.episode_kind === 'practice' ? 'practice' : 'demonstrate';
+}
+
+function render() {
+  const screen = pickScreen();
+  S.screen = screen;
+  document.body.dataset.screen = screen;
+  const w = S.welcome, st = S.state;
+  const counts = st && st.counts;
+  if (counts) {
+    const word = informed() ? 'accepted' : 'recorded';
+    $('progress').textContent = `${word} ${counts.accepted} of ${counts.wanted}`;
+    $('progress').dataset.accepted = counts.accepted;
+    $('progress').dataset.wanted = counts.wanted;
+  }
+  $('phase').textContent = S.phase ? S.phase.phase : '';
+  if (w) {
+    const goal = GOALS[w.task] || 'Solve the task.';
+    $('task-goal').textContent = goal;
+    $('demo-goal').textContent = goal;
+    $('rule-text').textContent = w.rule ? `A demonstration is accepted unless ${ruleWords(w.rule)}.` : '';
+    for (const el of document.querySelectorAll('.horizon')) el.textContent = `${w.horizon} steps (${(w.horizon / w.control_hz).toFixed(0)} s)`;
+  }
+  if (st && counts) {
+    $('practice-n').textContent = `${Math.min(counts.practice + 1, w.practice)} of ${w.practice}`;
+    $('demo-n').textContent = `${counts.accepted + 1} of ${counts.wanted}`;
+  }
+  if (screen === 'prompt') renderPrompt();
+  if (screen === 'review') renderReview();
+  if (screen === 'progress') renderProgress();
+  if (screen === 'done') renderDone();
+  if (screen === 'error') $('error-text').textContent = S.fatal || (st && st.message) || S.error || '';
+  if (screen === 'retrain') $('retrain-text').textContent = 'The robot is learning from the demonstrations accepted so far. This takes a minute or two.';
+  $('indicator-box').hidden = !(informed() && screen === 'demonstrate');
+  applyView(screen);
+  updateIndicator();
+  updateHud();
+}
+
+function ruleWords(rule) {
+  const m = /reject when (.*)/.exec(rule);
+  return m ? m[1] : rule;
+}
+
+function renderPrompt() {
+  const p = S.prompt;
+  $('prompt-message').textContent = `Here ${p.episodes.length === 1 ? 'is one demonstration' : `are ${p.episodes.length} demonstrations`} the robot reproduces best. Do it like this.`;
+  const list = $('prompt-list');
+  if (list.dataset.for !== JSON.stringify(p.episodes.map((e) => e.base_episode))) {
+    list.dataset.for = JSON.stringify(p.episodes.map((e) => e.base_episode));
+    list.replaceChildren(...p.episodes.map((e, i) => {
+      const b = document.createElement('button');
+      b.type = 'button';
+      b.innerHTML = `Demonstration ${i + 1} <span class="meta">${e.length} steps${e.exact ? '' : ' · gripper only'}</span>`;
+      b.onclick = () => { S.promptIndex = i; render(); player.play(); };
+      return b;
+    }));
+  }
+  [...list.children].forEach((b, i) => b.setAttribute('aria-pressed', String(i === S.promptIndex)));
+}
+
+function renderReview() {
+  const r = S.review;
+  const v = $('verdict');
+  if (!r) { v.textContent = '…'; v.dataset.verdict = ''; return; }
+  v.dataset.verdict = r.verdict;
+  v.textContent = { accepted: 'Accepted', rejected: 'Not accepted', failed: 'Not completed', unused: 'Nothing to record' }[r.verdict] || r.verdict;
+  const pct = (100 * r.fraction).toFixed(1);
+  $('review-text').textContent = r.verdict === 'rejected'
+    ? `${r.incompatible} of ${r.scored} of your steps (${pct}%) did not fit the robot's motion. Where it differed most:`
+    : r.verdict === 'accepted'
+      ? `${r.incompatible} of ${r.scored} steps (${pct}%) did not fit: within the rule. Thank you!`
+      : r.text;
+  const list = $('review-windows');
+  if (list.dataset.for !== String(r.episode)) {
+    list.dataset.for = String(r.episode);
+    list.replaceChildren(...r.windows.map((win, i) => {
+      const b = document.createElement('button');
+      b.type = 'button';
+      b.className = 'window';
+      const words = win.text.replace(/^steps [^:]*: /, '');
+      b.innerHTML = `<b>Steps ${win.start}–${win.stop - 1}</b> <span class="meta">(1−M ${win.incompatibility.toFixed(2)})</span><br><span class="meta"></span>`;
+      b.querySelector('br + .meta').textContent = words;
+      b.onclick = () => { S.windowIndex = i; render(); player.play(); };
+      return b;
+    }));
+  }
+  [...list.children].forEach((b, i) => b.setAttribute('aria-pressed', String(i === S.windowIndex)));
+  $('review-compare').hidden = !r.windows.length;
+  drawStrip($('review-strip'), r.indicators, S.welcome.horizon, r.windows.map((x) => x.episode_steps));
+}
+
+function renderProgress() {
+  const c = S.state.counts, end = S.lastEnd, w = S.welcome;
+  let last = '';
+  if (end) {
+    if (end.episode_kind === 'practice') last = `Practice ${Math.min(c.practice, w.practice)} of ${w.practice} done${end.success ? ': solved' : ''}.`;
+    else if (!informed()) last = end.success ? 'Recorded: the task was completed.' : 'Not completed: this try does not count.';
+    else last = S.review ? S.review.text.split(';')[0] + '.' : '';
+  }
+  $('last-result').textContent = last;
+  $('progress-text').textContent = informed()
+    ? `Accepted so far: ${c.accepted} of ${c.wanted} (${c.rejected} not accepted, ${c.failed} not completed).`
+    : `Recorded so far: ${c.accepted} of ${c.wanted}.`;
+  const rows = (S.state.history || []).filter((h) => h.kind === 'demonstration');
+  $('history').replaceChildren(...rows.map((h) => {
+    const li = document.createElement('li');
+    li.dataset.verdict = h.verdict;
+    const word = informed() ? h.verdict : (h.verdict === 'accepted' ? 'recorded' : 'not completed');
+    li.textContent = `demonstration ${h.index} — ${word} (${h.length} steps)`;
+    return li;
+  }));
+  const next = S.state.state === 'done' ? 'Finish' : S.state.episode_kind === 'practice' ? 'Next practice' : `Start demonstration ${c.accepted + 1}`;
+  $('next').textContent = `${next} (Enter)`;
+}
+
+function renderDone() {
+  const c = S.state.counts;
+  $('done-text').textContent = `Your session is complete: ${c.accepted} demonstration${c.accepted === 1 ? '' : 's'} ${informed() ? 'accepted' : 'recorded'}. You can close this page.`;
+}
+
+// --- the view ------------------------------------------------------------------------------
+function applyView(screen) {
+  let key, clips = null, split = false, labels = ['', ''];
+  const ep = S.episode ? S.episode.episode : -1;
+  if (screen === 'prompt') {
+    key = `prompt:${S.promptIndex}`;
+    clips = S.promptClips[S.promptIndex] ? [S.promptClips[S.promptIndex]] : null;
+  } else if (screen === 'review' && S.review && S.review.windows.length) {
+    const i = S.windowIndex, win = S.review.windows[i];
+    key = `review:${S.review.episode}:${i}`;
+    const a = S.reviewClips.yours[i], b = S.reviewClips.base[i];
+    clips = a && b ? [a, b] : null;
+    split = true;
+    labels = [`you: steps ${win.start}–${win.stop - 1}`, `base demo ${win.base_episode}: steps ${win.base_start}–${win.base_stop - 1}`];
+  } else if ((screen === 'review' || screen === 'progress') && S.lastEnd) {
+    key = `end:${S.lastEnd.episode}`;
+  } else {
+    key = `live:${ep}`;
+  }
+  const full = `${key}|${clips ? 'clips' : ''}`;
+  if (full === S.viewFull) return;
+  S.viewFull = full;
+  S.viewKey = key;
+  view.setSplit(split, labels);
+  document.body.dataset.split = String(split);
+  $('split-labels').hidden = !split;
+  $('label-left').textContent = labels[0];
+  $('label-right').textContent = labels[1];
+  if (clips) {
+    player.load(clips, S.welcome ? S.welcome.control_hz : 20);
+    $('replay-bar').hidden = false;
+  } else {
+    player.stop();
+    $('replay-bar').hidden = true;
+    const episode = Number(key.split(':')[1]);
+    const frame = S.frames.get(episode);
+    if (frame) view.pose(frame);
+  }
+}
+
+function updateReplayBar(p) {
+  const scrub = $('replay-scrub');
+  scrub.max = String(Math.max(0, p.length - 1));
+  scrub.value = String(p.t);
+  $('replay-play').textContent = p.playing ? 'pause' : 'play';
+  $('replay-play').dataset.playing = String(p.playing);
+  $('replay-step').textContent = p.length ? `step ${p.t + 1} / ${p.length}` : '';
+}
+
+function updateIndicator() {
+  const ind = $('indicator');
+  const last = S.indicators.length ? S.indicators[S.indicators.length - 1] : null;
+  ind.dataset.state = last ? (last[2] ? 'red' : 'green') : 'none';
+  ind.dataset.m = last ? last[1].toFixed(3) : '';
+  $('m-value').textContent = last ? `M ${last[1].toFixed(2)}` : 'M –';
+  const li = S.lastIndicator;
+  $('inc-count').textContent = li ? `red so far: ${li.incompatible_so_far} (the rule allows ${li.allowed.toFixed(1)})` : 'not started';
+  drawStrip($('strip'), S.indicators, S.welcome ? S.welcome.horizon : 100, []);
+}
+
+function updateHud() {
+  const f = S.frameInfo, w = S.welcome;
+  const live = S.viewKey && S.viewKey.startsWith('live:');
+  $('hud-step').textContent = live && f && w ? `step ${f.step} / ${w.horizon} · ${w.control_hz} Hz` : '';
+  const ctl = $('hud-control');
+  if (w && w.dagger && live) {
+    const mine = S.state && S.state.state === 'running' && f ? f.operator : S.control;
+    ctl.dataset.control = mine ? 'operator' : 'robot';
+    ctl.textContent = mine ? 'YOU are in control (T hands back)' : 'ROBOT in control (T takes over)';
+  } else {
+    ctl.dataset.control = '';
+    ctl.textContent = '';
+  }
+}
+
+function drawStrip(canvas, items, horizon, windows) {
+  const ctx = canvas.getContext('2d');
+  const w = canvas.width, h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const last = items.length ? items[items.length - 1][0] + 1 : 1;
+  const n = Math.max(horizon, last);
+  const bw = w / n;
+  ctx.fillStyle = 'rgba(214, 69, 69, 0.14)';
+  for (const steps of windows) {
+    if (steps.length) ctx.fillRect(steps[0] * bw, 0, (steps[steps.length - 1] - steps[0] + 1) * bw, h);
+  }
+  for (const [step, m, inc] of items) {
+    if (m === null) continue;
+    ctx.fillStyle = inc ? '#d64545' : '#1f9d55';
+    const bh = inc ? h - 4 : Math.max(3, m * (h - 4));
+    ctx.fillRect(step * bw, h - bh, Math.max(1, bw - 0.5), bh);
+  }
+}
+
+// --- actions ---------------------------------------------------------------------------------
+function start() {
+  teleop.emit(true);
+  if (S.welcome && S.welcome.dagger) send({ type: 'control', operator: S.control });
+  send({ type: 'start' });
+}
+
+function dismissPrompt() {
+  S.promptDismissed = true;
+  S.promptRequested = false;
+  render();
+}
+
+function toggleControl() {
+  if (!S.welcome || !S.welcome.dagger) return;
+  S.control = !S.control;
+  send({ type: 'control', operator: S.control });
+  updateHud();
+}
+
+function onEnter() {
+  const st = S.state;
+  switch (S.screen) {
+    case 'prompt': dismissPrompt(); break;
+    case 'practice':
+    case 'demonstrate':
+      // Without DAgger the clock starts with the first move (no idle steps get recorded).
+      if (st && st.state === 'ready' && S.welcome.dagger) start();
+      break;
+    case 'review': S.reviewStep = 'progress'; render(); break;
+    case 'progress':
+      S.acked = S.lastEnd ? S.lastEnd.episode : -1;
+      render();
+      break;
+    case 'error': reconnect(); break;
+    default: break;
+  }
+}
+
+function reconnect() {
+  S.fatal = '';
+  if (S.ws) S.ws.close();
+  S.ws = null;
+  connect();
+  render();
+}
+
+document.addEventListener('keydown', (e) => {
+  const t = e.target;
+  if (t && t.tagName === 'INPUT' && t.type !== 'range') return;
+  if (e.code === 'Enter' || e.code === 'NumpadEnter') { e.preventDefault(); if (!e.repeat) onEnter(); return; }
+  if (e.code === 'Space' && player.clips.length) { e.preventDefault(); player.toggle(); return; }
+  if (e.code === 'Backspace') {
+    e.preventDefault();
+    if (S.state && S.state.state === 'running') send({ type: 'give-up' });
+    return;
+  }
+  if (e.code === 'KeyC') { view.resetCamera(); return; }
+  if (e.code === 'KeyT') { if (!e.repeat) toggleControl(); return; }
+  if ((S.screen === 'practice' || S.screen === 'demonstrate') && teleop.keydown(e)) {
+    e.preventDefault();
+    if (e.code in MOTION_KEYS && S.state && S.state.state === 'ready' && !S.welcome.dagger) start();
+  }
+});
+document.addEventListener('keyup', (e) => { if (teleop.keyup(e)) e.preventDefault(); });
+window.addEventListener('blur', () => teleop.releaseAll());
+
+window.addEventListener('gamepadconnected', () => {
+  const poll = () => { if (teleop.pollGamepad()) requestAnimationFrame(poll); };
+  requestAnimationFrame(poll);
+});
+
+$('name-form').addEventListener('submit', (e) => {
+  e.preventDefault();
+  const name = $('name').value.trim();
+  if (!NAME_RE.test(name)) { $('name').setCustomValidity('1–40 letters, digits, _ or -'); $('name').reportValidity(); return; }
+  S.name = name;
+  localStorage.setItem(NAME_KEY, name);
+  connect();
+  render();
+});
+$('name').addEventListener('input', () => $('name').setCustomValidity(''));
+$('change-name').addEventListener('click', (e) => {
+  e.preventDefault();
+  localStorage.removeItem(NAME_KEY);
+  S.name = null; S.state = null; S.welcome = null; S.fatal = '';
+  const ws = S.ws;
+  S.ws = null;
+  if (ws) ws.close();
+  setConn('idle', 'not connected');
+  render();
+});
+$('prompt-done').onclick = () => dismissPrompt();
+$('prompt-again').onclick = () => { if (S.prompt) { S.promptDismissed = false; S.promptRequested = true; render(); } };
+$('review-done').onclick = () => { S.reviewStep = 'progress'; render(); };
+$('next').onclick = () => onEnter();
+$('reconnect').onclick = () => reconnect();
+$('replay-play').onclick = () => player.toggle();
+$('replay-scrub').addEventListener('input', (e) => { player.pause(); player.seek(Number(e.target.value)); });
+
+render();
+connect();
