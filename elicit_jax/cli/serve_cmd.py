@@ -25,6 +25,9 @@ def serve_cmd(
         "--demo",
         help="Built-in reach-pillar base policy, demos and thresholds (built once, cached).",
     ),
+    demo_dir: Path = typer.Option(
+        None, "--demo-dir", help="Where --demo keeps its inputs [~/.cache/elicit-jax/serve-demo]."
+    ),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to bind (others need a token)."),
     port: int = typer.Option(8765, "--port", help="Port (0: any free one)."),
     token: str = typer.Option(
@@ -72,6 +75,8 @@ def serve_cmd(
 
     given = so.given(ctx.params)
     resolved = _resolve(thresholds, lambda_, eta, preset)
+    if demo_dir is not None and not demo:
+        raise ElicitError("--demo-dir goes with --demo")
     if demo:
         from elicit_jax.web.demo import DemoRecipe, demo_inputs
 
@@ -84,7 +89,7 @@ def serve_cmd(
             raise ElicitError(f"--demo brings its own inputs; drop {', '.join(clash)}")
         if given.get("task", DEMO_TASK) != DEMO_TASK:
             raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
-        inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), echo=typer.echo)
+        inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
         thresholds = inputs.thresholds
         resolved = _resolve(thresholds, None, None)
         given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}

@@ -65,6 +65,7 @@ class OperatorDriver:
         (retraining), ``done`` or ``error``.
       message: why, for ``error``.
       steps: control steps taken (all episodes) since the server started.
+      detached_at: when the last page went away (``time.monotonic()``).
     """
 
     def __init__(
@@ -73,6 +74,7 @@ class OperatorDriver:
         self.name, self.config, self.out, self.log = name, config, Path(out), log
         self.state, self.message = OPENING, ""
         self.steps = 0
+        self.detached_at = time.monotonic()
         self.session: Any = None
         self.setup: Any = None
         self.operator: Any = None
@@ -110,6 +112,11 @@ class OperatorDriver:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    @property
+    def attached(self) -> bool:
+        """A page is attached."""
+        return self._outbox is not None
+
     def attach(self, outbox: Outbox) -> Outbox | None:
         """Send everything the page needs to ``outbox`` and make it the operator's page.
 
@@ -118,6 +125,8 @@ class OperatorDriver:
         """
         with self._lock:
             old, self._outbox = self._outbox, outbox
+            if old is not None and old is not outbox and self.state == RUNNING:
+                self._go, self.state = False, READY  # another window: pause until it starts
             for msg in self._snapshot():
                 outbox.send(msg)
         return old if old is not outbox else None
@@ -128,6 +137,7 @@ class OperatorDriver:
             if self._outbox is not outbox:
                 return
             self._outbox = None
+            self.detached_at = time.monotonic()
             if self.state == RUNNING:
                 self._go = False
                 self.state = READY
@@ -302,7 +312,7 @@ class OperatorDriver:
         self._review_pending = True
         self._step = event.length
         frame = pack_frame(body_poses(self.session.sim_data), event.episode, event.length, self._m)
-        self._review = [messages.event(event), frame]
+        self._review = [frame, messages.event(event)]
         self._sendall(self._review)
         row = self.session.progress.rows[-1]
         c = event.counts

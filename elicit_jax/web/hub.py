@@ -4,7 +4,9 @@ Each operator's session lives in ``SESSIONS/<name>/``. A name seen for the first
 the server started gets an :class:`~elicit_jax.web.driver.OperatorDriver`, which creates the
 session or resumes the one in its directory — so after a server restart every operator
 finds their session where they left it when their page reconnects. A driver whose session
-failed to open is replaced on the next contact (the operator may retry).
+failed to open is replaced on the next contact (the operator may retry); when the hub is
+full, the driver of the operator who left longest ago is released (resumed from disk if
+they come back).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.web import operator as browser_operator
-from elicit_jax.web.driver import ERROR, OperatorDriver
+from elicit_jax.web.driver import DONE, ERROR, READY, OperatorDriver
 
 
 class HubFull(Exception):
@@ -37,7 +39,8 @@ class OperatorHub:
       template: the session config every operator gets (its operator is replaced by
         ``browser:NAME``).
       root: the sessions directory.
-      max_operators: most operators served at once.
+      max_operators: most operators held at once; when full, the operator whose page left
+        longest ago is released to make room (their session stays on disk).
       log: where console lines go.
     """
 
@@ -71,13 +74,24 @@ class OperatorHub:
             d = self.drivers.get(name)
             if d is not None and d.state != ERROR:
                 return d
-            live = sum(x.state != ERROR for x in self.drivers.values())
-            if live >= self.max_operators:
-                raise HubFull(f"the server is full ({self.max_operators} operators)")
+            live = [x for x in self.drivers.values() if x.state != ERROR]
+            if len(live) >= self.max_operators:
+                self._release_idle(live)
             d = OperatorDriver(name, self.config_for(name), self.root / name, log=self.log)
             self.drivers[name] = d
             d.start()
             return d
+
+    def _release_idle(self, live: list[OperatorDriver]) -> None:
+        """Stop the driver whose page left longest ago (its session stays on disk; a paused
+        episode is not recorded), or raise :class:`HubFull` when every operator is here."""
+        idle = [x for x in live if not x.attached and x.state in (READY, DONE)]
+        if not idle:
+            raise HubFull(f"the server is full ({self.max_operators} operators connected)")
+        victim = min(idle, key=lambda x: x.detached_at)
+        victim.stop()
+        del self.drivers[victim.name]
+        self.log(f"operator {victim.name}: away, released (the session stays in {victim.out})")
 
     def shutdown(self) -> None:
         """Stop every driver (episodes in progress are not recorded)."""

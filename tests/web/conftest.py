@@ -1,0 +1,43 @@
+"""Fixtures of the browser-interface tests: the `serve --demo` inputs, built once per run."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from elicit_jax.elicit.config import SessionConfig
+
+
+@pytest.fixture(scope="session")
+def demo(tmp_path_factory):
+    """The built-in reach-pillar inputs of `serve --demo` (the recipe users get), in a
+    temporary cache directory: 20 base demos, a 5 x 128-128 policy, fitted thresholds."""
+    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+
+    return demo_inputs(DemoRecipe(), tmp_path_factory.mktemp("serve-demo"), echo=lambda _: None)
+
+
+@pytest.fixture(scope="session")
+def template(demo) -> SessionConfig:
+    """A session config over the demo inputs: 1 practice episode, a prompt of 2, 1 demo."""
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    lam, eta, _ = read_thresholds(demo.thresholds)
+    return SessionConfig(
+        task="reach-pillar",
+        policy=str(demo.policy),
+        base_demos=str(demo.base_demos),
+        lambda_=lam,
+        eta=eta,
+        thresholds_file=str(demo.thresholds),
+        operator="browser:_",
+        practice=1,
+        prompt=2,
+        demos=1,
+        max_episodes=6,
+    )
+
+
+def with_settings(template: SessionConfig, **kw) -> SessionConfig:
+    return dataclasses.replace(template, **kw)
