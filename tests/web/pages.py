@@ -72,7 +72,9 @@ class Page:
         return self.until(ok)
 
     def events(self, kind: str) -> list[dict]:
-        return [m["event"] for m in self.texts if m["type"] == "event" and m["event"]["kind"] == kind]
+        return [
+            m["event"] for m in self.texts if m["type"] == "event" and m["event"]["kind"] == kind
+        ]
 
     def body(self, name: str) -> int:
         assert self.scene is not None

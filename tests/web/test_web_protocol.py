@@ -77,7 +77,11 @@ def test_a_session_from_practice_to_an_accepted_demonstration(make_client, tmp_p
     client = make_client()
     page = _join(client, "alice")
     welcome = next(m for m in page.texts if m["type"] == "welcome")
-    assert (welcome["task"], welcome["mode"], welcome["control_hz"]) == ("reach-pillar", "informed", 20)
+    assert (welcome["task"], welcome["mode"], welcome["control_hz"]) == (
+        "reach-pillar",
+        "informed",
+        20,
+    )
     assert welcome["rule"].startswith("reject when more than 5%")
     assert {i["type"] for i in page.scene["items"]} == {"plane", "capsule", "box", "sphere"}
     state = page.state
@@ -229,7 +233,9 @@ def test_naive_mode_hides_prompt_indicator_and_verdict(make_client):
     end = page.drive(-1)  # the conflicting route: recorded anyway, nothing said about it
     assert end["counted"]
     page.state_where(state="done")
-    kinds = {m["type"] for m in page.texts} | {e["event"]["kind"] for e in page.texts if e["type"] == "event"}
+    kinds = {m["type"] for m in page.texts} | {
+        e["event"]["kind"] for e in page.texts if e["type"] == "event"
+    }
     assert not kinds & {"prompt", "review", "indicator", "indicators"}
     assert all(np.isnan(f["m"]) for f in page.frames)
     page.ws.__exit__(None, None, None)
@@ -250,8 +256,11 @@ def test_the_token_guards_every_request_off_loopback(make_client):
     with client.websocket_connect("/ws?token=s3cret-token") as ws:  # past the guard
         ws.send_text('{"type": "ping", "t": 1}')
         assert "must be 'hello'" in Page(ws).receive()["reason"]
-    with pytest.raises(WebSocketDisconnect), client.websocket_connect(
-        "/ws?token=s3cret-token", headers={"origin": "http://evil.example"}
+    with (
+        pytest.raises(WebSocketDisconnect),
+        client.websocket_connect(
+            "/ws?token=s3cret-token", headers={"origin": "http://evil.example"}
+        ),
     ):
         pass
 
