@@ -93,18 +93,18 @@ def clip_from_actions(task: Any, init_seed: int, actions: np.ndarray) -> np.ndar
     """Poses ``(T + 1, nbody, 7)`` of ``actions (T, A)`` replayed from a seeded initial state.
 
     Row ``t`` is the state step ``t`` started from; the last row is the state after the
-    last action.
+    last action. Poses come from the joint positions (as :func:`clip_from_states`).
     """
     from elicit_jax.sim.rollout_mujoco import BatchSim
 
-    out = []
+    qpos = []
     with BatchSim(task, 1, threads=1) as sim:
         sim.reset_seeds(np.array([init_seed]))
         for a in np.asarray(actions, np.float64):
-            out.append(body_poses(sim.datas[0]))
+            qpos.append(sim.datas[0].qpos.copy())
             sim.step(a[None])
-        out.append(body_poses(sim.datas[0]))
-    return np.stack(out)
+        qpos.append(sim.datas[0].qpos.copy())
+    return clip_from_states(task, np.stack(qpos), init_seed)
 
 
 def clip_from_states(task: Any, qpos: np.ndarray, init_seed: int | None = None) -> np.ndarray:

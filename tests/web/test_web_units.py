@@ -1,0 +1,183 @@
+"""Pieces of the browser interface without a server: messages, poses, scene, access, files."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from elicit_jax.web.access import is_loopback, same_origin, scope_token
+from elicit_jax.web.protocol import (
+    CLOSE_POLICY,
+    ProtocolError,
+    RateLimiter,
+    pack_clip,
+    pack_frame,
+    parse_message,
+    unpack,
+)
+
+STATIC = Path(__file__).resolve().parents[2] / "elicit_jax" / "web" / "static"
+
+
+def test_messages_are_parsed_into_their_fields():
+    assert parse_message('{"type": "hello", "name": "op_4-b"}', 7).name == "op_4-b"
+    a = parse_message('{"type": "action", "a": [1, -1, 0.5, 0, 0, 0, -1]}', 7).action
+    assert a == (1.0, -1.0, 0.5, 0.0, 0.0, 0.0, -1.0)
+    assert parse_message('{"type": "control", "operator": true}', 7).operator is True
+    assert parse_message('{"type": "give-up"}', 7).type == "give-up"
+    assert parse_message('{"type": "ping", "t": 3.5}', 7).t == 3.5
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '{"type": "action", "a": [1, 0, 0, 0, 0, 0, Infinity]}',
+        '{"type": "action", "a": [1, 0, 0, 0, 0, 0, 1.0001]}',
+        '{"type": "action", "a": "fast"}',
+        '{"type": "hello", "name": ""}',
+        '{"type": "hello", "name": "a/b"}',
+        '{"type": "hello", "name": "' + "a" * 41 + '"}',
+        '{"type": "hello", "name": 3}',
+        '{"type": "start", "now": true}',
+        '{"kind": "start"}',
+        "null",
+    ],
+)
+def test_bad_messages_raise_a_policy_close(text):
+    with pytest.raises(ProtocolError) as e:
+        parse_message(text, 7)
+    assert e.value.code == CLOSE_POLICY and e.value.reason
+
+
+def test_the_rate_limit_allows_bursts_then_the_average_rate():
+    limiter = RateLimiter(rate=10, burst=5)
+    t = limiter.last
+    for _ in range(5):
+        limiter.take(t)
+    with pytest.raises(ProtocolError, match="too many"):
+        limiter.take(t)
+    limiter.take(t + 0.1)  # one token back after 1/rate seconds
+    with pytest.raises(ProtocolError):
+        limiter.take(t + 0.1)
+
+
+def test_binary_frames_and_clips_round_trip():
+    poses = np.arange(5 * 7, dtype=np.float32).reshape(5, 7)
+    data = pack_frame(poses, episode=3, step=41, m=0.25, operator=False)
+    assert len(data) == 16 + 5 * 7 * 4
+    f = unpack(data)
+    assert (f["episode"], f["step"], f["m"], f["operator"]) == (3, 41, 0.25, False)
+    np.testing.assert_array_equal(f["poses"], poses)
+    assert math.isnan(unpack(pack_frame(poses, 0, 0))["m"])
+    clip = np.stack([poses, poses + 1])
+    c = unpack(pack_clip(clip, role=2, ident=1))
+    assert (c["role"], c["id"]) == (2, 1)
+    np.testing.assert_array_equal(c["poses"], clip)
+
+
+def test_the_scene_describes_reach_pillar_geoms_in_their_bodies():
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.web.scene import scene_description
+
+    task = make_task("reach-pillar")
+    d = scene_description(task.mj_model, task.name)
+    assert d["bodies"] == ["world", "gripper", "finger_l", "finger_r", "goal"]
+    items = {i["name"]: i for i in d["items"]}
+    pillar = items["pillar"]  # fromto 0 0 0 -> 0 0 0.14, radius 0.03: half-length 0.07 at z 0.07
+    assert pillar["type"] == "capsule" and pillar["body"] == 0
+    np.testing.assert_allclose(pillar["size"][:2], [0.03, 0.07])
+    np.testing.assert_allclose(pillar["pos"], [0, 0, 0.07], atol=1e-12)
+    assert items["palm"]["type"] == "box" and items["palm"]["body"] == 1
+    np.testing.assert_allclose(items["palm"]["size"], [0.012, 0.055, 0.01])
+    assert items["goal"]["kind"] == "site" and items["goal"]["rgba"][3] == 0.5
+    assert items["floor"]["type"] == "plane"
+
+
+def test_clips_replay_recorded_states_and_actions_alike():
+    from elicit_jax.elicit.replay import replay_episode
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.web.scene import clip_from_actions, clip_from_states
+
+    task = make_task("reach-pillar")
+    actions = np.tile(np.array([1, 1, 0, 0, 0, 0, -1], np.float32), (12, 1))
+
+    class Record:
+        init_seed, action = 5, actions
+
+    states = replay_episode(task, Record)
+    by_actions = clip_from_actions(task, 5, actions)
+    by_states = clip_from_states(task, states["qpos"], init_seed=5)
+    assert by_actions.shape == (13, task.mj_model.nbody, 7)
+    np.testing.assert_allclose(by_actions[:-1], by_states, atol=1e-6)
+    gripper = by_actions[:, 1, :3]
+    assert gripper[-1, 0] - gripper[0, 0] > 0.05  # it moved forward (about 0.02 m a step)
+    goal = by_actions[:, 4, :3]
+    np.testing.assert_allclose(goal, goal[0])  # the goal (mocap) stays put
+    np.testing.assert_allclose(goal[0], states["obs"][0, 9:12], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("host", "loopback"),
+    [
+        ("127.0.0.1", True),
+        ("127.3.2.1", True),
+        ("::1", True),
+        ("localhost", True),
+        ("0.0.0.0", False),
+        ("192.168.1.5", False),
+        ("::", False),
+        ("example.org", False),
+    ],
+)
+def test_loopback_hosts(host, loopback):
+    assert is_loopback(host) is loopback
+
+
+def test_tokens_come_from_the_query_or_the_cookie_and_origins_must_match():
+    scope = {"query_string": b"a=1&token=xyz", "headers": []}
+    assert scope_token(scope) == "xyz"
+    scope = {"query_string": b"", "headers": [(b"cookie", b"x=1; elicit_jax_token=abc")]}
+    assert scope_token(scope) == "abc"
+    assert scope_token({"query_string": b"", "headers": [(b"cookie", b"\x00bad")]}) == ""
+    same = {"headers": [(b"host", b"box:8765"), (b"origin", b"http://box:8765")]}
+    other = {"headers": [(b"host", b"box:8765"), (b"origin", b"http://evil.example")]}
+    assert same_origin(same) and not same_origin(other)
+    assert same_origin({"headers": [(b"host", b"box:8765")]})  # no Origin: not a browser page
+
+
+def test_three_js_is_shipped_unchanged_with_its_licence():
+    three = STATIC / "three"
+    readme = (three / "README.md").read_text()
+    for name in ("three.module.js", "three.core.js"):
+        digest = hashlib.sha256((three / name).read_bytes()).hexdigest()
+        assert digest in readme, name
+    assert (three / "LICENSE").read_text().startswith("The MIT License")
+    controls = (three / "OrbitControls.js").read_text()
+    assert "from './three.module.js'" in controls and "from 'three'" not in controls
+
+
+def test_the_page_fetches_nothing_from_elsewhere():
+    for path in [*STATIC.glob("*.html"), *STATIC.glob("*.js"), *STATIC.glob("*.css")]:
+        text = path.read_text()
+        assert not re.search(r"""(src|href)=["']?(https?:)?//""", text), path
+        assert not re.search(r"""(import|from)\s*\(?\s*["']https?://""", text), path
+
+
+def test_serve_refuses_bad_settings_in_one_line():
+    from elicit_jax.cli import app
+
+    cases = [
+        (["serve", "--demo", "--policy", "p"], "--demo brings its own inputs"),
+        (["serve", "--demo", "--task", "square-nut"], "--demo serves reach-pillar"),
+        (["serve", "--task", "reach-pillar"], "missing --policy, --base-demos, thresholds"),
+        (["serve", "--demo-dir", "x"], "--demo-dir goes with --demo"),
+    ]
+    for args, message in cases:
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code != 0 and message in str(result.exception), args
