@@ -285,7 +285,11 @@ function renderProgress() {
   if (end) {
     if (end.episode_kind === 'practice') last = `Practice ${Math.min(c.practice, w.practice)} of ${w.practice} done${end.success ? ': solved' : ''}.`;
     else if (!informed()) last = end.success ? 'Recorded: the task was completed.' : 'Not completed: this try does not count.';
-    else last = S.review ? S.review.text.split(';')[0] + '.' : '';
+    else if (S.review) {
+      const r = S.review, pct = (100 * r.fraction).toFixed(1);
+      const word = { accepted: 'Accepted', rejected: 'Not accepted', failed: 'Not completed', unused: 'Nothing recorded' }[r.verdict] || r.verdict;
+      last = r.scored ? `${word}: ${r.incompatible} of ${r.scored} steps (${pct}%) did not fit.` : `${word}.`;
+    }
   }
   $('last-result').textContent = last;
   $('progress-text').textContent = informed()
@@ -296,7 +300,7 @@ function renderProgress() {
     const li = document.createElement('li');
     li.dataset.verdict = h.verdict;
     const word = informed() ? h.verdict : (h.verdict === 'accepted' ? 'recorded' : 'not completed');
-    li.textContent = `demonstration ${h.index} — ${word} (${h.length} steps)`;
+    li.textContent = `${word} (${h.length} steps)`;
     return li;
   }));
   const next = S.state.state === 'done' ? 'Finish' : S.state.episode_kind === 'practice' ? 'Next practice' : `Start demonstration ${c.accepted + 1}`;
@@ -434,12 +438,15 @@ function onEnter() {
     case 'review': S.reviewStep = 'progress'; render(); break;
     case 'progress':
       S.acked = S.lastEnd ? S.lastEnd.episode : -1;
+      sessionStorage.setItem(ackKey(), String(S.acked));  // a reload does not show it again
       render();
       break;
     case 'error': reconnect(); break;
     default: break;
   }
 }
+
+function ackKey() { return `elicit-jax-acked:${S.name}`; }
 
 function reconnect() {
   S.fatal = '';
@@ -479,6 +486,7 @@ $('name-form').addEventListener('submit', (e) => {
   const name = $('name').value.trim();
   if (!NAME_RE.test(name)) { $('name').setCustomValidity('1–40 letters, digits, _ or -'); $('name').reportValidity(); return; }
   S.name = name;
+  S.acked = Number(sessionStorage.getItem(ackKey()) ?? -1);
   localStorage.setItem(NAME_KEY, name);
   connect();
   render();
@@ -500,7 +508,12 @@ $('review-done').onclick = () => { S.reviewStep = 'progress'; render(); };
 $('next').onclick = () => onEnter();
 $('reconnect').onclick = () => reconnect();
 $('replay-play').onclick = () => player.toggle();
-$('replay-scrub').addEventListener('input', (e) => { player.pause(); player.seek(Number(e.target.value)); });
+$('replay-scrub').addEventListener('input', (e) => {
+  const t = Number(e.target.value);
+  player.pause();
+  player.seek(t);
+});
 
+if (S.name) S.acked = Number(sessionStorage.getItem(ackKey()) ?? -1);
 render();
 connect();

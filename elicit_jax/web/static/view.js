@@ -84,8 +84,10 @@ export class View {
   constructor(container) {
     this.container = container;
     // Software WebGL (no GPU): no multisampling, and at most SOFTWARE_PIXELS pixels drawn per
-    // frame, or drawing stalls the page; `?hq` in the URL draws full quality anyway.
-    this.software = softwareRenderer() && !new URLSearchParams(location.search).has('hq');
+    // frame, or drawing stalls the page (setFullQuality(true) lifts the cap, e.g. for a
+    // screenshot).
+    this.software = softwareRenderer();
+    this.fullQuality = false;
     this.renderer = new THREE.WebGLRenderer({ antialias: !this.software });
     this.renderer.shadowMap.enabled = true;
     this.renderer.shadowMap.type = THREE.PCFShadowMap;
@@ -131,6 +133,12 @@ export class View {
 
   dirty() { this._dirty = true; }
 
+  setFullQuality(on) {
+    this.fullQuality = on;
+    this.size = '';
+    this.render();
+  }
+
   // poses: Float32Array of nbody * 7 (x, y, z, qw, qx, qy, qz), into instance i.
   pose(poses, i = 0) {
     const inst = this.instances[i];
@@ -164,7 +172,7 @@ export class View {
     const r = this.renderer;
     if (this.size !== `${w}x${h}`) {
       this.size = `${w}x${h}`;
-      const ratio = this.software
+      const ratio = this.software && !this.fullQuality
         ? Math.min(1, Math.sqrt(SOFTWARE_PIXELS / (w * h)))
         : Math.min(window.devicePixelRatio || 1, 2);
       r.setPixelRatio(ratio);
