@@ -314,6 +314,7 @@ def write_report(path: Path, ours: list[dict], ref: list[dict], args, started: f
         f"{dt.datetime.now().isoformat(timespec='seconds')} on {platform.node()} "
         f"({os.cpu_count()} CPUs), {time.time() - started:.0f} s in all; "
         f"`python benchmarks/bench_serve.py --levels {args.levels} --duration {args.duration:g}`.",
+        f"Process niceness {os.nice(0)} (the servers inherit it). "
         f"Load average (1 min) at the start: {args.load_start:.1f}"
         + (
             " — **a shared machine under other jobs' load**; a quiet run will differ."
