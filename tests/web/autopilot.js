@@ -3,7 +3,8 @@
 // keyup events on the document, as a person's keyboard would) to drive reach-pillar past the
 // pillar on the left (side = 1, the base operator's route) or the right (side = -1).
 // Running in the page keeps the loop free of the test process's round trips, which on a
-// loaded machine take long enough to overshoot. Returns a promise of what it saw.
+// loaded machine take long enough to overshoot. Returns a promise of what it saw: the
+// indicator states, the last one, how often it turned red, and the route's phase.
 (side) => new Promise((resolve) => {
   const held = new Set();
   const seen = new Set();
@@ -19,13 +20,20 @@
     for (const k of keys) if (!held.has(k)) { press(k, true); held.add(k); }
   };
   const axis = (keys, d, pos, neg, db) => { if (d > db) keys.add(pos); else if (d < -db) keys.add(neg); };
+  let last = 'none';
+  let reds = 0;
   const timer = setInterval(() => {
     const state = document.body.dataset.state;
-    seen.add(document.getElementById('indicator').dataset.state);
+    if (state === 'running') {  // the indicator resets once the episode is over
+      const ind = document.getElementById('indicator').dataset.state;
+      if (ind !== last && ind === 'red') reds += 1;
+      seen.add(ind);
+      last = ind;
+    }
     if (started && state !== 'running') {
       want(new Set());
       clearInterval(timer);
-      resolve({ seen: [...seen], phase });
+      resolve({ seen: [...seen], last, reds, phase });
       return;
     }
     if (state === 'running') started = true;
