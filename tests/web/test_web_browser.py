@@ -45,6 +45,7 @@ FLAGS = [
 ]
 AUTOPILOT = (Path(__file__).parent / "autopilot.js").read_text()
 SHOTS = os.environ.get("ELICIT_JAX_SCREENSHOTS")
+ATTEMPTS = 4  # at the base route (the session has 2 + ATTEMPTS episodes: practice, wrong side)
 
 
 def find_chromium() -> str | None:
@@ -92,6 +93,8 @@ class Server:
             "2",
             "--demos",
             "1",
+            "--max-episodes",
+            str(2 + ATTEMPTS),
             "--horizon",
             "200",
         ]
@@ -242,15 +245,25 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         page.keyboard.press("Enter")
         screen(page, "demonstrate", "ready")
 
-        # the base route, by keyboard: green, accepted
-        drive(page, +1)
-        route = driven(page)
-        print("base route:", route)
-        assert route["phase"] == 2 and "green" in route["seen"], route
-        screen(page, "review")
-        page.wait_for_selector("#verdict:is([data-verdict=accepted], [data-verdict=rejected])")
-        verdict = page.get_attribute("#verdict", "data-verdict")
-        assert verdict == "accepted", (route, page.inner_text("#verdict"))
+        # the base route, by keyboard: green, accepted. Like a person, the autopilot may stray
+        # past the rule's 5% (keys held while a loaded machine stalls the page overshoot the
+        # goal); it tries again after a rejection, within the session's episodes.
+        routes = []
+        for _ in range(ATTEMPTS):
+            drive(page, +1)
+            route = driven(page)
+            assert route["phase"] == 2 and "green" in route["seen"], route
+            screen(page, "review")
+            page.wait_for_selector("#verdict:is([data-verdict=accepted], [data-verdict=rejected])")
+            route["verdict"] = page.get_attribute("#verdict", "data-verdict")
+            routes.append(route)
+            if route["verdict"] == "accepted":
+                break
+            page.keyboard.press("Enter")
+            screen(page, "progress")
+            page.keyboard.press("Enter")
+            screen(page, "demonstrate", "ready")
+        assert routes[-1]["verdict"] == "accepted", routes
         page.keyboard.press("Enter")
         screen(page, "progress")
         assert page.inner_text("#progress-text").startswith("Accepted so far: 1 of 1")
@@ -265,8 +278,9 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
 
     store = SessionStore(sessions / "ana")
     heads = store.episode_headers()
-    assert [h["verdict"] for h in heads] == ["practice", "rejected", "accepted"]
-    accepted = store.read_episode(2)
+    retries = ["rejected"] * (len(routes) - 1)
+    assert [h["verdict"] for h in heads] == ["practice", "rejected", *retries, "accepted"]
+    accepted = store.read_episode(len(heads) - 1)
     demos = read_demos(sessions / "ana" / "demos.parquet")
     assert demos.n_episodes == 1 and len(demos.obs) == accepted.length
     assert accepted.success and accepted.operator.all()
