@@ -34,9 +34,13 @@ def elicit_cmd(
     eta: float | None = _ETA,
     preset: str | None = so.PRESET,
     operator: str = typer.Option(
-        None, "--operator", help="Who demonstrates: scripted:STYLE (a task's scripted operator)."
+        None,
+        "--operator",
+        help="Who demonstrates: scripted:STYLE (a task's scripted operator) or "
+        "person:STYLE[,trait=value,...] (a simulated person, docs/people.md).",
     ),
     mode: str = so.MODE,
+    show: str = so.SHOW,
     demos: int = so.DEMOS,
     batch: int = so.BATCH,
     fixed_base: bool = so.FIXED_BASE,

@@ -16,6 +16,9 @@ POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
 PRESET = typer.Option(None, "--preset", help="Paper thresholds of a task: square-nut, ...")
 MODE = typer.Option(None, "--mode", help="informed (default) or naive (control).")
+SHOW = typer.Option(
+    None, "--show", help="Informed mode: parts shown, comma-separated [prompt,indicator,feedback]."
+)
 DEMOS = typer.Option(None, "--demos", help="Demonstrations wanted [10].")
 BATCH = typer.Option(None, "--batch", help="Retrain after every N accepted [0: never].")
 FIXED_BASE = typer.Option(
@@ -59,4 +62,6 @@ def given(params: dict[str, Any]) -> dict[str, Any]:
     for k in ("policy", "base_demos"):
         if k in out:
             out[k] = str(out[k])
+    if isinstance(out.get("show"), str):
+        out["show"] = tuple(p.strip() for p in out["show"].split(",") if p.strip())
     return out

@@ -16,6 +16,8 @@ from elicit_jax.compat.measures import check_thresholds
 from elicit_jax.errors import ElicitError
 
 MODES = ("informed", "naive")
+SHOW_PARTS = ("prompt", "indicator", "feedback")
+"""The parts of the informed interface: the prompt, the live indicator, post-hoc feedback."""
 RETRIEVALS = ("l2", "dtw")
 PATH_FIELDS = ("policy", "base_demos", "thresholds_file")
 """Fields naming input files: a resumed session compares the files' hashes, not the paths."""
@@ -37,6 +39,9 @@ class SessionConfig:
       operator: operator spec, e.g. ``scripted:conflict-flip-pause``.
       mode: ``informed`` (prompt, live indicator, feedback, the rule applied) or ``naive``
         (the paper's control: practice only; the rule is computed and recorded, not applied).
+      show: informed mode: the parts of the interface the operator gets (default all three;
+        an ablation shows fewer). The rule is applied whatever is shown; a verdict and its
+        feedback are shown only with ``feedback``.
       demos: demonstrations wanted (accepted).
       batch: retrain after every this many accepted demonstrations (0: never).
       fixed_base: score every batch against the base policy (else against the latest π_new).
@@ -65,6 +70,7 @@ class SessionConfig:
     operator: str
     thresholds_file: str | None = None
     mode: str = "informed"
+    show: tuple[str, ...] = SHOW_PARTS
     demos: int = 10
     batch: int = 0
     fixed_base: bool = False
@@ -85,6 +91,13 @@ class SessionConfig:
     horizon: int = 0
 
     def __post_init__(self) -> None:
+        show = (self.show,) if isinstance(self.show, str) else tuple(self.show)
+        object.__setattr__(self, "show", show)
+        bad = [p for p in show if p not in SHOW_PARTS]
+        if bad or len(set(show)) != len(show):
+            raise ElicitError(
+                f"--show takes distinct parts among {', '.join(SHOW_PARTS)}, got {','.join(show)}"
+            )
         checks = (
             (self.mode in MODES, f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}"),
             (self.demos >= 1, f"--demos must be >= 1, got {self.demos}"),
@@ -108,6 +121,10 @@ class SessionConfig:
         check_thresholds(self.lambda_, self.eta)
         self.rule()  # validates the fraction and the count
         self.score_config()
+
+    def shown(self, part: str) -> bool:
+        """The operator gets ``part`` (``prompt``, ``indicator``, ``feedback``)."""
+        return self.mode == "informed" and part in self.show
 
     @property
     def episode_limit(self) -> int:
@@ -142,6 +159,7 @@ class SessionConfig:
         """JSON-ready dict (``lambda_`` written as ``lambda``)."""
         d = dataclasses.asdict(self)
         d["lambda"] = d.pop("lambda_")
+        d["show"] = list(self.show)
         return d
 
     @classmethod

@@ -144,7 +144,7 @@ class ScriptedIntervener:
 
     def __init__(
         self,
-        operator: ScriptedOperator,
+        operator: Any,
         base: Any,
         eef: slice,
         rule: InterventionRule = InterventionRule(),
@@ -162,9 +162,15 @@ class ScriptedIntervener:
         self.history: list[np.ndarray] = []
 
     def on_event(self, event: Event) -> None:
+        self.operator.on_event(event)  # a learning operator hears everything
         if isinstance(event, EpisodeStartEvent):
-            self.operator.on_event(event)
             self._reset()
+
+    def catch_up(self, setup: Any) -> None:
+        """Let a learning operator relive a resumed session's finished episodes."""
+        catch_up = getattr(self.operator, "catch_up", None)
+        if catch_up is not None:
+            catch_up(setup)
 
     def trouble(self, obs: np.ndarray) -> str:
         """``stalled``, ``off-route`` or ``""`` for the robot's current state."""
@@ -199,11 +205,16 @@ def _eef_slice(task: Any) -> slice:
     return slice(0, 3)
 
 
-def _scripted(name: str, context: OperatorContext) -> SessionOperator:
-    op = ScriptedOperator(context.task, name)
+def in_session(operator: Any, context: OperatorContext) -> SessionOperator:
+    """``operator`` as it acts in a session of ``context``: wrapped by the
+    :class:`ScriptedIntervener` in HG-DAgger (it needs ``restart(obs)`` and ``act``)."""
     if context.dagger:
-        return ScriptedIntervener(op, context.base, _eef_slice(context.task))
-    return op
+        return ScriptedIntervener(operator, context.base, _eef_slice(context.task))
+    return operator
+
+
+def _scripted(name: str, context: OperatorContext) -> SessionOperator:
+    return in_session(ScriptedOperator(context.task, name), context)
 
 
 register_operator("scripted", _scripted)

@@ -26,7 +26,9 @@ def run_session(
 
     Args:
       setup: from :func:`~elicit_jax.elicit.setup.open_session`.
-      operator: a :class:`~elicit_jax.elicit.events.SessionOperator`.
+      operator: a :class:`~elicit_jax.elicit.events.SessionOperator`. One that learns
+        (a simulated person) may define ``catch_up(setup)``: on a resumed session it is
+        called first, to relive the episodes already recorded.
       listeners: factories ``make(session) -> listener`` of more event listeners (called
         after the operator's ``on_event``).
 
@@ -36,6 +38,9 @@ def run_session(
     session = Session(setup, [operator.on_event])
     for make in listeners or []:
         session.add_listener(make(session))
+    catch_up = getattr(operator, "catch_up", None)
+    if catch_up is not None and session.progress.counts.episodes:
+        catch_up(setup)  # a learning operator relives the episodes a resumed session holds
     try:
         if not setup.demos_up_to_date(session.progress):
             setup.write_demos(session.progress)

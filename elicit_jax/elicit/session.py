@@ -219,7 +219,7 @@ class Session:
         if kind == PRACTICE:
             self._set_phase(PRACTICE, f"practice {counts.practice + 1} of {c.practice}")
         else:
-            if c.mode == "informed" and c.prompt and not self._prompted:
+            if c.shown("prompt") and c.prompt and not self._prompted:
                 self._set_phase("prompt", f"watch {c.prompt} demonstrations of the base operator")
                 self._emit(self.setup.prompt_event())
                 self._prompted = True
@@ -235,7 +235,7 @@ class Session:
             self._sim = BatchSim(self.setup.task, 1, threads=1)
         self._index = self.progress.next_index
         self._kind = kind
-        self._indicator = kind == DEMONSTRATION and self.config.mode == "informed"
+        self._indicator = kind == DEMONSTRATION and self.config.shown("indicator")
         self._init_seed = self.config.init_seed(self._index)
         self._sim.reset_seeds(np.array([self._init_seed]))
         self._buf = {

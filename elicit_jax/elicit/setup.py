@@ -109,7 +109,7 @@ class SessionSetup:
             verdict=verdict,
             rule_verdict=rule_verdict,
             feedback=feedback,
-            feedback_shown=c.mode == "informed",
+            feedback_shown=c.shown("feedback"),
             text=text,
             meta=meta,
         )
@@ -352,6 +352,7 @@ def open_session(
     """
     from elicit_jax.compat.feedback import normalizer
     from elicit_jax.data.demos import read_demos
+    from elicit_jax.elicit import people  # noqa: F401  (registers the person: operators)
     from elicit_jax.elicit.operators import OperatorContext, make_session_operator
     from elicit_jax.elicit.retrain import loaded_seed, policy_train_config
     from elicit_jax.policy.checkpoint import check_compatible, load_policy, policy_spec

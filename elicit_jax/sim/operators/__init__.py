@@ -31,6 +31,25 @@ def operator_names(task_name: str) -> dict[str, str]:
     return {k: d for k, (_, d) in _module(task_name).STYLES.items()}
 
 
+def style_names(task_name: str) -> list[str]:
+    """Names of a task's scripted styles, in registry order (their styles are not read)."""
+    return list(_module(task_name).STYLES)
+
+
+def style_of(task_name: str, name: str) -> Style:
+    """The :class:`Style` registered as ``name`` for a task.
+
+    Raises:
+      ElicitError: unknown style for this task.
+    """
+    styles = _module(task_name).STYLES
+    if name not in styles:
+        raise ElicitError(
+            f"task '{task_name}' has no operator '{name}' (known: {', '.join(styles)})"
+        )
+    return styles[name][0]
+
+
 def make_operator(task: Task, name: str, style: Style | None = None) -> Operator:
     """The scripted operator ``name`` of ``task`` (its registered style unless ``style``).
 
@@ -44,4 +63,4 @@ def make_operator(task: Task, name: str, style: Style | None = None) -> Operator
     return mod.OPERATOR_CLASS(task, style or mod.STYLES[name][0], name)
 
 
-__all__ = ["Operator", "Style", "make_operator", "operator_names"]
+__all__ = ["Operator", "Style", "make_operator", "operator_names", "style_names", "style_of"]
