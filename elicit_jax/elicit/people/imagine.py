@@ -85,6 +85,15 @@ def alternatives(choices: Choices, known: Mapping[str, Sequence[Any]]) -> Iterat
                 yield key, value, with_choice(choices, key, value)
 
 
+def pairs(choices: Choices, known: Mapping[str, Sequence[Any]]) -> Iterator[tuple]:
+    """Every change of two different choices at once ``(changes, new_choices)``."""
+    singles = list(alternatives(choices, known))
+    for i, (k1, v1, _) in enumerate(singles):
+        for k2, v2, _ in singles[i + 1 :]:
+            if k2 != k1:
+                yield ((k1, v1), (k2, v2)), with_choice(with_choice(choices, k1, v1), k2, v2)
+
+
 def calm(style: Style, choices: Choices) -> Style:
     """``style`` with ``choices`` and without motor noise, hesitation or jitter."""
     return dataclasses.replace(

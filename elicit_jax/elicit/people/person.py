@@ -3,7 +3,7 @@ what the interface shows (the model is written down in ``docs/people.md``).
 
 The person acts like a scripted operator of its current style, with motor noise that practice
 reduces. Between episodes it thinks over what it saw (:class:`Seen`) and may change a style
-*choice* (one key of the style's choices at a time):
+*choice* (one key of the style's choices; two at once when no single change is enough):
 
 * **prompt** (:meth:`SimulatedPerson.learn_from_prompt`): it imagines doing the shown base
   demonstrations its own way and each single-choice change of its way
@@ -55,6 +55,7 @@ from elicit_jax.elicit.people.imagine import (
     alternatives,
     calm,
     imagine,
+    pairs,
     repertoire,
     same_value,
     with_choice,
@@ -231,22 +232,28 @@ class SimulatedPerson:
         actions: list[np.ndarray],
         spans: list[slice] | None = None,
         weights: np.ndarray | None = None,
-    ) -> tuple[str, Any, float, float] | None:
-        """The single-choice change that best predicts ``actions`` at ``states``, if it is
-        clearly better than the current choices: ``(key, value, error now, error after)``."""
-        now = action_error(imagine(self.task, calm(self.motor, self.choices), states), actions,
-                           spans, weights)  # fmt: skip
+    ) -> tuple[tuple[tuple[str, Any], ...], float, float] | None:
+        """The change of one choice (or, when none is enough, of two) that best predicts
+        ``actions`` at ``states``, if clearly better than the current choices:
+        ``(((key, value), ...), error now, error after)``."""
+
+        def error(choices: Mapping[str, Any]) -> float:
+            imagined = imagine(self.task, calm(self.motor, choices), states)
+            return action_error(imagined, actions, spans, weights)
+
+        now = error(self.choices)
         if now <= ERROR_FLOOR:
             return None
-        best: tuple[str, Any, float] | None = None
-        for key, value, new in alternatives(self.choices, self.known):
-            err = action_error(imagine(self.task, calm(self.motor, new), states), actions,
-                               spans, weights)  # fmt: skip
-            if best is None or err < best[2]:
-                best = (key, value, err)
-        if best is None or best[2] >= (1.0 - MIN_GAIN) * now:
-            return None
-        return best[0], best[1], now, best[2]
+        singles = ((((k, v),), new) for k, v, new in alternatives(self.choices, self.known))
+        for candidates in (singles, pairs(self.choices, self.known)):
+            best: tuple[tuple, float] | None = None
+            for changes, new in candidates:
+                err = error(new)
+                if best is None or err < best[1]:
+                    best = (changes, err)
+            if best is not None and best[1] < (1.0 - MIN_GAIN) * now:
+                return best[0], now, best[1]
+        return None
 
     def learn_from_prompt(self, event: PromptEvent) -> None:
         """Imitate the prompt's demonstrations (once: a repeated prompt teaches nothing new)."""
@@ -261,8 +268,9 @@ class SimulatedPerson:
             change = self._best_change(states, actions)
             if change is None or rng.random() >= self.traits.imitation:
                 break
-            key, value, now, after = change
-            self._adopt(episode, "prompt", key, value, error_before=now, error_after=after)
+            changes, now, after = change
+            for key, value in changes:
+                self._adopt(episode, "prompt", key, value, error_before=now, error_after=after)
 
     def digest(self) -> None:
         """Think over the episode just finished (called when the next one starts)."""
@@ -325,10 +333,11 @@ class SimulatedPerson:
             change = self._best_change([states], [actions], [span], weights)
             if change is None:
                 continue
-            key, value, now, after = change
-            self._adopt(seen.index, "feedback", key, value, window=[window.start, window.stop],
-                        base_episode=window.base_episode, error_before=now,
-                        error_after=after)  # fmt: skip
+            changes, now, after = change
+            for key, value in changes:
+                self._adopt(seen.index, "feedback", key, value, window=[window.start, window.stop],
+                            base_episode=window.base_episode, error_before=now,
+                            error_after=after)  # fmt: skip
             changed = True
         return changed
 
