@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +61,25 @@ def default_run_dir(spec: PipelineSpec, tasks: tuple[str, ...] | None = None) ->
     return Path("runs") / f"{spec.name}-{spec.profile}{suffix}"
 
 
+def plan_run(config: PipelineRunConfig) -> tuple[Any, Graph, Callable[[], Mapping[str, StageFn]]]:
+    """The definition, its stage graph and its stage registry: a filtering pipeline, or an
+    elicitation study (``[pipeline] kind = "elicitation"``)."""
+    from elicit_jax.pipeline.elicitation.spec import KIND, load_study, read_kind
+    from elicit_jax.pipeline.spec import resolve_path
+
+    if read_kind(resolve_path(config.pipeline)) == KIND:
+        from elicit_jax.pipeline.elicitation.plan import build_study_graph
+        from elicit_jax.pipeline.elicitation.stages import resolve_study_config, study_registry
+
+        study = load_study(config.pipeline, config.profile, config.tasks)
+        return study, build_study_graph(study, resolve_study_config), study_registry
+    from elicit_jax.pipeline.plan import build_graph
+    from elicit_jax.pipeline.stages import real_registry, resolve_config
+
+    spec = load_spec(config.pipeline, config.profile, config.tasks)
+    return spec, build_graph(spec, resolve_config), real_registry
+
+
 def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
     """Write ``run.json``: the definition (text, source, profile) and every stage."""
     stages = [
@@ -79,6 +98,7 @@ def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
         1,
         config={
             "pipeline": spec.name,
+            "kind": getattr(spec, "kind", "filtering"),
             "profile": spec.profile,
             "description": spec.description,
             "source": spec.source,
@@ -104,12 +124,8 @@ def run_pipeline(
     """
     from rich.console import Console
 
-    from elicit_jax.pipeline.plan import build_graph
-    from elicit_jax.pipeline.stages import real_registry, resolve_config
-
     console = console or Console()
-    spec = load_spec(config.pipeline, config.profile, config.tasks)
-    graph = build_graph(spec, resolve_config)
+    spec, graph, default_registry = plan_run(config)
     run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     note = " — CPU profile: shrunk networks/epochs, not the paper's sizes" * (spec.profile == "cpu")
     console.print(
@@ -130,7 +146,7 @@ def run_pipeline(
         result = execute(
             graph,
             run_dir,
-            registry or real_registry(),
+            registry or default_registry(),
             console=console,
             show_progress=config.progress,
             lock=False,
@@ -152,13 +168,10 @@ def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str,
     from rich.console import Console
     from rich.table import Table
 
-    from elicit_jax.pipeline.plan import build_graph
     from elicit_jax.pipeline.runner import stage_up_to_date
-    from elicit_jax.pipeline.stages import resolve_config
 
     console = console or Console()
-    spec = load_spec(config.pipeline, config.profile, config.tasks)
-    graph = build_graph(spec, resolve_config)
+    spec, graph, _ = plan_run(config)
     run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     out: dict[str, list[str]] = {"up to date": [], "to run": []}
     per_kind: dict[str, list[int]] = {}
@@ -185,6 +198,8 @@ def print_results(run_dir: Path, console: Any) -> None:
 
     from elicit_jax.pipeline.tables import models_table, results_tables
 
+    if _is_study(run_dir):
+        return _print_study(run_dir, console)
     data = gather(run_dir)
     for title, (header, rows) in results_tables(data) + models_table(data):
         table = Table(title=title)
@@ -197,9 +212,44 @@ def print_results(run_dir: Path, console: Any) -> None:
         console.print(f"[yellow]{note}[/]")
 
 
+def _is_study(run_dir: Path) -> bool:
+    from elicit_jax.pipeline.elicitation.spec import KIND
+    from elicit_jax.pipeline.gather import read_manifest
+
+    return read_manifest(run_dir)["config"].get("kind") == KIND
+
+
+def _print_study(run_dir: Path, console: Any) -> None:
+    """Print an elicitation study's Table 2 and, per task, its ablation."""
+    from rich.table import Table
+
+    from elicit_jax.pipeline.elicitation.gather import gather_study
+    from elicit_jax.pipeline.elicitation.tables import ablation_table, cells_of, table2
+
+    data = gather_study(run_dir)
+    tables = [("Base / Naive / Naive + M-filtered / Informed (success %)", table2(data))]
+    tables += [(f"{t} ({m}): ablation", ablation_table(data, t, m)) for t, m in cells_of(data)]
+    for title, (header, rows) in tables:
+        table = Table(title=title)
+        for col in header:
+            table.add_column(col)
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
+    for note in data.notes:
+        console.print(f"[yellow]{note}[/]")
+
+
 def render_run_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
-    """(Re)write the report of a run directory; returns the Markdown and HTML paths."""
+    """(Re)write the report of a run directory (a filtering pipeline or an elicitation
+    study); returns the Markdown and HTML paths."""
     from elicit_jax.pipeline.report import write_report
 
     run_dir = Path(run_dir)
-    return write_report(gather(run_dir), Path(out) if out else run_dir / REPORT_DIR)
+    target = Path(out) if out else run_dir / REPORT_DIR
+    if _is_study(run_dir):
+        from elicit_jax.pipeline.elicitation.gather import gather_study
+        from elicit_jax.pipeline.elicitation.report import write_study_report
+
+        return write_study_report(gather_study(run_dir), target)
+    return write_report(gather(run_dir), target)

@@ -19,9 +19,11 @@ reduces. Between episodes it thinks over what it saw (:class:`Seen`) and may cha
   allows, with probability ``explore`` it tries another way: a single-choice change drawn
   with probability proportional to the number of red steps at which, replaying its own
   episode in imagination, the change would have acted differently (:func:`red_matters`) —
-  the light says *where*, not *what*. On the next lit demonstration it keeps the change if
-  the task was done and the red fraction fell below its mean since the last change, else it
-  goes back and does not try that change again until some other change has stuck.
+  the light says *where*, not *what*. It does not experiment with a choice it changed on the
+  prompt's or the feedback's evidence. On the next lit demonstration it keeps the change if
+  the task was done and the red fraction fell clearly (by :data:`MIN_GAIN`) below its mean
+  since the last change, else it goes back and does not try that change again until some
+  other change has stuck.
 
 It never reads the base operator's style: the repertoire of choices comes from the task's
 other styles (:func:`~elicit_jax.elicit.people.imagine.repertoire`).
@@ -64,7 +66,8 @@ from elicit_jax.elicit.people.traits import PersonTraits
 from elicit_jax.errors import ElicitError
 
 MIN_GAIN = 0.2
-"""A change counts as better when it cuts the imagined action error by more than this."""
+"""A change counts as better when it cuts the imagined action error (or, for a trial, the red
+fraction) by more than this fraction."""
 ERROR_FLOOR = 0.01
 """Below this imagined action error (per dim, squared) the person sees nothing to correct."""
 FOCUS = 4.0
@@ -159,6 +162,7 @@ class SimulatedPerson:
         self.episodes_done = 0
         self.trial: Trial | None = None
         self.tabu: list[tuple[str, Any]] = []
+        self.anchored: set[str] = set()
         self.reds: list[float] = []
         self.log: list[dict[str, Any]] = []
         self.prompt_seen = False
@@ -222,6 +226,8 @@ class SimulatedPerson:
         )
 
     def _adopt(self, episode: int, source: str, key: str, value: Any, **extra: Any) -> None:
+        if source in ("prompt", "feedback"):
+            self.anchored.add(key)
         old = self.choices.get(key, UNSET)
         self.choices = with_choice(self.choices, key, value)
         self._note(episode, source, key, old, value, **extra)
@@ -296,7 +302,7 @@ class SimulatedPerson:
         trial, self.trial = self.trial, None
         assert trial is not None
         detail = {"red_before": trial.red_before, "red_after": seen.red_fraction}
-        if not seen.success or seen.red_fraction >= trial.red_before:
+        if not seen.success or seen.red_fraction >= (1.0 - MIN_GAIN) * trial.red_before:
             self._adopt(seen.index, "indicator-undo", trial.key, trial.old, **detail)
             self.tabu.append((trial.key, trial.new))
         else:
@@ -345,7 +351,9 @@ class SimulatedPerson:
         options = [
             (key, value, n)
             for key, value, n in red_matters(self, seen)
-            if n and not any(k == key and same_value(v, value) for k, v in self.tabu)
+            if n
+            and key not in self.anchored
+            and not any(k == key and same_value(v, value) for k, v in self.tabu)
         ]
         if not options:
             return

@@ -1,0 +1,200 @@
+"""Gather an elicitation study's run directory into :class:`StudyData` for its report.
+
+Reads the run manifest and, per finished stage: evaluations (success per training seed, best
+checkpoint — the filtering report's :func:`~elicit_jax.pipeline.gather.result_rows`),
+sessions (per-episode summaries from the episode files, and the person's record of what it
+changed), M-filter counts, thresholds and D_base's lengths. Unfinished stages are listed in a
+note, so a partial run's report is right about what it shows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import read_header, read_json
+from elicit_jax.pipeline.gather import read_manifest, result_rows
+from elicit_jax.pipeline.tables import ResultRow
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionData:
+    """One finished session of one simulated person.
+
+    Attributes:
+      task, model, condition: where it belongs (condition: naive, informed, an ablation arm,
+        naive-dagger, informed-dagger).
+      person: the person's id in the study (``p0``, ...).
+      spec: the person's operator spec.
+      dagger: an HG-DAgger session.
+      rows: per-episode summaries (kind, verdict, rule verdict, length, operator steps,
+        incompatible fraction, intervention rate, ...), in episode order.
+      person_record: what the person recorded (traits, starting and final choices, changes).
+      end_reason: ``complete`` or ``max-episodes`` (empty while running).
+    """
+
+    task: str
+    model: str
+    condition: str
+    person: str
+    spec: str
+    dagger: bool
+    rows: tuple[Mapping[str, Any], ...]
+    person_record: Mapping[str, Any]
+
+    @property
+    def style(self) -> str:
+        return self.spec.partition(":")[2].split(",")[0]
+
+    @property
+    def demonstrations(self) -> list[Mapping[str, Any]]:
+        return [r for r in self.rows if r["episode_kind"] == "demonstration"]
+
+    @property
+    def accepted(self) -> list[Mapping[str, Any]]:
+        return [r for r in self.rows if r["verdict"] == "accepted"]
+
+
+@dataclasses.dataclass(frozen=True)
+class FilterCount:
+    """What the M-filter kept of one naive session."""
+
+    task: str
+    model: str
+    person: str
+    pairs_kept: int
+    pairs_total: int
+    episodes_kept: int
+    episodes_total: int
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyData:
+    """Everything the study report shows."""
+
+    pipeline: str
+    profile: str
+    description: str
+    run_dir: str
+    spec_text: str
+    results: tuple[ResultRow, ...]
+    sessions: tuple[SessionData, ...]
+    base_lengths: Mapping[str, tuple[float, float, int]]
+    thresholds: Mapping[tuple[str, str], Mapping[str, Any]]
+    filters: tuple[FilterCount, ...]
+    configs: Mapping[str, Any]
+    versions: Mapping[str, str]
+    notes: tuple[str, ...] = ()
+
+
+def _lengths(path: Path) -> tuple[float, float, int]:
+    import pyarrow.parquet as pq
+
+    episode = pq.read_table(path, columns=["episode"]).column("episode").to_numpy()
+    _, counts = np.unique(episode, return_counts=True)
+    return float(counts.mean()), float(counts.std()), int(counts.size)
+
+
+def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
+    """A finished session stage's data (None when its person record is not written yet)."""
+    from elicit_jax.elicit.progress import summary_row
+    from elicit_jax.elicit.store import SessionStore
+    from elicit_jax.pipeline.elicitation.stages import PERSON_FILE
+
+    if not (path / PERSON_FILE).exists():
+        return None
+    cfg = stage["config"]
+    rows = tuple(summary_row(h) for h in SessionStore(path).episode_headers())
+    return SessionData(
+        task=cfg["task"],
+        model=cfg["model"],
+        condition=cfg["condition"],
+        person=cfg["person"],
+        spec=cfg["session"]["operator"],
+        dagger=bool(cfg["session"]["dagger"]),
+        rows=rows,
+        person_record=read_json(path / PERSON_FILE),
+    )
+
+
+def gather_study(run_dir: str | Path) -> StudyData:
+    """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
+    from elicit_jax.pipeline.gather import _training_note
+
+    run_dir = Path(run_dir)
+    manifest = read_manifest(run_dir)
+    head = manifest["config"]
+    results: list[ResultRow] = []
+    sessions: list[SessionData] = []
+    filters: list[FilterCount] = []
+    base_lengths: dict[str, tuple[float, float, int]] = {}
+    thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
+    configs: dict[str, dict[str, Any]] = {}
+    missing = []
+    for stage in manifest["stages"]:
+        kind, cfg, path = stage["kind"], stage["config"], run_dir / stage["output"]
+        configs.setdefault(kind, {})[stage["id"]] = cfg
+        if kind == "study-report":
+            continue
+        if not path.exists():
+            missing.append(stage["id"])
+            continue
+        if kind == "evaluate":
+            results += result_rows(cfg, path)
+        elif kind == "session":
+            data = session_data(stage, path)
+            if data is None:
+                missing.append(stage["id"])
+            else:
+                sessions.append(data)
+        elif kind == "collect" and cfg.get("role") == "base":
+            base_lengths[cfg["collect"]["task"]] = _lengths(path)
+        elif kind == "fit-thresholds":
+            data = read_json(path)
+            report = dict(data.get("report", {}))
+            thresholds[(cfg["task"], cfg["model"])] = {
+                "lambda": float(data["lambda"]),
+                "eta": float(data["eta"]),
+                "method": data.get("method", "fit"),
+                "trust": report.get("trust"),
+                "balanced_accuracy": report.get("balanced_accuracy"),
+            }
+        elif kind == "filter-session":
+            h = read_header(path)
+            filters.append(
+                FilterCount(
+                    task=cfg["task"],
+                    model=cfg["model"],
+                    person=cfg["person"],
+                    pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
+                    pairs_total=int(h["pairs_in"]),
+                    episodes_kept=int(h["episodes_out"]),
+                    episodes_total=int(h["episodes_in"]),
+                )
+            )
+    notes = [_training_note(configs["train"])] if configs.get("train") else []
+    if missing:
+        notes.append(
+            f"{len(missing)} stage(s) have not finished, so their results are absent: "
+            + ", ".join(missing[:8])
+            + (" …" if len(missing) > 8 else "")
+        )
+    return StudyData(
+        pipeline=head["pipeline"],
+        profile=head["profile"],
+        description=head.get("description", ""),
+        run_dir=str(run_dir),
+        spec_text=head.get("spec_text", ""),
+        results=tuple(results),
+        sessions=tuple(sessions),
+        base_lengths=base_lengths,
+        thresholds=thresholds,
+        filters=tuple(filters),
+        configs=configs,
+        versions=manifest.get("versions", {}),
+        notes=tuple(notes),
+    )

@@ -1,0 +1,227 @@
+"""Expand an elicitation study into its stage graph.
+
+Per task: collect D_base and the two contrast sets. Per task × model: train the base policy
+(all seeds at once) and evaluate it; score the contrast sets with the first seed's base policy
+and fit (λ, η). Per person of the task's population, one session per condition — ``naive``
+(practice only), ``informed`` (prompt + live indicator + feedback), each ablation arm
+(``prompt``, ``indicator`` or ``feedback`` only) and, on a DAgger task, ``naive-dagger`` and
+``informed-dagger`` — all against the first seed's base policy and the fitted thresholds, all
+from the same session seed (the person meets the same initial states in every condition);
+then train on D_base ∪ the session's accepted demonstrations (all seeds) and evaluate. The
+``filtered`` condition scores the naive session's demonstrations and drops the incompatible
+pairs before training. One report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
+from elicit_jax.pipeline.graph import Graph, Stage
+from elicit_jax.pipeline.plan import COLLECT_SEED_OFFSETS
+
+ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
+SESSION_SEED_STRIDE = 1000
+
+
+def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+    return raw
+
+
+def session_modes(spec: StudySpec, task: StudyTask) -> dict[str, dict[str, Any]]:
+    """Session condition -> its mode, parts shown and DAgger flag, for one task."""
+    out: dict[str, dict[str, Any]] = {}
+    if {"naive", "filtered"} & set(spec.conditions):
+        out["naive"] = {"mode": "naive", "show": [], "dagger": False}
+    if "informed" in spec.conditions:
+        out["informed"] = {"mode": "informed", "show": ["prompt", "indicator", "feedback"]}
+    for arm in spec.ablation:
+        out[arm] = {"mode": "informed", "show": [arm]}
+    if task.dagger:
+        for cond in spec.dagger_conditions:
+            show = [] if cond == "naive" else ["prompt", "indicator", "feedback"]
+            out[f"{cond}-dagger"] = {"mode": cond, "show": show, "dagger": True}
+    for mode in out.values():
+        mode.setdefault("dagger", False)
+    return out
+
+
+def session_seed(spec: StudySpec, person: int) -> int:
+    """Session seed of person ``person``: every condition of a person shares it."""
+    return spec.collect_seed * SESSION_SEED_STRIDE + person
+
+
+def person_id(index: int) -> str:
+    return f"p{index}"
+
+
+def build_study_graph(spec: StudySpec, resolve: ConfigResolver = _identity) -> Graph:
+    """The stage graph of an elicitation study (see the module docstring)."""
+    stages: list[Stage] = []
+    for task in spec.tasks:
+        stages += _collect_stages(spec, task, resolve)
+        for model in spec.models:
+            stages += _cell_stages(spec, task, model, resolve)
+    kinds = ("collect", "fit-thresholds", "evaluate", "session", "filter-session")
+    stages.append(
+        Stage(
+            id="report",
+            kind="study-report",
+            output="report",
+            config=resolve(
+                "study-report",
+                {
+                    **spec.section("report"),
+                    "pipeline": spec.name,
+                    "profile": spec.profile,
+                    "spec_text": spec.text,
+                },
+            ),
+            inputs={s.id: s.id for s in stages if s.kind in kinds},
+            label="report",
+        )
+    )
+    return Graph(stages)
+
+
+def _collect_stages(spec: StudySpec, task: StudyTask, resolve: ConfigResolver) -> list[Stage]:
+    sets = [
+        ("base", task.base_operator, task.base_episodes),
+        ("holdout", task.base_operator, task.holdout_episodes),
+        ("incompatible", task.incompatible_operator, task.incompatible_episodes),
+    ]
+    out = []
+    for role, operator, episodes in sets:
+        seed = spec.collect_seed + COLLECT_SEED_OFFSETS[role]
+        raw = {**spec.section("collect"), "task": task.name, "operator": operator}
+        raw |= {"episodes": episodes, "seed": seed, "role": role}
+        out.append(
+            Stage(
+                id=f"collect/{task.name}/{role}",
+                kind="collect",
+                output=f"data/{task.name}/{role}.parquet",
+                config=resolve("collect", raw),
+                seed=seed,
+                label=f"collect {task.name} {role} ({episodes} demos of {operator})",
+            )
+        )
+    return out
+
+
+def _cell_stages(
+    spec: StudySpec, task: StudyTask, model: str, resolve: ConfigResolver
+) -> list[Stage]:
+    t = task.name
+    cell = f"{t}/{model}"
+    base_data = f"collect/{t}/base"
+    where = {"task": t, "model": model}
+    seeds = list(spec.seeds)
+
+    def train(method: str, who: str | None, extra: dict[str, str]) -> list[Stage]:
+        suffix = method if who is None else f"{method}/{who}"
+        raw = {**spec.section("train"), **where, "seeds": seeds, "profile": spec.profile}
+        tr = Stage(
+            id=f"train/{cell}/{suffix}",
+            kind="train",
+            output=f"policies/{cell}/{suffix.replace('/', '-')}",
+            config=resolve("train", {**raw, "method": method, "operator": who}),
+            inputs={"demos0": base_data, **extra},
+            label=f"train {t} {model} {suffix}",
+        )
+        raw = {**spec.section("evaluate"), **where, "seeds": seeds, "profile": spec.profile}
+        ev = Stage(
+            id=f"evaluate/{cell}/{suffix}",
+            kind="evaluate",
+            output=f"evals/{cell}/{suffix.replace('/', '-')}.parquet",
+            config=resolve("evaluate", {**raw, "method": method, "operator": who}),
+            inputs={"policy": tr.id},
+            label=f"evaluate {t} {model} {suffix}",
+        )
+        return [tr, ev]
+
+    stages = train("base", None, {})
+    base = stages[0]
+    score_raw = {**spec.section("score"), **where, "policy_seed": seeds[0]}
+    contrast = Stage(
+        id=f"score/{cell}/contrast",
+        kind="score",
+        output=f"scores/{cell}/contrast",
+        config=resolve("score", {**score_raw, "set": "contrast"}),
+        inputs={
+            "policy": base.id,
+            "demos0": f"collect/{t}/holdout",
+            "demos1": f"collect/{t}/incompatible",
+        },
+        label=f"score {t} {model} contrast sets",
+    )
+    fit = Stage(
+        id=f"fit-thresholds/{cell}",
+        kind="fit-thresholds",
+        output=f"thresholds/{cell}.json",
+        config=resolve(
+            "fit-thresholds",
+            {
+                **spec.section("thresholds"),
+                **where,
+                "compatible_operator": task.base_operator,
+                "incompatible_operator": task.incompatible_operator,
+                "holdout_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["holdout"],
+                "incompatible_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["incompatible"],
+            },
+        ),
+        inputs={"scores": contrast.id},
+        label=f"fit thresholds {t} {model}",
+    )
+    stages += [contrast, fit]
+    modes = session_modes(spec, task)
+    for index, person in enumerate(task.people):
+        who = person_id(index)
+        sessions = {}
+        for cond, mode in modes.items():
+            raw = {
+                **_score_options(spec),
+                **spec.section("session"),
+                **where,
+                **mode,
+                "operator": person,
+                "person": who,
+                "condition": cond,
+                "seed": session_seed(spec, index),
+                "policy_seed": seeds[0],
+            }
+            sessions[cond] = Stage(
+                id=f"session/{cell}/{cond}/{who}",
+                kind="session",
+                output=f"sessions/{cell}/{cond}/{who}",
+                config=resolve("session", raw),
+                inputs={"policy": base.id, "base": base_data, "thresholds": fit.id},
+                label=f"session {t} {cond} {who} ({person.partition(',')[0]})",
+            )
+            stages.append(sessions[cond])
+            if cond != "naive" or "naive" in spec.conditions:
+                stages += train(cond, who, {"demos1": sessions[cond].id})
+        if "filtered" in spec.conditions:
+            raw = {"score": spec.section("score"), "filter": spec.section("filter")}
+            filt = Stage(
+                id=f"filter-session/{cell}/{who}",
+                kind="filter-session",
+                output=f"filtered/{cell}/{who}",
+                config=resolve(
+                    "filter-session", {**raw, **where, "person": who, "policy_seed": seeds[0]}
+                ),
+                inputs={
+                    "session": sessions["naive"].id,
+                    "policy": base.id,
+                    "thresholds": fit.id,
+                },
+                label=f"M-filter {t} naive {who}",
+            )
+            stages += [filt, *train("filtered", who, {"demos1": filt.id})]
+    return stages
+
+
+def _score_options(spec: StudySpec) -> dict[str, Any]:
+    """The scoring conventions of ``[score]`` a session's live scorer shares."""
+    score = spec.section("score")
+    return {k: score[k] for k in ("likelihood", "ddof") if k in score}

@@ -1,0 +1,195 @@
+"""Render an elicitation study as Markdown and one self-contained HTML page (the filtering
+report's style: the same table rendering, figures inlined as base64 PNG, no external asset).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.artifact import atomic_path, dumps, make_header
+from elicit_jax.pipeline.elicitation.gather import StudyData
+from elicit_jax.pipeline.elicitation.tables import (
+    CONDITION_LABELS,
+    ablation_table,
+    cells_of,
+    compare,
+    dagger_table,
+    filter_table,
+    learning_curves,
+    learning_table,
+    length_table,
+    person_table,
+    success_cells,
+    table2,
+    threshold_table,
+)
+from elicit_jax.pipeline.report import _CSS, CPU_NOTE, _html_inline, _md_table
+
+FIGURES = "figures"
+INTERVAL_NOTE = (
+    "Differences are in success points, paired by person: each person's mean over training "
+    "seeds in one condition minus the other, with a 95% Student t interval over people; `*` "
+    "marks an interval that excludes 0. Without `*`, the difference is inside the noise of "
+    "this many people and seeds."
+)
+MODEL_NOTE = (
+    "The people are simulated (docs/people.md): scripted styles that change their style "
+    "choices only from what the interface shows. What they learn, and how fast, is a "
+    "consequence of that model, not a measurement of human operators."
+)
+
+
+def _verdicts(data: StudyData) -> list[str]:
+    cells = success_cells(data)
+    out = []
+    for task, model in cells_of(data):
+        d = compare(cells, task, model, "informed", "naive")
+        if d.n == 0:
+            continue
+        beyond = d.n > 1 and not np.isnan(d.low) and (d.low > 0 or d.high < 0)
+        out.append(
+            f"**{task}** ({model}): informed − naive = {d.text()} points over {d.n} people — "
+            + ("beyond the noise." if beyond else "inside the noise (not a demonstrated effect).")
+        )
+    return out
+
+
+def _figure(data: StudyData, task: str, model: str) -> bytes | None:
+    from matplotlib.figure import Figure
+
+    from elicit_jax.elicit.pages import figure_png
+
+    curves = learning_curves(data, task, model)
+    if not curves:
+        return None
+    fig = Figure(figsize=(9, 3.6))
+    left, right = fig.subplots(1, 2)
+    for cond, curve in curves.items():
+        x = np.arange(1, len(curve) + 1)
+        left.plot(x, 100 * curve[:, 0], marker="o", ms=3, label=CONDITION_LABELS[cond])
+        right.plot(x, 100 * curve[:, 1], marker="o", ms=3, label=CONDITION_LABELS[cond])
+    left.set_ylabel("incompatible pairs (%)")
+    right.set_ylabel("rule accepts (%)")
+    for ax in (left, right):
+        ax.set_xlabel("demonstration attempt")
+    left.legend(fontsize=7)
+    fig.suptitle(f"{task} ({model}): mean over the population, by attempt", fontsize=10)
+    fig.tight_layout()
+    return figure_png(fig)
+
+
+def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any]]:
+    title = "Base / Naive / Naive + M-filtered / Informed (success %, mean (std) over seeds)"
+    blocks: list[tuple[str, Any]] = [(title, table2(data))]
+    for task, model in cells_of(data):
+        where = f"{task} ({model})"
+        blocks.append((f"{where}: per person", person_table(data, task, model)))
+        abl = ablation_table(data, task, model)
+        if abl[1]:
+            blocks.append((f"{where}: which part of the interface does the work", abl))
+        learning = learning_table(data, task, model)
+        blocks.append((f"{where}: do the people learn, and how fast?", learning))
+        name = f"{task}-{model}-learning.png"
+        if name in figures:
+            blocks.append((f"{where}: learning curves", [("figure", name)]))
+    blocks.append(("Demonstration lengths: accepted demonstrations against D_base",
+                   length_table(data)))  # fmt: skip
+    dagger = dagger_table(data)
+    if dagger[1]:
+        blocks.append(("HG-DAgger: interventions", dagger))
+    if data.filters:
+        blocks.append(("What the M-filter kept of each naive session", filter_table(data)))
+    if data.thresholds:
+        blocks.append(("Thresholds (every session and the M-filter)", threshold_table(data)))
+    blocks.append(("Study definition", ("code", data.spec_text or "(not recorded)")))
+    blocks.append(("Stage configs", ("code", dumps(dict(data.configs)))))
+    blocks.append(("Library versions", ("code", dumps(dict(data.versions)))))
+    return blocks
+
+
+def _intro(data: StudyData) -> list[str]:
+    lines = [
+        f"Study **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
+    ]
+    if data.profile == "cpu":
+        lines.append(CPU_NOTE)
+    if data.description:
+        lines.append(data.description)
+    lines += [MODEL_NOTE, INTERVAL_NOTE, *_verdicts(data), *data.notes]
+    return lines
+
+
+def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
+    """The study report as Markdown; figures are linked as files beside it."""
+    out = [f"# elicit-jax study: {data.pipeline} ({data.profile} profile)", ""]
+    out += [line + "\n" for line in _intro(data)]
+    for title, content in _sections(data, figures):
+        out += [f"## {title}", ""]
+        if isinstance(content, tuple) and content and content[0] == "code":
+            out += ["```", content[1].rstrip(), "```", ""]
+        elif isinstance(content, list):
+            for _, name in content:
+                out += [f"![{title}]({FIGURES}/{name})", ""]
+        else:
+            out += [_md_table(content), ""]
+    return "\n".join(out)
+
+
+def render_html(data: StudyData, figures: dict[str, bytes]) -> str:
+    """The study report as one self-contained HTML page."""
+    esc = html.escape
+    body = [f"<h1>elicit-jax study: {esc(data.pipeline)} ({esc(data.profile)} profile)</h1>"]
+    for line in _intro(data):
+        cls = ' class="note"' if line in (CPU_NOTE, MODEL_NOTE) else ""
+        body.append(f"<p{cls}>{_html_inline(line)}</p>")
+    for title, content in _sections(data, figures):
+        body.append(f"<h2>{esc(title)}</h2>")
+        if isinstance(content, tuple) and content and content[0] == "code":
+            body.append(f"<details><summary>show</summary><pre>{esc(content[1])}</pre></details>")
+        elif isinstance(content, list):
+            for _, name in content:
+                b64 = base64.b64encode(figures[name]).decode()
+                body.append(f'<figure><img alt="{esc(title)}" src="data:image/png;base64,{b64}">')
+                body.append("</figure>")
+        else:
+            header, rows = content
+            head = "".join(f"<th>{esc(h)}</th>" for h in header)
+            trs = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{trs}</tbody></table>")
+    return (
+        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+        f"<title>elicit-jax study: {esc(data.pipeline)}</title><style>{_CSS}</style></head>"
+        f"<body>{''.join(body)}</body></html>\n"
+    )
+
+
+def write_study_report(data: StudyData, out_dir: str | Path) -> tuple[Path, Path]:
+    """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``figures/*.png``
+    and ``artifact.json``; returns the Markdown and HTML paths."""
+    out_dir = Path(out_dir)
+    figures = {}
+    for task, model in cells_of(data):
+        png = _figure(data, task, model)
+        if png is not None:
+            figures[f"{task}-{model}-learning.png"] = png
+    with atomic_path(out_dir) as tmp:
+        (tmp / FIGURES).mkdir(parents=True)
+        for name, png in figures.items():
+            (tmp / FIGURES / name).write_bytes(png)
+        (tmp / "report.md").write_text(render_markdown(data, figures))
+        (tmp / "report.html").write_text(render_html(data, figures))
+        header = make_header(
+            "study-report",
+            1,
+            config={"pipeline": data.pipeline, "profile": data.profile},
+            n_results=len(data.results),
+            n_sessions=len(data.sessions),
+            files=["report.md", "report.html", *[f"{FIGURES}/{n}" for n in figures]],
+        )
+        (tmp / "artifact.json").write_text(dumps(header) + "\n")
+    return out_dir / "report.md", out_dir / "report.html"

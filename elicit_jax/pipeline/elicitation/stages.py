@@ -1,0 +1,185 @@
+"""Stage functions of an elicitation study: sessions with simulated people, the M-filter of a
+naive session's demonstrations, and the study report (the other stages are the filtering
+pipeline's own: collect, train, score, fit-thresholds, evaluate).
+
+A session stage runs in its output directory, which is a session directory: a run killed
+mid-session resumes it where it stopped (the session's own resume; the person relives the
+recorded episodes), and a changed config or input starts it again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.runner import StageContext, StageFn
+
+PERSON_FILE = "person.json"
+_PLACEHOLDERS = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
+_META = ("task", "model", "person", "condition")
+
+
+def _resolve_session(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.elicit.config import SessionConfig
+
+    meta = {k: raw[k] for k in _META if k in raw}
+    fields = {k: v for k, v in raw.items() if k not in ("model", "person", "condition")}
+    try:
+        config = SessionConfig.from_dict({**fields, **_PLACEHOLDERS})
+    except ElicitError as e:
+        raise ElicitError(f"[session] {e}") from None
+    settings = config.to_dict()
+    for key in ("policy", "base_demos", "lambda", "eta", "thresholds_file"):
+        settings.pop(key)
+    return {**meta, "session": settings}
+
+
+def _resolve_filter_session(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.pipeline.stages import resolve_config
+
+    where = {"task": raw["task"], "model": raw["model"]}
+    score = resolve_config(
+        "score", {**raw["score"], **where, "policy_seed": raw["policy_seed"], "set": "naive"}
+    )
+    filt = resolve_config(
+        "filter", {**raw["filter"], **where, "method": "filtered", "operator": raw["person"]}
+    )
+    return {**where, "person": raw["person"], "score": score, "filter": filt}
+
+
+def resolve_study_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+    """Full, validated config of a study stage (the filtering pipeline's resolvers for its
+    own stage kinds)."""
+    from elicit_jax.pipeline.stages import resolve_config
+
+    if kind == "session":
+        return _resolve_session(raw)
+    if kind == "filter-session":
+        return _resolve_filter_session(raw)
+    return resolve_config(kind, raw)
+
+
+def session_stage(ctx: StageContext) -> None:
+    """Run one session of one simulated person (resuming one a killed run left)."""
+    from rich.progress import Progress
+
+    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.elicit.config import SessionConfig
+    from elicit_jax.elicit.events import EpisodeEndEvent
+    from elicit_jax.elicit.people import person_of
+    from elicit_jax.elicit.run import run_session
+    from elicit_jax.elicit.setup import open_session
+    from elicit_jax.pipeline.stages import demos_file
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    config = SessionConfig.from_dict(
+        {
+            **ctx.config["session"],
+            "policy": str(ctx.inputs["policy"]),
+            "base_demos": str(demos_file(ctx.inputs["base"])),
+            "lambda": lam,
+            "eta": eta,
+            "thresholds_file": str(ctx.inputs["thresholds"]),
+        }
+    )
+    try:
+        setup, operator, _ = open_session(config, ctx.output)
+    except ElicitError:  # a session of other settings or inputs: start it again
+        setup, operator, _ = open_session(config, ctx.output, overwrite=True)
+    label = f"{ctx.config['condition']} {ctx.config['person']}"
+    with Progress(console=ctx.console, transient=True) as progress:
+        bar = progress.add_task(f"session {label}", total=config.episode_limit)
+
+        def advance(event: Any) -> None:
+            if isinstance(event, EpisodeEndEvent):
+                progress.update(bar, completed=event.counts.episodes)
+
+        session = run_session(setup, operator, [lambda _s: advance])
+    person = person_of(operator)
+    if person is None:
+        raise ElicitError(f"operator {config.operator!r} is not a simulated person")
+    write_json(ctx.output / PERSON_FILE, person.summary())
+    c = session.progress.counts
+    changes = ", ".join(f"{x['key']}→{x['to']} (e{x['episode']})" for x in person.log) or "none"
+    ctx.console.print(
+        f"{label}: {c.accepted}/{c.wanted} accepted, {c.rejected} rejected, {c.failed} failed, "
+        f"{c.episodes} episodes; style changes: {changes}"
+    )
+
+
+def filter_session_stage(ctx: StageContext) -> None:
+    """M-filter a naive session's demonstrations: score them with the base policy and drop
+    the incompatible pairs (ℓ > λ in a familiar state). Nothing accepted, or every pair
+    dropped: no demonstrations file, and the retraining uses D_base alone."""
+    import numpy as np
+
+    from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
+    from elicit_jax.compat.measures import config_from_dict
+    from elicit_jax.compat.score_file import read_scores, score_file
+    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.pipeline.stages import DEMOS_FILE, SCORES_FILE
+    from elicit_jax.policy.checkpoint import load_policy
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    source = ctx.inputs["session"] / DEMOS_FILE
+    score_cfg = ctx.config["score"]
+    cfg = FilterConfig(**{**ctx.config["filter"]["filter"], "lambda_": lam, "eta": eta})
+    counts = {"pairs_in": 0, "pairs_dropped": 0, "episodes_in": 0, "episodes_out": 0}
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        files: list[str] = []
+        reason = "the naive session accepted no demonstrations"
+        if source.exists():
+            policy = load_policy(
+                ctx.inputs["policy"], score_cfg["checkpoint"], seed=score_cfg["policy_seed"]
+            )
+            score_file(
+                policy,
+                source,
+                tmp / SCORES_FILE,
+                config_from_dict(score_cfg["score"]),
+                policy_path=ctx.inputs["policy"],
+            )
+            _, scores = read_scores(tmp / SCORES_FILE)
+            drop, reason = drop_mask(scores, cfg)
+            counts["pairs_in"], counts["pairs_dropped"] = int(drop.size), int(drop.sum())
+            counts["episodes_in"] = int(np.unique(scores["episode"]).size)
+            if not drop.all():
+                result = filter_demos(tmp / SCORES_FILE, source, tmp / DEMOS_FILE, cfg)
+                counts["episodes_out"] = result.episodes_out
+                files = [DEMOS_FILE, SCORES_FILE, result.log_path.name]
+            else:
+                reason += "; every pair dropped, so the retraining uses D_base alone"
+        header = make_header(
+            "pipeline-filter",
+            1,
+            config=dict(ctx.config),
+            inputs=dict(ctx.inputs),
+            thresholds={"lambda": lam, "eta": eta},
+            reason=reason,
+            files=files,
+            **counts,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def study_report_stage(ctx: StageContext) -> None:
+    """Gather the study's artifacts and write its Markdown + HTML report."""
+    from elicit_jax.pipeline.elicitation.gather import gather_study
+    from elicit_jax.pipeline.elicitation.report import write_study_report
+
+    write_study_report(gather_study(ctx.run_dir), Path(ctx.output))
+
+
+def study_registry() -> dict[str, StageFn]:
+    """Stage kind -> function for an elicitation study."""
+    from elicit_jax.pipeline.stages import real_registry
+
+    return {
+        **real_registry(),
+        "session": session_stage,
+        "filter-session": filter_session_stage,
+        "study-report": study_report_stage,
+    }

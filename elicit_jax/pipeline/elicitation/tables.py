@@ -1,0 +1,398 @@
+"""The study report's tables, from :class:`~elicit_jax.pipeline.elicitation.gather.StudyData`.
+
+Success of a condition (the paper's Table 2 cells): per training seed, the mean over the
+population of each person's policy success (best checkpoint per seed, 50 rollouts), then
+mean (std) over seeds (std with ddof 0, as the filtering report). Differences between two
+conditions are paired by person: each person's difference of mean success over seeds, with a
+95% Student t interval over people (:func:`paired_interval`) — the person is the unit a user
+study replicates; the interval includes the training-seed noise through each person's mean.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
+from elicit_jax.pipeline.tables import Table, mean_std
+
+CONDITION_LABELS = {
+    "base": "Base",
+    "naive": "Naive",
+    "filtered": "Naive + M-filtered",
+    "informed": "Informed",
+    "prompt": "Prompt only",
+    "indicator": "Live indicator only",
+    "feedback": "Post-hoc feedback only",
+    "naive-dagger": "Naive HG-DAgger",
+    "informed-dagger": "Informed HG-DAgger",
+}
+TABLE2 = ("base", "naive", "filtered", "informed")
+ARMS = ("naive", "prompt", "indicator", "feedback", "informed")
+CURVE_ATTEMPTS = 10
+"""Demonstration attempts shown in the learning-curve table."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Interval:
+    """Mean paired difference (points) and its 95% interval; NaN ends with under 2 people."""
+
+    mean: float
+    low: float
+    high: float
+    n: int
+
+    def text(self) -> str:
+        if self.n == 0:
+            return "–"
+        if self.n < 2 or math.isnan(self.low):
+            return f"{self.mean:+.1f} (n={self.n}, no interval)"
+        mark = " *" if self.low > 0 or self.high < 0 else ""
+        return f"{self.mean:+.1f} [{self.low:+.1f}, {self.high:+.1f}]{mark}"
+
+
+def paired_interval(a: Sequence[float], b: Sequence[float], level: float = 0.95) -> Interval:
+    """Mean of ``a − b`` (paired by position) with a Student t interval (ddof 1)."""
+    from scipy.stats import t
+
+    d = np.asarray(a, float) - np.asarray(b, float)
+    n = int(d.size)
+    if n == 0:
+        return Interval(math.nan, math.nan, math.nan, 0)
+    if n == 1:
+        return Interval(float(d[0]), math.nan, math.nan, 1)
+    half = float(t.ppf(0.5 + level / 2, n - 1)) * float(d.std(ddof=1)) / math.sqrt(n)
+    return Interval(float(d.mean()), float(d.mean()) - half, float(d.mean()) + half, n)
+
+
+def success_cells(data: StudyData) -> dict[tuple, dict[int, float]]:
+    """``(task, model, condition, person or None) -> {seed: success}``."""
+    out: dict[tuple, dict[int, float]] = {}
+    for r in data.results:
+        out.setdefault((r.task, r.model, r.method, r.operator), {})[r.seed] = r.success
+    return out
+
+
+def cells_of(data: StudyData) -> list[tuple[str, str]]:
+    """(task, model) pairs, in the order the study ran them."""
+    seen = [(r.task, r.model) for r in data.results] + [(s.task, s.model) for s in data.sessions]
+    return list(dict.fromkeys(seen))
+
+
+def people_of(data: StudyData, task: str, model: str) -> list[str]:
+    ids = {s.person for s in data.sessions if (s.task, s.model) == (task, model)}
+    ids |= {r.operator for r in data.results if (r.task, r.model) == (task, model) and r.operator}
+    return sorted(ids, key=lambda p: int(p[1:]) if p[1:].isdigit() else 0)
+
+
+def population_by_seed(
+    cells: Mapping[tuple, Mapping[int, float]], task: str, model: str, cond: str, people: list[str]
+) -> dict[int, float]:
+    """Per seed, the mean success over the people with a result for that seed."""
+    if cond == "base":
+        return dict(cells.get((task, model, "base", None), {}))
+    per_seed: dict[int, list[float]] = {}
+    for p in people:
+        for seed, value in cells.get((task, model, cond, p), {}).items():
+            per_seed.setdefault(seed, []).append(value)
+    return {s: float(np.mean(v)) for s, v in sorted(per_seed.items())}
+
+
+def person_means(
+    cells: Mapping[tuple, Mapping[int, float]], task: str, model: str, cond: str
+) -> dict[str, float]:
+    """Each person's mean success over seeds (base: the same value for everyone)."""
+    out = {}
+    for (t, m, c, p), by_seed in cells.items():
+        if (t, m, c) == (task, model, cond) and p is not None and by_seed:
+            out[p] = float(np.mean(list(by_seed.values())))
+    return out
+
+
+def compare(
+    cells: Mapping[tuple, Mapping[int, float]], task: str, model: str, a: str, b: str
+) -> Interval:
+    """``a − b`` in success points, paired by person (``b`` may be ``base``)."""
+    ma = person_means(cells, task, model, a)
+    if b == "base":
+        base = cells.get((task, model, "base", None), {})
+        if not base:
+            return Interval(math.nan, math.nan, math.nan, 0)
+        mb = dict.fromkeys(ma, float(np.mean(list(base.values()))))
+    else:
+        mb = person_means(cells, task, model, b)
+    common = sorted(set(ma) & set(mb))
+    return paired_interval([100 * ma[p] for p in common], [100 * mb[p] for p in common])
+
+
+def table2(data: StudyData) -> Table:
+    """The paper's Table 2 layout: per task, Base / Naive / Naive + M-filtered / Informed."""
+    cells = success_cells(data)
+    header = ["task", "model", *[CONDITION_LABELS[c] for c in TABLE2]]
+    header += ["Informed − Naive", "Informed − Base", "people"]
+    rows = []
+    for task, model in cells_of(data):
+        people = people_of(data, task, model)
+        row = [task, model]
+        for cond in TABLE2:
+            row.append(
+                mean_std(list(population_by_seed(cells, task, model, cond, people).values()))
+            )
+        row.append(compare(cells, task, model, "informed", "naive").text())
+        row.append(compare(cells, task, model, "informed", "base").text())
+        row.append(str(len(people)))
+        rows.append(row)
+    return header, rows
+
+
+def _traits(record: Mapping[str, Any]) -> str:
+    t = record.get("traits", {})
+    keys = (("imitation", "im"), ("uptake", "up"), ("explore", "ex"), ("noise", "noise"))
+    keys += (("practice", "pr"),)
+    return " ".join(f"{short} {t[k]:g}" for k, short in keys if k in t)
+
+
+def _changes(record: Mapping[str, Any]) -> str:
+    final = {
+        x["key"]: x["to"]
+        for x in record.get("changes", [])
+        if x["source"] in ("prompt", "feedback", "indicator-try", "indicator-undo")
+    }
+    start = record.get("start_choices", {})
+    kept = {k: v for k, v in final.items() if _value(start.get(k, "<default>")) != _value(v)}
+    return ", ".join(f"{k}→{_value(v)}" for k, v in kept.items()) or "none"
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    if isinstance(v, list):
+        return "(" + ",".join(_value(x) for x in v) + ")"
+    return str(v)
+
+
+def base_choices_match(task: str, choices: Mapping[str, Any]) -> bool | None:
+    """Whether ``choices`` equal the base operator's (the report's check, never a person's)."""
+    from elicit_jax.elicit.people.imagine import same_value
+    from elicit_jax.errors import ElicitError
+    from elicit_jax.sim.operators import style_of
+
+    try:
+        base = dict(style_of(task, "base").choices)
+    except ElicitError:
+        return None
+    return set(base) == set(choices) and all(same_value(base[k], choices[k]) for k in base)
+
+
+def person_table(data: StudyData, task: str, model: str) -> Table:
+    """Per person: starting style, traits, success per condition, what the informed session
+    changed and whether it ends with the base operator's choices."""
+    cells = success_cells(data)
+    conds = [
+        c for c in CONDITION_LABELS if c != "base" and any(k[:3] == (task, model, c) for k in cells)
+    ]
+    header = ["person", "starts as", "traits", *[CONDITION_LABELS[c] for c in conds]]
+    header += ["informed: accepted / episodes", "informed: choices changed", "ends as base"]
+    by = {(s.condition, s.person): s for s in data.sessions if (s.task, s.model) == (task, model)}
+    rows = []
+    for p in people_of(data, task, model):
+        any_session = next((s for (c, q), s in by.items() if q == p), None)
+        row = [p, any_session.style if any_session else "?"]
+        row.append(_traits(any_session.person_record) if any_session else "")
+        for cond in conds:
+            row.append(mean_std(list(cells.get((task, model, cond, p), {}).values())))
+        informed = by.get(("informed", p))
+        if informed is not None:
+            demos = informed.demonstrations
+            row.append(f"{len(informed.accepted)} / {len(demos)}")
+            row.append(_changes(informed.person_record))
+            match = base_choices_match(task, informed.person_record.get("choices", {}))
+            row.append("–" if match is None else "yes" if match else "no")
+        else:
+            row += ["–", "–", "–"]
+        rows.append(row)
+    return header, rows
+
+
+def _conditions(data: StudyData, task: str, model: str) -> list[str]:
+    present = {s.condition for s in data.sessions if (s.task, s.model) == (task, model)}
+    return [c for c in CONDITION_LABELS if c in present]
+
+
+def _sessions(data: StudyData, task: str, model: str, cond: str) -> list[SessionData]:
+    return [s for s in data.sessions if (s.task, s.model, s.condition) == (task, model, cond)]
+
+
+def length_table(data: StudyData) -> Table:
+    """Mean length of the accepted demonstrations per condition, against D_base's."""
+    header = ["task", "model", "demonstrations", "n", "mean length (std)", "vs base"]
+    rows = []
+    for task, model in cells_of(data):
+        base = data.base_lengths.get(task)
+        if base:
+            rows.append([task, model, "D_base", str(base[2]), f"{base[0]:.1f} ({base[1]:.1f})", ""])
+        for cond in _conditions(data, task, model):
+            key = "operator_steps" if cond.endswith("dagger") else "length"
+            lens = [float(r[key]) for s in _sessions(data, task, model, cond) for r in s.accepted]
+            if not lens:
+                continue
+            vs = f"{100 * (np.mean(lens) / base[0] - 1):+.1f}%" if base else "–"
+            label = CONDITION_LABELS[cond] + (" (operator steps)" if key != "length" else "")
+            rows.append(
+                [
+                    task,
+                    model,
+                    label,
+                    str(len(lens)),
+                    f"{np.mean(lens):.1f} ({np.std(lens):.1f})",
+                    vs,
+                ]
+            )
+    return header, rows
+
+
+def learning_curves(data: StudyData, task: str, model: str) -> dict[str, np.ndarray]:
+    """Per condition: (attempts, 3) rows of [mean incompatible fraction, rule accept rate,
+    people] over the population, by demonstration attempt (1st, 2nd, ...)."""
+    out = {}
+    for cond in _conditions(data, task, model):
+        per: dict[int, list[tuple[float, bool]]] = {}
+        for s in _sessions(data, task, model, cond):
+            demos = [r for r in s.demonstrations if r["fraction_incompatible"] is not None]
+            for k, r in enumerate(demos):
+                per.setdefault(k, []).append(
+                    (float(r["fraction_incompatible"]), r["rule_verdict"] == "accept")
+                )
+        if per:
+            out[cond] = np.array(
+                [
+                    [np.mean([f for f, _ in v]), np.mean([a for _, a in v]), len(v)]
+                    for _, v in sorted(per.items())
+                ]
+            )
+    return out
+
+
+def learning_table(data: StudyData, task: str, model: str) -> Table:
+    """Incompatible fraction and the rule's accept rate by demonstration attempt, mean over
+    the population (naive sessions: what the rule would have said)."""
+    curves = learning_curves(data, task, model)
+    k = min(CURVE_ATTEMPTS, max((len(c) for c in curves.values()), default=0))
+    header = ["condition", "", *[f"#{i + 1}" for i in range(k)], "episodes per accepted demo"]
+    rows = []
+    for cond, curve in curves.items():
+        cells = [f"{100 * v:.0f}%" for v in curve[:k, 0]] + [""] * (k - min(k, len(curve)))
+        accept = [f"{100 * v:.0f}%" for v in curve[:k, 1]] + [""] * (k - min(k, len(curve)))
+        sessions = _sessions(data, task, model, cond)
+        demos = sum(len(s.demonstrations) for s in sessions)
+        accepted = sum(len(s.accepted) for s in sessions)
+        per = f"{demos / accepted:.1f}" if accepted else "–"
+        rows.append([CONDITION_LABELS[cond], "incompatible", *cells, per])
+        rows.append(["", "rule accepts", *accept, ""])
+    return header, rows
+
+
+def ablation_table(data: StudyData, task: str, model: str) -> Table:
+    """Which part of the interface does the work: nothing (naive), each part alone, all three."""
+    cells = success_cells(data)
+    people = people_of(data, task, model)
+    header = ["shown", "success %", "vs Naive", "rule accepts", "incompatible"]
+    header += ["demos per accepted", "people who changed", "ends as base"]
+    rows = []
+    for cond in ARMS:
+        sessions = _sessions(data, task, model, cond)
+        if not sessions:
+            continue
+        demos = [r for s in sessions for r in s.demonstrations if r["rule_verdict"]]
+        frac = [float(r["fraction_incompatible"]) for r in demos]
+        accepted = sum(len(s.accepted) for s in sessions)
+        changed = sum(1 for s in sessions if _changes(s.person_record) != "none")
+        ends = [base_choices_match(task, s.person_record.get("choices", {})) for s in sessions]
+        rows.append(
+            [
+                CONDITION_LABELS[cond] if cond != "informed" else "All three (informed)",
+                mean_std(list(population_by_seed(cells, task, model, cond, people).values())),
+                "" if cond == "naive" else compare(cells, task, model, cond, "naive").text(),
+                f"{100 * np.mean([r['rule_verdict'] == 'accept' for r in demos]):.0f}%"
+                if demos
+                else "–",
+                f"{100 * np.mean(frac):.1f}%" if frac else "–",
+                f"{len(demos) / accepted:.1f}" if accepted else "–",
+                f"{changed}/{len(sessions)}",
+                f"{sum(1 for e in ends if e)}/{len(sessions)}",
+            ]
+        )
+    return header, rows
+
+
+def dagger_table(data: StudyData) -> Table:
+    """HG-DAgger sessions: success, how much of each episode the person controlled, how often
+    it took over."""
+    cells = success_cells(data)
+    header = ["task", "model", "condition", "success %", "intervention rate"]
+    header += ["interventions per episode", "accepted demos", "operator steps per accepted"]
+    rows = []
+    for task, model in cells_of(data):
+        people = people_of(data, task, model)
+        for cond in ("naive-dagger", "informed-dagger"):
+            sessions = _sessions(data, task, model, cond)
+            if not sessions:
+                continue
+            demos = [r for s in sessions for r in s.demonstrations]
+            rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
+            takes = [r["interventions"] or 0 for r in demos]
+            acc = [r for s in sessions for r in s.accepted]
+            rows.append(
+                [
+                    task,
+                    model,
+                    CONDITION_LABELS[cond],
+                    mean_std(list(population_by_seed(cells, task, model, cond, people).values())),
+                    f"{100 * np.mean(rates):.0f}%" if rates else "–",
+                    f"{np.mean(takes):.1f}" if takes else "–",
+                    str(len(acc)),
+                    f"{np.mean([r['operator_steps'] for r in acc]):.1f}" if acc else "–",
+                ]
+            )
+    return header, rows
+
+
+def filter_table(data: StudyData) -> Table:
+    """What the M-filter kept of each naive session."""
+    header = ["task", "model", "person", "pairs kept", "demos with pairs kept"]
+    rows = [
+        [
+            f.task,
+            f.model,
+            f.person,
+            f"{f.pairs_kept}/{f.pairs_total}"
+            + (f" ({100 * f.pairs_kept / f.pairs_total:.1f}%)" if f.pairs_total else ""),
+            f"{f.episodes_kept}/{f.episodes_total}",
+        ]
+        for f in data.filters
+    ]
+    return header, rows
+
+
+def threshold_table(data: StudyData) -> Table:
+    """The thresholds every session and the M-filter used."""
+    from elicit_jax.pipeline.tables import trust_text
+
+    header = ["task", "model", "λ", "η", "how", "balanced acc.", "trust"]
+    rows = [
+        [
+            task,
+            model,
+            f"{t['lambda']:.4g}",
+            f"{t['eta']:.4g}",
+            "fitted on contrast sets" if t["method"] == "fit" else "set by hand",
+            "–" if t.get("balanced_accuracy") is None else f"{t['balanced_accuracy']:.3g}",
+            trust_text(t.get("trust")),
+        ]
+        for (task, model), t in data.thresholds.items()
+    ]
+    return header, rows
