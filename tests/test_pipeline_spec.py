@@ -31,9 +31,18 @@ MINI = {
 }
 
 
+def _filtering_names() -> list[str]:
+    """Shipped filtering definitions (elicitation studies: tests/test_study_pipeline.py)."""
+    from elicit_jax.pipeline.elicitation.spec import read_kind
+    from elicit_jax.pipeline.spec import resolve_path
+
+    return [n for n in builtin_names() if read_kind(resolve_path(n)) == "filtering"]
+
+
 def test_shipped_definitions_parse_under_both_profiles():
-    assert {"quickstart", "filtering", "models"} <= set(builtin_names())
-    for name in builtin_names():
+    assert {"quickstart", "filtering", "models"} <= set(_filtering_names())
+    assert "elicitation" in builtin_names()
+    for name in _filtering_names():
         for profile in ("cpu", "paper"):
             spec = load_spec(name, profile)
             assert spec.profile == profile
@@ -45,7 +54,7 @@ def test_shipped_definitions_parse_under_both_profiles():
 def test_shipped_definitions_name_real_operators_and_valid_options():
     from elicit_jax.pipeline.stages import resolve_config
 
-    for name in builtin_names():
+    for name in _filtering_names():
         graph = build_graph(load_spec(name, "cpu"), resolve_config)
         assert graph["report"].config["pipeline"] == name
 

@@ -20,6 +20,9 @@ from elicit_jax.artifact import read_header, read_json
 from elicit_jax.pipeline.gather import read_manifest, result_rows
 from elicit_jax.pipeline.tables import ResultRow
 
+PERSON_FILE = "person.json"
+"""Beside a study's session: the person's traits, starting and final choices, every change."""
+
 
 @dataclasses.dataclass(frozen=True)
 class SessionData:
@@ -103,7 +106,6 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
     """A finished session stage's data (None when its person record is not written yet)."""
     from elicit_jax.elicit.progress import summary_row
     from elicit_jax.elicit.store import SessionStore
-    from elicit_jax.pipeline.elicitation.stages import PERSON_FILE
 
     if not (path / PERSON_FILE).exists():
         return None

@@ -14,9 +14,9 @@ from typing import Any
 
 from elicit_jax.artifact import atomic_path, make_header, write_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.elicitation.gather import PERSON_FILE
 from elicit_jax.pipeline.runner import StageContext, StageFn
 
-PERSON_FILE = "person.json"
 _PLACEHOLDERS = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
 _META = ("task", "model", "person", "condition")
 
