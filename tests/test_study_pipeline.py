@@ -180,7 +180,7 @@ def test_table2_and_ablation_by_hand():
         _session("naive", "p0", [100, 120], [0.2, 0.4], [False, False]),
         _session("informed", "p0", [90, 80, 70], [0.3, 0.0, 0.0], [False, True, True]),
     )
-    data = StudyData("s", "cpu", "", "", "", tuple(results), sessions, {"t": (80.0, 5.0, 10)},
+    data = StudyData("s", "cpu", "", "", "", tuple(results), sessions, {"t": (80.0, 5.0, 10)}, {},
                      {}, (), {}, {})  # fmt: skip
     header, (row,) = table2(data)
     cols = dict(zip(header, row, strict=True))
@@ -196,6 +196,7 @@ def test_table2_and_ablation_by_hand():
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"
     assert informed["rule accepts"] == "67%" and informed["demos per accepted"] == "1.5"
+    assert informed["ends as base"] == "–"  # no D_base states to compare styles on
     lengths = {r[2]: r for r in length_table(data)[1]}
     assert lengths["Informed"][4] == "75.0 (5.0)" and lengths["Informed"][5] == "-6.2%"
     assert lengths["D_base"][4] == "80.0 (5.0)"

@@ -87,6 +87,7 @@ class StudyData:
     results: tuple[ResultRow, ...]
     sessions: tuple[SessionData, ...]
     base_lengths: Mapping[str, tuple[float, float, int]]
+    base_states: Mapping[str, tuple[Any, ...]]
     thresholds: Mapping[tuple[str, str], Mapping[str, Any]]
     filters: tuple[FilterCount, ...]
     configs: Mapping[str, Any]
@@ -100,6 +101,14 @@ def _lengths(path: Path) -> tuple[float, float, int]:
     episode = pq.read_table(path, columns=["episode"]).column("episode").to_numpy()
     _, counts = np.unique(episode, return_counts=True)
     return float(counts.mean()), float(counts.std()), int(counts.size)
+
+
+def _first_states(path: Path, n: int = 3) -> tuple[Any, ...]:
+    """States ``(T, O)`` of D_base's first ``n`` demonstrations (to compare styles on)."""
+    from elicit_jax.data.demos import read_demos
+
+    demos = read_demos(path)
+    return tuple(np.asarray(demos.obs[s:t]) for _, s, t in list(demos.episode_bounds())[:n])
 
 
 def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
@@ -134,6 +143,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
     sessions: list[SessionData] = []
     filters: list[FilterCount] = []
     base_lengths: dict[str, tuple[float, float, int]] = {}
+    base_states: dict[str, tuple[Any, ...]] = {}
     thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
@@ -155,6 +165,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
                 sessions.append(data)
         elif kind == "collect" and cfg.get("role") == "base":
             base_lengths[cfg["collect"]["task"]] = _lengths(path)
+            base_states[cfg["collect"]["task"]] = _first_states(path)
         elif kind == "fit-thresholds":
             data = read_json(path)
             report = dict(data.get("report", {}))
@@ -194,6 +205,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
         results=tuple(results),
         sessions=tuple(sessions),
         base_lengths=base_lengths,
+        base_states=base_states,
         thresholds=thresholds,
         filters=tuple(filters),
         configs=configs,

@@ -175,22 +175,41 @@ def _value(v: Any) -> str:
     return str(v)
 
 
-def base_choices_match(task: str, choices: Mapping[str, Any]) -> bool | None:
-    """Whether ``choices`` equal the base operator's (the report's check, never a person's)."""
-    from elicit_jax.elicit.people.imagine import same_value
+def acts_as_base(data: StudyData, task: str, choices: Mapping[str, Any]) -> bool | None:
+    """Whether a person with ``choices`` acts as the base operator's style does: both imagined
+    (noise-free, the base's motor parameters) along D_base's first states give the same
+    actions. The report's check, never a person's: it reads the base style. None when D_base
+    or the base style is not available."""
+    from elicit_jax.elicit.people.imagine import calm, imagine
     from elicit_jax.errors import ElicitError
+    from elicit_jax.sim.env import make_task
     from elicit_jax.sim.operators import style_of
 
+    states = data.base_states.get(task)
+    if not states:
+        return None
     try:
-        base = dict(style_of(task, "base").choices)
+        base = style_of(task, "base")
     except ElicitError:
         return None
-    return set(base) == set(choices) and all(same_value(base[k], choices[k]) for k in base)
+    key = (task, repr(sorted((k, repr(v)) for k, v in choices.items())))
+    if key not in _ACTS_AS_BASE:
+        sim = make_task(task)
+        own = {k: tuple(v) if isinstance(v, list) else v for k, v in choices.items()}
+        mine = imagine(sim, calm(base, own), list(states))
+        theirs = imagine(sim, calm(base, dict(base.choices)), list(states))
+        _ACTS_AS_BASE[key] = all(
+            np.allclose(a, b, atol=1e-6) for a, b in zip(mine, theirs, strict=True)
+        )
+    return _ACTS_AS_BASE[key]
+
+
+_ACTS_AS_BASE: dict[tuple[str, str], bool] = {}
 
 
 def person_table(data: StudyData, task: str, model: str) -> Table:
     """Per person: starting style, traits, success per condition, what the informed session
-    changed and whether it ends with the base operator's choices."""
+    changed and whether it ends acting as the base operator's style does."""
     cells = success_cells(data)
     conds = [
         c for c in CONDITION_LABELS if c != "base" and any(k[:3] == (task, model, c) for k in cells)
@@ -210,7 +229,7 @@ def person_table(data: StudyData, task: str, model: str) -> Table:
             demos = informed.demonstrations
             row.append(f"{len(informed.accepted)} / {len(demos)}")
             row.append(_changes(informed.person_record))
-            match = base_choices_match(task, informed.person_record.get("choices", {}))
+            match = acts_as_base(data, task, informed.person_record.get("choices", {}))
             row.append("–" if match is None else "yes" if match else "no")
         else:
             row += ["–", "–", "–"]
@@ -240,7 +259,8 @@ def length_table(data: StudyData) -> Table:
             lens = [float(r[key]) for s in _sessions(data, task, model, cond) for r in s.accepted]
             if not lens:
                 continue
-            vs = f"{100 * (np.mean(lens) / base[0] - 1):+.1f}%" if base else "–"
+            comparable = base and key == "length"  # DAgger: interventions, not whole demos
+            vs = f"{100 * (np.mean(lens) / base[0] - 1):+.1f}%" if comparable else "–"
             label = CONDITION_LABELS[cond] + (" (operator steps)" if key != "length" else "")
             rows.append(
                 [
@@ -311,7 +331,7 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
         frac = [float(r["fraction_incompatible"]) for r in demos]
         accepted = sum(len(s.accepted) for s in sessions)
         changed = sum(1 for s in sessions if _changes(s.person_record) != "none")
-        ends = [base_choices_match(task, s.person_record.get("choices", {})) for s in sessions]
+        ends = [acts_as_base(data, task, s.person_record.get("choices", {})) for s in sessions]
         rows.append(
             [
                 CONDITION_LABELS[cond] if cond != "informed" else "All three (informed)",
@@ -323,7 +343,7 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
                 f"{100 * np.mean(frac):.1f}%" if frac else "–",
                 f"{len(demos) / accepted:.1f}" if accepted else "–",
                 f"{changed}/{len(sessions)}",
-                f"{sum(1 for e in ends if e)}/{len(sessions)}",
+                "–" if None in ends else f"{sum(ends)}/{len(sessions)}",
             ]
         )
     return header, rows
