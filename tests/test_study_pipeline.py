@@ -9,7 +9,6 @@ report; a re-run does nothing; deleting a session re-runs it and what depends on
 from __future__ import annotations
 
 import io
-import math
 import shutil
 
 import numpy as np
@@ -24,7 +23,6 @@ from elicit_jax.pipeline.elicitation.tables import (
     ablation_table,
     compare,
     length_table,
-    paired_interval,
     success_cells,
     table2,
 )
@@ -136,16 +134,6 @@ def test_unknown_session_option_is_reported_before_anything_runs():
         build_study_graph(spec, resolve_study_config)
 
 
-def test_paired_interval_by_hand():
-    d = paired_interval([10.0, 30.0, 20.0], [0.0, 10.0, 20.0])  # differences 10, 20, 0
-    half = 4.302652729911275 * 10.0 / math.sqrt(3)  # t(0.975, 2) × sd / √n
-    assert (d.mean, d.n) == (10.0, 3)
-    assert d.low == pytest.approx(10.0 - half) and d.high == pytest.approx(10.0 + half)
-    assert "*" not in d.text()
-    assert paired_interval([5.0, 6.0], [1.0, 2.0]).text().endswith("*")  # sd 0: beyond noise
-    assert "no interval" in paired_interval([1.0], [0.0]).text()
-
-
 def _result(method, person, seed, success):
     return ResultRow("t", "mlp", method, person, seed, success, 50.0, 50, "best")
 
@@ -188,10 +176,14 @@ def test_table2_and_ablation_by_hand():
     assert cols["Base"] == "30.0 (10.0)" and cols["Naive"] == "20.0 (5.0)"
     # informed per seed: mean(50, 40)=45, mean(30, 60)=45 → 45 (0)
     assert cols["Informed"] == "45.0 (0.0)" and cols["Naive + M-filtered"] == "–"
-    # per person, informed − naive: p0 40 − 20 = 20, p1 50 − 20 = 30 → mean 25
+    # per person, informed − naive: p0 .40 − .20 = .20, p1 .50 − .20 = .30 → mean .25, paired
+    # over the 2 people: ± t(0.975, 1) × sd(.2, .3) / √2 = 12.706 × 0.0707 / 1.414 = 0.635
     diff = compare(success_cells(data), "t", "mlp", "informed", "naive")
-    assert diff.mean == pytest.approx(25.0) and diff.n == 2
-    assert cols["Informed − Naive"] == diff.text()
+    assert diff.mean == pytest.approx(0.25) and diff.n == 2
+    assert diff.high - diff.mean == pytest.approx(12.7062 * 0.05, rel=1e-4)
+    assert cols["Informed − Naive"] == "+25.0 [-38.5, +88.5]"
+    one = compare(success_cells(data), "t", "mlp", "informed", "base")  # vs base: p0 +10, p1 +20
+    assert one.mean == pytest.approx(0.15)
     header, rows = ablation_table(data, "t", "mlp")
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"

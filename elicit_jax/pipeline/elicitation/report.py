@@ -19,6 +19,7 @@ from elicit_jax.pipeline.elicitation.tables import (
     cells_of,
     compare,
     dagger_table,
+    diff_text,
     filter_table,
     learning_curves,
     learning_table,
@@ -49,12 +50,15 @@ def _verdicts(data: StudyData) -> list[str]:
     out = []
     for task, model in cells_of(data):
         d = compare(cells, task, model, "informed", "naive")
-        if d.n == 0:
+        if d is None:
             continue
-        beyond = d.n > 1 and not np.isnan(d.low) and (d.low > 0 or d.high < 0)
         out.append(
-            f"**{task}** ({model}): informed − naive = {d.text()} points over {d.n} people — "
-            + ("beyond the noise." if beyond else "inside the noise (not a demonstrated effect).")
+            f"**{task}** ({model}): informed − naive = {diff_text(d)} points over {d.n} people — "
+            + (
+                "beyond the noise."
+                if d.excludes_zero
+                else "inside the noise (not a demonstrated effect)."
+            )
         )
     return out
 

@@ -3,21 +3,21 @@
 Success of a condition (the paper's Table 2 cells): per training seed, the mean over the
 population of each person's policy success (best checkpoint per seed, 50 rollouts), then
 mean (std) over seeds (std with ddof 0, as the filtering report). Differences between two
-conditions are paired by person: each person's difference of mean success over seeds, with a
-95% Student t interval over people (:func:`paired_interval`) — the person is the unit a user
-study replicates; the interval includes the training-seed noise through each person's mean.
+conditions are paired by person: each person's difference of mean success over seeds, with
+the pipeline's paired 95% Student t interval
+(:func:`~elicit_jax.pipeline.stats.paired_t_interval`), here over people — the person is the
+unit a user study replicates; the training-seed noise enters through each person's mean.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
+from elicit_jax.pipeline.stats import PairedDiff, format_diff, paired_t_interval
 from elicit_jax.pipeline.tables import Table, mean_std
 
 CONDITION_LABELS = {
@@ -37,36 +37,14 @@ CURVE_ATTEMPTS = 10
 """Demonstration attempts shown in the learning-curve table."""
 
 
-@dataclasses.dataclass(frozen=True)
-class Interval:
-    """Mean paired difference (points) and its 95% interval; NaN ends with under 2 people."""
-
-    mean: float
-    low: float
-    high: float
-    n: int
-
-    def text(self) -> str:
-        if self.n == 0:
-            return "–"
-        if self.n < 2 or math.isnan(self.low):
-            return f"{self.mean:+.1f} (n={self.n}, no interval)"
-        mark = " *" if self.low > 0 or self.high < 0 else ""
-        return f"{self.mean:+.1f} [{self.low:+.1f}, {self.high:+.1f}]{mark}"
-
-
-def paired_interval(a: Sequence[float], b: Sequence[float], level: float = 0.95) -> Interval:
-    """Mean of ``a − b`` (paired by position) with a Student t interval (ddof 1)."""
-    from scipy.stats import t
-
-    d = np.asarray(a, float) - np.asarray(b, float)
-    n = int(d.size)
-    if n == 0:
-        return Interval(math.nan, math.nan, math.nan, 0)
-    if n == 1:
-        return Interval(float(d[0]), math.nan, math.nan, 1)
-    half = float(t.ppf(0.5 + level / 2, n - 1)) * float(d.std(ddof=1)) / math.sqrt(n)
-    return Interval(float(d.mean()), float(d.mean()) - half, float(d.mean()) + half, n)
+def diff_text(diff: PairedDiff | None) -> str:
+    """A paired difference in points, ``+10.0 [−5.2, +25.2]`` (``*``: the interval excludes
+    0), as :func:`~elicit_jax.pipeline.stats.format_diff` writes it; one person: no interval."""
+    if diff is None:
+        return "–"
+    if diff.n < 2:
+        return f"{100 * diff.mean:+.1f} (1 person, no interval)"
+    return format_diff(diff)
 
 
 def success_cells(data: StudyData) -> dict[tuple, dict[int, float]]:
@@ -115,18 +93,21 @@ def person_means(
 
 def compare(
     cells: Mapping[tuple, Mapping[int, float]], task: str, model: str, a: str, b: str
-) -> Interval:
-    """``a − b`` in success points, paired by person (``b`` may be ``base``)."""
+) -> PairedDiff | None:
+    """``a − b`` in success (fraction), paired by person (``b`` may be ``base``); None when no
+    person has both."""
     ma = person_means(cells, task, model, a)
     if b == "base":
         base = cells.get((task, model, "base", None), {})
         if not base:
-            return Interval(math.nan, math.nan, math.nan, 0)
+            return None
         mb = dict.fromkeys(ma, float(np.mean(list(base.values()))))
     else:
         mb = person_means(cells, task, model, b)
     common = sorted(set(ma) & set(mb))
-    return paired_interval([100 * ma[p] for p in common], [100 * mb[p] for p in common])
+    if not common:
+        return None
+    return paired_t_interval([ma[p] for p in common], [mb[p] for p in common])
 
 
 def table2(data: StudyData) -> Table:
@@ -142,8 +123,8 @@ def table2(data: StudyData) -> Table:
             row.append(
                 mean_std(list(population_by_seed(cells, task, model, cond, people).values()))
             )
-        row.append(compare(cells, task, model, "informed", "naive").text())
-        row.append(compare(cells, task, model, "informed", "base").text())
+        row.append(diff_text(compare(cells, task, model, "informed", "naive")))
+        row.append(diff_text(compare(cells, task, model, "informed", "base")))
         row.append(str(len(people)))
         rows.append(row)
     return header, rows
@@ -336,7 +317,7 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
             [
                 CONDITION_LABELS[cond] if cond != "informed" else "All three (informed)",
                 mean_std(list(population_by_seed(cells, task, model, cond, people).values())),
-                "" if cond == "naive" else compare(cells, task, model, cond, "naive").text(),
+                "" if cond == "naive" else diff_text(compare(cells, task, model, cond, "naive")),
                 f"{100 * np.mean([r['rule_verdict'] == 'accept' for r in demos]):.0f}%"
                 if demos
                 else "–",
