@@ -3,6 +3,17 @@
 The tests step MJX, so XLA's CPU pool gets the threads MJX needs (``mjx=True``).
 """
 
+import pytest
+
 from elicit_jax.runtime import configure
 
 configure(mjx=True)
+
+
+@pytest.fixture(scope="session")
+def square_nut_session_inputs(tmp_path_factory):
+    """Square-nut D_base, a tiny base policy and fitted (λ, η), built once for every session
+    test module (:func:`fixtures_data.square_nut_session_inputs`); tests only read them."""
+    from fixtures_data import square_nut_session_inputs
+
+    return square_nut_session_inputs(tmp_path_factory.mktemp("square-nut-session"))

@@ -18,6 +18,7 @@ against ourselves:
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from pathlib import Path
@@ -525,3 +526,50 @@ def tiny_run(d: Path, **overrides) -> Path:
     write_demos(d / "demos.parquet", demos)
     train_policy(demos, tiny_train_config(**overrides), d / "run", quiet=True)
     return d
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionInputs:
+    """What an elicitation session needs: D_base, the base policy and the fitted (λ, η)."""
+
+    base: Path
+    policy: Path
+    lam: float
+    eta: float
+
+
+def square_nut_session_inputs(d: Path) -> SessionInputs:
+    """The square-nut session tests' inputs in ``d``: D_base (10 base demos), a tiny base
+    policy (3 × 64-64, 40 epochs) and (λ, η) fitted, with the library's ``fit_thresholds``,
+    on 3 same-style and 3 conflict-flip-pause demos from other initial states (which the fit
+    must separate perfectly)."""
+    from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score import score_demos
+    from elicit_jax.compat.thresholds import fit_thresholds
+    from elicit_jax.data.demos import concat_demos, from_episodes, read_demos
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.train import train_policy
+    from elicit_jax.sim.collect import CollectConfig, collect, collect_episodes
+    from elicit_jax.sim.env import make_task
+
+    collect(
+        CollectConfig(task="square-nut", operator="base", episodes=10, seed=0), d / "base.parquet"
+    )
+    cfg = TrainConfig.from_profile(
+        "cpu", hidden=(64, 64), ensemble_size=3, epochs=40, checkpoint_every=20, progress_every=20
+    )
+    train_policy(read_demos(d / "base.parquet"), cfg, d / "base_run", quiet=True)
+    task = make_task("square-nut")
+    parts = []
+    for op in ("same-style", "conflict-flip-pause"):
+        r = collect_episodes(
+            CollectConfig(task="square-nut", operator=op, episodes=3, seed=7, batch=3)
+        )
+        parts.append(from_episodes(r.episodes, operators=op, obs_fields=task.obs_fields))
+    contrast = concat_demos(parts)
+    scores = score_demos(load_policy(d / "base_run"), contrast, ScoreConfig())
+    labels = {e: op == "same-style" for e, op in contrast.episode_operator().items()}
+    fit = fit_thresholds(scores["likelihood"], scores["novelty"], contrast.episode, labels)
+    assert fit.balanced_accuracy == 1.0
+    return SessionInputs(d / "base.parquet", d / "base_run", fit.lambda_, fit.eta)

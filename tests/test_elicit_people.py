@@ -10,12 +10,11 @@ feedback is not shown, nothing in naive mode, and resumes as if never interrupte
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
-from pathlib import Path
 
 import numpy as np
 import pytest
+from fixtures_data import SessionInputs
 
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
@@ -179,46 +178,10 @@ def test_naive_person_only_gets_practice(states):
 
 
 # --- sessions ---------------------------------------------------------------------------------
-@dataclasses.dataclass
-class Nut:
-    base: Path
-    policy: Path
-    lam: float
-    eta: float
-
-
 @pytest.fixture(scope="module")
-def nut(tmp_path_factory) -> Nut:
-    from elicit_jax.compat.measures import ScoreConfig
-    from elicit_jax.compat.score import score_demos
-    from elicit_jax.compat.thresholds import fit_thresholds
-    from elicit_jax.data.demos import concat_demos, from_episodes, read_demos
-    from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.policy.config import TrainConfig
-    from elicit_jax.policy.train import train_policy
-    from elicit_jax.sim.collect import CollectConfig, collect, collect_episodes
-    from elicit_jax.sim.env import make_task
-
-    d = tmp_path_factory.mktemp("people")
-    collect(
-        CollectConfig(task="square-nut", operator="base", episodes=10, seed=0), d / "base.parquet"
-    )
-    cfg = TrainConfig.from_profile(
-        "cpu", hidden=(64, 64), ensemble_size=3, epochs=40, checkpoint_every=20, progress_every=20
-    )
-    train_policy(read_demos(d / "base.parquet"), cfg, d / "base_run", quiet=True)
-    task = make_task("square-nut")
-    parts = []
-    for op in ("same-style", "conflict-flip-pause"):
-        r = collect_episodes(
-            CollectConfig(task="square-nut", operator=op, episodes=3, seed=7, batch=3)
-        )
-        parts.append(from_episodes(r.episodes, operators=op, obs_fields=task.obs_fields))
-    contrast = concat_demos(parts)
-    scores = score_demos(load_policy(d / "base_run"), contrast, ScoreConfig())
-    labels = {e: op == "same-style" for e, op in contrast.episode_operator().items()}
-    fit = fit_thresholds(scores["likelihood"], scores["novelty"], contrast.episode, labels)
-    return Nut(d / "base.parquet", d / "base_run", fit.lambda_, fit.eta)
+def nut(square_nut_session_inputs) -> SessionInputs:
+    """D_base, base policy and (λ, η) of square-nut, shared with the other session tests."""
+    return square_nut_session_inputs
 
 
 class Watcher:

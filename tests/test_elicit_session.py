@@ -9,7 +9,6 @@ conflicting style is not", not on their exact motions.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import shutil
 import signal
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fixtures_data import SessionInputs
 
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
@@ -34,48 +34,10 @@ from elicit_jax.elicit.store import SessionStore
 from elicit_jax.errors import ElicitError
 
 
-@dataclasses.dataclass
-class Nut:
-    dir: Path
-    base: Path
-    policy: Path
-    lam: float
-    eta: float
-
-
 @pytest.fixture(scope="module")
-def nut(tmp_path_factory) -> Nut:
-    from elicit_jax.compat.measures import ScoreConfig
-    from elicit_jax.compat.score import score_demos
-    from elicit_jax.compat.thresholds import fit_thresholds
-    from elicit_jax.data.demos import concat_demos, from_episodes, read_demos
-    from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.policy.config import TrainConfig
-    from elicit_jax.policy.train import train_policy
-    from elicit_jax.sim.collect import CollectConfig, collect, collect_episodes
-    from elicit_jax.sim.env import make_task
-
-    d = tmp_path_factory.mktemp("nut")
-    collect(
-        CollectConfig(task="square-nut", operator="base", episodes=10, seed=0), d / "base.parquet"
-    )
-    cfg = TrainConfig.from_profile(
-        "cpu", hidden=(64, 64), ensemble_size=3, epochs=40, checkpoint_every=20, progress_every=20
-    )
-    train_policy(read_demos(d / "base.parquet"), cfg, d / "base_run", quiet=True)
-    task = make_task("square-nut")
-    parts = []
-    for op in ("same-style", "conflict-flip-pause"):
-        r = collect_episodes(
-            CollectConfig(task="square-nut", operator=op, episodes=3, seed=7, batch=3)
-        )
-        parts.append(from_episodes(r.episodes, operators=op, obs_fields=task.obs_fields))
-    contrast = concat_demos(parts)
-    scores = score_demos(load_policy(d / "base_run"), contrast, ScoreConfig())
-    labels = {e: op == "same-style" for e, op in contrast.episode_operator().items()}
-    fit = fit_thresholds(scores["likelihood"], scores["novelty"], contrast.episode, labels)
-    assert fit.balanced_accuracy == 1.0
-    return Nut(d, d / "base.parquet", d / "base_run", fit.lambda_, fit.eta)
+def nut(square_nut_session_inputs) -> SessionInputs:
+    """D_base, base policy and (λ, η) of square-nut, shared with the other session tests."""
+    return square_nut_session_inputs
 
 
 class Recorder:
@@ -95,7 +57,7 @@ class Recorder:
         return [e for e in self.events if isinstance(e, kind)]
 
 
-def _config(nut: Nut, operator: str, **kw) -> SessionConfig:
+def _config(nut: SessionInputs, operator: str, **kw) -> SessionConfig:
     base = dict(
         task="square-nut",
         policy=str(nut.policy),
@@ -111,7 +73,7 @@ def _config(nut: Nut, operator: str, **kw) -> SessionConfig:
     return SessionConfig(**{**base, **kw})
 
 
-def _run(nut: Nut, out: Path, operator: str, **kw):
+def _run(nut: SessionInputs, out: Path, operator: str, **kw):
     setup, op, _ = open_session(_config(nut, operator, **kw), out)
     rec = Recorder(op)
     return run_session(setup, rec), rec

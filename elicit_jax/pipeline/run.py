@@ -194,21 +194,25 @@ def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str,
 
 def print_results(run_dir: Path, console: Any) -> None:
     """Print the run's result tables (paper layout) from its finished artifacts."""
-    from rich.table import Table
-
     from elicit_jax.pipeline.tables import models_table, results_tables
 
     if _is_study(run_dir):
         return _print_study(run_dir, console)
     data = gather(run_dir)
-    for title, (header, rows) in results_tables(data) + models_table(data):
+    _print_tables(results_tables(data) + models_table(data), data.notes, console)
+
+
+def _print_tables(tables: list, notes: Any, console: Any) -> None:
+    from rich.table import Table
+
+    for title, (header, rows) in tables:
         table = Table(title=title)
         for col in header:
             table.add_column(col)
         for row in rows:
             table.add_row(*row)
         console.print(table)
-    for note in data.notes:
+    for note in notes:
         console.print(f"[yellow]{note}[/]")
 
 
@@ -221,23 +225,13 @@ def _is_study(run_dir: Path) -> bool:
 
 def _print_study(run_dir: Path, console: Any) -> None:
     """Print an elicitation study's Table 2 and, per task, its ablation."""
-    from rich.table import Table
-
     from elicit_jax.pipeline.elicitation.gather import gather_study
     from elicit_jax.pipeline.elicitation.tables import ablation_table, cells_of, table2
 
     data = gather_study(run_dir)
     tables = [("Base / Naive / Naive + M-filtered / Informed (success %)", table2(data))]
     tables += [(f"{t} ({m}): ablation", ablation_table(data, t, m)) for t, m in cells_of(data)]
-    for title, (header, rows) in tables:
-        table = Table(title=title)
-        for col in header:
-            table.add_column(col)
-        for row in rows:
-            table.add_row(*row)
-        console.print(table)
-    for note in data.notes:
-        console.print(f"[yellow]{note}[/]")
+    _print_tables(tables, data.notes, console)
 
 
 def render_run_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:

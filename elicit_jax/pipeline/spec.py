@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -193,6 +193,7 @@ def load_spec(
     name_or_path: str | Path,
     profile: str | None = None,
     tasks: tuple[str, ...] | None = None,
+    parse: Callable[..., Any] | None = None,
 ) -> PipelineSpec:
     """Read and validate a pipeline definition.
 
@@ -200,6 +201,8 @@ def load_spec(
       name_or_path: a TOML file, or the name of a shipped definition.
       profile: ``paper`` or ``cpu``; default: the file's ``[pipeline] profile``.
       tasks: run only these of the definition's tasks (default: all).
+      parse: ``(data, *, source, text, profile) -> spec`` (default :func:`parse_spec`; an
+        elicitation study passes its own).
 
     Raises:
       ElicitError: one line naming the file and the offending key.
@@ -210,7 +213,7 @@ def load_spec(
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ElicitError(f"malformed TOML ({e})", path) from e
-    spec = parse_spec(data, source=str(path), text=text, profile=profile)
+    spec = (parse or parse_spec)(data, source=str(path), text=text, profile=profile)
     if tasks:
         known = [t.name for t in spec.tasks]
         unknown = [t for t in tasks if t not in known]

@@ -27,7 +27,7 @@ from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.spec import PROFILES, _check_keys, _table, _task_table, resolve_path
+from elicit_jax.pipeline.spec import PROFILES, _check_keys, _table, _task_table, load_spec
 
 KIND = "elicitation"
 CONDITIONS = ("naive", "filtered", "informed")
@@ -133,23 +133,7 @@ def load_study(
     Raises:
       ElicitError: one line naming the file and the offending key.
     """
-    path = resolve_path(name_or_path)
-    text = path.read_text()
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ElicitError(f"malformed TOML ({e})", path) from e
-    spec = parse_study(data, source=str(path), text=text, profile=profile)
-    if tasks:
-        known = [t.name for t in spec.tasks]
-        unknown = [t for t in tasks if t not in known]
-        if unknown:
-            raise ElicitError(
-                f"no task {', '.join(unknown)} in this definition (it has {', '.join(known)})",
-                path,
-            )
-        spec = dataclasses.replace(spec, tasks=tuple(t for t in spec.tasks if t.name in tasks))
-    return spec
+    return load_spec(name_or_path, profile, tasks, parse=parse_study)  # type: ignore[return-value]
 
 
 def _names(head: Mapping[str, Any], key: str, allowed: tuple[str, ...], source: str) -> tuple:
