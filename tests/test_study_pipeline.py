@@ -110,7 +110,12 @@ def test_shipped_definition_and_its_graph():
         "session/round-nut/mlp/informed/p3"
     )
     paper = load_study("pipelines/elicitation.toml", "paper")
-    assert [t.name for t in paper.tasks] == ["round-nut", "hammer-drawer", "square-nut"]
+    assert [t.name for t in paper.tasks] == [
+        "round-nut",
+        "hammer-drawer",
+        "square-nut",
+        "reach-pillar",
+    ]
 
 
 @pytest.mark.parametrize(
