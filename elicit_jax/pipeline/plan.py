@@ -45,6 +45,52 @@ def collect_seed(spec: PipelineSpec, task: TaskSpec, role: str) -> int:
     return spec.collect_seed + NEW_SEED_OFFSET + task.operators.index(role)
 
 
+def threshold_stages(
+    spec: Any, task: Any, model: str, base_policy: str, resolve: ConfigResolver
+) -> tuple[Stage, Stage]:
+    """Score the contrast sets (held-out base demos, the known-incompatible operator's demos)
+    with the first seed's base policy of stage ``base_policy``, and fit (λ, η) on them.
+
+    ``spec`` and ``task`` are a filtering pipeline's or an elicitation study's: both have
+    ``seeds``, ``collect_seed`` and ``section``, and ``name``, ``base_operator`` and
+    ``incompatible_operator``.
+    """
+    t = task.name
+    cell, where = f"{t}/{model}", {"task": t, "model": model}
+    score_raw = {**spec.section("score"), **where, "policy_seed": spec.seeds[0]}
+    contrast = Stage(
+        id=f"score/{cell}/contrast",
+        kind="score",
+        output=f"scores/{cell}/contrast",
+        config=resolve("score", {**score_raw, "set": "contrast"}),
+        inputs={
+            "policy": base_policy,
+            "demos0": f"collect/{t}/holdout",
+            "demos1": f"collect/{t}/incompatible",
+        },
+        label=f"score {t} {model} contrast sets",
+    )
+    fit = Stage(
+        id=f"fit-thresholds/{cell}",
+        kind="fit-thresholds",
+        output=f"thresholds/{cell}.json",
+        config=resolve(
+            "fit-thresholds",
+            {
+                **spec.section("thresholds"),
+                **where,
+                "compatible_operator": task.base_operator,
+                "incompatible_operator": task.incompatible_operator,
+                "holdout_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["holdout"],
+                "incompatible_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["incompatible"],
+            },
+        ),
+        inputs={"scores": contrast.id},
+        label=f"fit thresholds {t} {model}",
+    )
+    return contrast, fit
+
+
 def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Graph:
     """The stage graph of ``spec``.
 
@@ -267,36 +313,7 @@ def _cell_stages(
     if not needs_scores:
         return stages
     score_raw = {**spec.section("score"), **c.where, "policy_seed": spec.seeds[0]}
-    contrast = Stage(
-        id=f"score/{c.cell}/contrast",
-        kind="score",
-        output=f"scores/{c.cell}/contrast",
-        config=resolve("score", {**score_raw, "set": "contrast"}),
-        inputs={
-            "policy": base.id,
-            "demos0": f"collect/{c.t}/holdout",
-            "demos1": f"collect/{c.t}/incompatible",
-        },
-        label=f"score {c.t} {model} contrast sets",
-    )
-    fit = Stage(
-        id=f"fit-thresholds/{c.cell}",
-        kind="fit-thresholds",
-        output=f"thresholds/{c.cell}.json",
-        config=resolve(
-            "fit-thresholds",
-            {
-                **spec.section("thresholds"),
-                **c.where,
-                "compatible_operator": task.base_operator,
-                "incompatible_operator": task.incompatible_operator,
-                "holdout_seed": collect_seed(spec, task, "holdout"),
-                "incompatible_seed": collect_seed(spec, task, "incompatible"),
-            },
-        ),
-        inputs={"scores": contrast.id},
-        label=f"fit thresholds {c.t} {model}",
-    )
+    contrast, fit = threshold_stages(spec, task, model, base.id, resolve)
     stages += [contrast, fit]
     map_inputs = {"thresholds": fit.id, "scores:contrast": contrast.id}
     scores: dict[str, Stage] = {}

@@ -19,7 +19,7 @@ from typing import Any
 
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
 from elicit_jax.pipeline.graph import Graph, Stage
-from elicit_jax.pipeline.plan import COLLECT_SEED_OFFSETS
+from elicit_jax.pipeline.plan import COLLECT_SEED_OFFSETS, threshold_stages
 
 ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
@@ -142,37 +142,7 @@ def _cell_stages(
 
     stages = train("base", None, {})
     base = stages[0]
-    score_raw = {**spec.section("score"), **where, "policy_seed": seeds[0]}
-    contrast = Stage(
-        id=f"score/{cell}/contrast",
-        kind="score",
-        output=f"scores/{cell}/contrast",
-        config=resolve("score", {**score_raw, "set": "contrast"}),
-        inputs={
-            "policy": base.id,
-            "demos0": f"collect/{t}/holdout",
-            "demos1": f"collect/{t}/incompatible",
-        },
-        label=f"score {t} {model} contrast sets",
-    )
-    fit = Stage(
-        id=f"fit-thresholds/{cell}",
-        kind="fit-thresholds",
-        output=f"thresholds/{cell}.json",
-        config=resolve(
-            "fit-thresholds",
-            {
-                **spec.section("thresholds"),
-                **where,
-                "compatible_operator": task.base_operator,
-                "incompatible_operator": task.incompatible_operator,
-                "holdout_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["holdout"],
-                "incompatible_seed": spec.collect_seed + COLLECT_SEED_OFFSETS["incompatible"],
-            },
-        ),
-        inputs={"scores": contrast.id},
-        label=f"fit thresholds {t} {model}",
-    )
+    contrast, fit = threshold_stages(spec, task, model, base.id, resolve)
     stages += [contrast, fit]
     modes = session_modes(spec, task)
     for index, person in enumerate(task.people):
