@@ -6,7 +6,12 @@ import math
 
 import pytest
 
-from elicit_jax.pipeline.stats import format_diff, paired_t_interval, t_quantile
+from elicit_jax.pipeline.stats import (
+    format_diff,
+    paired_t_interval,
+    t_quantile,
+    welch_t_interval,
+)
 from elicit_jax.pipeline.tables import ReportData, ResultRow, difference_tables, paired_diff
 
 
@@ -20,6 +25,18 @@ def test_t_interval_by_hand():
     assert d.high == pytest.approx(0.1 + 0.152072, abs=1e-6)
     assert not d.excludes_zero
     assert format_diff(d) == "+10.0 [-5.2, +25.2]"
+
+
+def test_welch_interval_adds_the_reference_spread():
+    # one reference value: the one-sample t interval of a − 0.5 (a: .6, .7, .8 → sd .1)
+    one = welch_t_interval([0.6, 0.7, 0.8], [0.5])
+    assert one.mean == pytest.approx(0.2)
+    assert one.high - one.mean == pytest.approx(4.3027 * 0.1 / math.sqrt(3), rel=1e-4)
+    # equal spreads and sizes: se √(2 × .01 / 3), df = 4 → t(0.975, 4) = 2.7764
+    two = welch_t_interval([0.6, 0.7, 0.8], [0.4, 0.5, 0.6])
+    assert two.high - two.mean == pytest.approx(2.7764 * math.sqrt(0.02 / 3), rel=1e-4)
+    assert not one.excludes_zero and welch_t_interval([0.8, 0.9, 1.0], [0.1]).excludes_zero
+    assert math.isnan(welch_t_interval([0.6], [0.4, 0.5]).low)
 
 
 def test_interval_excluding_zero_is_marked_and_one_seed_has_none():

@@ -192,6 +192,10 @@ def test_table2_and_ablation_by_hand():
     assert cols["Informed − Naive"] == "+25.0 [-38.5, +88.5]"
     one = compare(success_cells(data), "t", "mlp", "informed", "base")  # vs base: p0 +10, p1 +20
     assert one.mean == pytest.approx(0.15)
+    # Welch: people .40, .50 → var/n .005/2; base seeds .2, .4 → .02/2; se √.0125;
+    # df = .0125² / (.0025² / 1 + .01² / 1) = 1.4706, t(0.975, 1.4706) = 6.1881 (scipy)
+    assert one.high - one.mean == pytest.approx(6.1881 * 0.0125**0.5, rel=1e-4)
+    assert not one.excludes_zero
     header, rows = ablation_table(data, "t", "mlp")
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"

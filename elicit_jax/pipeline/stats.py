@@ -50,7 +50,7 @@ class PairedDiff:
         return self.n > 1 and (self.low > 0 or self.high < 0)
 
 
-def t_quantile(df: int, level: float = LEVEL) -> float:
+def t_quantile(df: float, level: float = LEVEL) -> float:
     """Two-sided Student t quantile ``t((1 + level) / 2, df)``."""
     from scipy.stats import t
 
@@ -73,6 +73,34 @@ def paired_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEV
     if n == 1:
         return PairedDiff(mean, math.nan, math.nan, 1)
     half = t_quantile(n - 1, level) * float(d.std(ddof=1)) / math.sqrt(n)
+    return PairedDiff(mean, mean - half, mean + half, n)
+
+
+def welch_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEVEL) -> PairedDiff:
+    """Interval of mean(a) − mean(b) for two independent samples (Welch's t).
+
+    For a difference from a reference measured on its own seeds (a study's people against the
+    base policy): the standard error adds both samples' (sd² / n, sd with n − 1) and the
+    degrees of freedom are Welch–Satterthwaite's. A ``b`` of one value has no spread to add.
+
+    Args:
+      a: one sample (e.g. each person's mean success over seeds).
+      b: the other (e.g. the base policy's success per seed).
+      level: confidence level.
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.ndim != 1 or b.ndim != 1 or a.size == 0 or b.size == 0:
+        raise ValueError(f"two non-empty samples needed ({a.size}, {b.size})")
+    n = int(a.size)
+    mean = float(a.mean() - b.mean())
+    if n == 1:
+        return PairedDiff(mean, math.nan, math.nan, 1)
+    va = float(a.var(ddof=1)) / n
+    vb = float(b.var(ddof=1)) / b.size if b.size > 1 else 0.0
+    if va + vb == 0:
+        return PairedDiff(mean, mean, mean, n)
+    df = (va + vb) ** 2 / (va**2 / (n - 1) + (vb**2 / (b.size - 1) if b.size > 1 else 0.0))
+    half = t_quantile(df, level) * math.sqrt(va + vb)
     return PairedDiff(mean, mean - half, mean + half, n)
 
 

@@ -36,7 +36,8 @@ INTERVAL_NOTE = (
     "Differences are in success points, paired by person: each person's mean over training "
     "seeds in one condition minus the other, with a 95% Student t interval over people; `*` "
     "marks an interval that excludes 0. Without `*`, the difference is inside the noise of "
-    "this many people and seeds."
+    "this many people and seeds. A difference from Base is each person's mean against the "
+    "base policy's mean, Welch's t over the people and the base policy's seeds."
 )
 MODEL_NOTE = (
     "The people are simulated (docs/people.md): scripted styles that change their style "

@@ -7,6 +7,8 @@ conditions are paired by person: each person's difference of mean success over s
 the pipeline's paired 95% Student t interval
 (:func:`~elicit_jax.pipeline.stats.paired_t_interval`), here over people — the person is the
 unit a user study replicates; the training-seed noise enters through each person's mean.
+A difference from the base policy (one policy per seed, no person) is Welch's t over the
+people's means and the base policy's seeds.
 """
 
 from __future__ import annotations
@@ -17,7 +19,12 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
-from elicit_jax.pipeline.stats import PairedDiff, format_diff, paired_t_interval
+from elicit_jax.pipeline.stats import (
+    PairedDiff,
+    format_diff,
+    paired_t_interval,
+    welch_t_interval,
+)
 from elicit_jax.pipeline.tables import Table, mean_std
 
 CONDITION_LABELS = {
@@ -94,16 +101,18 @@ def person_means(
 def compare(
     cells: Mapping[tuple, Mapping[int, float]], task: str, model: str, a: str, b: str
 ) -> PairedDiff | None:
-    """``a − b`` in success (fraction), paired by person (``b`` may be ``base``); None when no
-    person has both."""
+    """``a − b`` in success (fraction), paired by person; None when no person has both.
+
+    ``b = "base"``: the people's mean against the base policy's mean over its seeds, Welch's
+    t over the people and the base seeds (:func:`~elicit_jax.pipeline.stats.welch_t_interval`),
+    so the base policy's own seed noise widens the interval."""
     ma = person_means(cells, task, model, a)
     if b == "base":
         base = cells.get((task, model, "base", None), {})
-        if not base:
+        if not base or not ma:
             return None
-        mb = dict.fromkeys(ma, float(np.mean(list(base.values()))))
-    else:
-        mb = person_means(cells, task, model, b)
+        return welch_t_interval(list(ma.values()), list(base.values()))
+    mb = person_means(cells, task, model, b)
     common = sorted(set(ma) & set(mb))
     if not common:
         return None
