@@ -49,18 +49,21 @@ MODEL_NOTE = (
 def _verdicts(data: StudyData) -> list[str]:
     cells = success_cells(data)
     out = []
+    pairs = (("informed", "naive"), ("filtered", "naive"), ("informed", "base"))
     for task, model in cells_of(data):
-        d = compare(cells, task, model, "informed", "naive")
-        if d is None:
-            continue
-        out.append(
-            f"**{task}** ({model}): informed − naive = {diff_text(d)} points over {d.n} people — "
-            + (
-                "beyond the noise."
-                if d.excludes_zero
-                else "inside the noise (not a demonstrated effect)."
+        for a, b in pairs:
+            d = compare(cells, task, model, a, b)
+            if d is None:
+                continue
+            out.append(
+                f"**{task}** ({model}): {CONDITION_LABELS[a]} − {CONDITION_LABELS[b]} = "
+                f"{diff_text(d)} points over {d.n} people — "
+                + (
+                    "beyond the noise."
+                    if d.excludes_zero
+                    else "inside the noise (not a demonstrated effect)."
+                )
             )
-        )
     return out
 
 

@@ -123,7 +123,7 @@ def table2(data: StudyData) -> Table:
     """The paper's Table 2 layout: per task, Base / Naive / Naive + M-filtered / Informed."""
     cells = success_cells(data)
     header = ["task", "model", *[CONDITION_LABELS[c] for c in TABLE2]]
-    header += ["Informed − Naive", "Informed − Base", "people"]
+    header += ["Informed − Naive", "Naive + M-filtered − Naive", "Informed − Base", "people"]
     rows = []
     for task, model in cells_of(data):
         people = people_of(data, task, model)
@@ -133,6 +133,7 @@ def table2(data: StudyData) -> Table:
                 mean_std(list(population_by_seed(cells, task, model, cond, people).values()))
             )
         row.append(diff_text(compare(cells, task, model, "informed", "naive")))
+        row.append(diff_text(compare(cells, task, model, "filtered", "naive")))
         row.append(diff_text(compare(cells, task, model, "informed", "base")))
         row.append(str(len(people)))
         rows.append(row)
