@@ -372,6 +372,8 @@ def test_cli_bad_inputs_info_and_report(nut, tmp_path, monkeypatch, capsys):
 
     bad(*common, "--operator", "scripted:nobody", "-o", out, match="no operator 'nobody'")
     bad(*common, "--operator", "robot:arm", "-o", out, match="unknown operator kind 'robot'")
+    show = ["--operator", "scripted:base", "--show", "prompt,voice", "-o", out]
+    bad(*common, *show, match="--show takes distinct parts among prompt, indicator, feedback")
     bad(
         *head,
         "--base-demos",
