@@ -1,16 +1,20 @@
-"""Process-level JAX set-up, applied at the CLI entry point and in the test configuration.
+"""Process-level set-up, applied at the CLI entry point and in the test configuration.
 
-Nothing here runs at import time; callers invoke :func:`configure` before importing JAX.
+Nothing here runs at import time: callers invoke :func:`configure` before importing JAX, and
+the CLI calls :func:`configure_logging` to decide where the library's log records go.
 """
 
 from __future__ import annotations
 
+import logging
+import logging.handlers
 import os
 from pathlib import Path
 
 MJX_CPU_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 CACHE_ENV = "ELICIT_JAX_CACHE_DIR"
 MJX_MIN_THREADS = 4
+LOG_ENV = "ELICIT_JAX_LOG"
 
 
 def default_cache_dir() -> Path:
@@ -101,3 +105,47 @@ def process_alive(pid: int) -> bool:
     except OverflowError:
         return False
     return True
+
+
+def default_log_path() -> Path:
+    """The CLI's log file: ``$ELICIT_JAX_LOG``, else ``elicit-jax/elicit-jax.log`` in the
+    user's state directory (``$XDG_STATE_HOME`` or ``~/.local/state``)."""
+    if os.environ.get(LOG_ENV):
+        return Path(os.environ[LOG_ENV]).expanduser()
+    base = os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state"
+    return Path(base) / "elicit-jax" / "elicit-jax.log"
+
+
+def configure_logging(path: Path | None = None, echo: bool = False) -> Path | None:
+    """Send the ``elicit_jax`` loggers' records (INFO and above) to a log file.
+
+    The file rotates at 1 MB (two old files kept). Records never reach the terminal unless
+    ``echo`` (the CLI's ``--debug``), which also prints them on stderr.
+
+    Args:
+      path: log file; defaults to :func:`default_log_path`.
+      echo: also print every record on stderr.
+
+    Returns:
+      The log file, or None when it cannot be created (then records are dropped, or only
+      echoed).
+    """
+    logger = logging.getLogger("elicit_jax")
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    fmt = logging.Formatter("%(asctime)s %(process)d %(name)s %(levelname)s %(message)s")
+    path = path or default_log_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handler: logging.Handler = logging.handlers.RotatingFileHandler(
+            path, maxBytes=1_000_000, backupCount=2, encoding="utf-8"
+        )
+    except OSError:
+        handler, path = logging.NullHandler(), None
+    handler.setFormatter(fmt)
+    logger.addHandler(handler)
+    if echo:
+        stream = logging.StreamHandler()
+        stream.setFormatter(fmt)
+        logger.addHandler(stream)
+    return path

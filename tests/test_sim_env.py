@@ -131,3 +131,31 @@ def test_c_backend_flags_and_freezes_a_diverged_env(at_step):
         assert sim.unstable.tolist() == [False, True, False]
         assert not sim.success[1]
         np.testing.assert_array_equal(sim.qpos()[1], frozen)
+
+
+def test_c_backend_sends_mujoco_warnings_to_the_log_not_the_terminal(capfd, caplog):
+    """A diverging env makes C MuJoCo warn; while a BatchSim is open the message goes to the
+    ``elicit_jax.sim.mujoco`` logger (and is counted), not to stdout/stderr or
+    MUJOCO_LOG.TXT; closing the sim restores MuJoCo's own handler."""
+    import logging
+
+    import mujoco
+
+    from elicit_jax.sim.rollout_mujoco import warning_count
+
+    task = make_task("reach-pillar")
+    before = warning_count()
+    with caplog.at_level(logging.INFO, logger="elicit_jax.sim.mujoco"):
+        with BatchSim(task, 2, threads=1) as sim, BatchSim(task, 1, threads=1):
+            sim.reset_seeds(np.array([1, 2]))
+            sim.datas[0].qvel[0] = np.nan
+            sim.step(np.zeros((2, 7)))
+            assert sim.unstable.tolist() == [True, False]
+        assert mujoco.get_mju_user_warning() is None
+    out, err = capfd.readouterr()
+    assert "unstable" not in out + err
+    assert warning_count() == before + 1
+    assert [r.getMessage() for r in caplog.records] == [
+        "MuJoCo warning: Nan, Inf or huge value in QVEL at DOF 0. The simulation is unstable. "
+        "Time = 0.0000."
+    ]

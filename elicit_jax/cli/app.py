@@ -99,12 +99,14 @@ app = typer.Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
-_state = {"debug": False}
+_state: dict = {"debug": False, "log": None}
 
 
 @app.callback()
 def _root(
-    debug: bool = typer.Option(False, "--debug", help="Show full tracebacks on errors."),
+    debug: bool = typer.Option(
+        False, "--debug", help="Show full tracebacks on errors, and log records on stderr."
+    ),
 ) -> None:
     _state["debug"] = debug
 
@@ -120,10 +122,11 @@ def _steps_mjx(argv: list[str]) -> bool:
 def main() -> None:
     """Console-script entry point: set up JAX, run the app, print errors as one line."""
     from elicit_jax import cli as _commands  # noqa: F401  (registers the commands)
-    from elicit_jax.runtime import configure
+    from elicit_jax.runtime import configure, configure_logging
 
     configure(mjx=_steps_mjx(sys.argv[1:]))
     debug = "--debug" in sys.argv[1:]
+    _state["log"] = configure_logging(echo=debug)
     try:
         app()
     except ElicitError as e:
@@ -139,3 +142,8 @@ def main() -> None:
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         sys.exit(130)
+
+
+def log_path() -> str:
+    """Where this run's log records go (for messages that point the user there)."""
+    return str(_state["log"]) if _state["log"] is not None else "(no log file)"

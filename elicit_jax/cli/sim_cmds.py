@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
 
 
 @app.command(rich_help_panel=INSPECT)
@@ -130,6 +130,12 @@ def evaluate(
         )
     print_summary(console, summary)
     console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
+    unstable = int(summary["unstable"].sum())
+    if unstable:
+        console.print(
+            f"{unstable} rollout(s) diverged (the physics became unstable) and count as "
+            f"failures; MuJoCo's messages are in the log: {log_path()}"
+        )
 
 
 def print_summary(console: object, summary: object) -> None:

@@ -410,8 +410,14 @@ def evaluate_stage(ctx: StageContext) -> None:
     total = len(expand_policies([spec], cfg.checkpoints))
     with Progress(console=ctx.console, transient=True) as progress:
         bar = progress.add_task(f"evaluate {label} ({cfg.rollouts} rollouts each)", total=total)
-        evaluate_policies(
+        rollouts, _ = evaluate_policies(
             [spec], cfg, out=ctx.output, progress=lambda ref, success: progress.advance(bar)
+        )
+    unstable = int(rollouts["unstable"].sum())
+    if unstable:
+        ctx.console.print(
+            f"evaluate {label}: {unstable} of {len(rollouts)} rollouts diverged (the physics "
+            "became unstable) and count as failures; MuJoCo's messages are in the log"
         )
 
 

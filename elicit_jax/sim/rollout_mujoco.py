@@ -9,11 +9,19 @@ run in parallel. Each thread also sets its environments' targets and copies thei
 joints and sensor data into shared buffers, so the per-environment Python runs beside the
 other threads' physics instead of in series before and after it. Observations and success
 come from the same sensor and success kernels as the MJX backend.
+
+While any :class:`BatchSim` is open, C MuJoCo's warnings (e.g. "Nan, Inf or huge value in
+QACC ... The simulation is unstable") go to the ``elicit_jax.sim.mujoco`` logger at INFO
+level instead of the terminal and ``MUJOCO_LOG.TXT``: a diverged environment is already
+flagged in :attr:`BatchSim.unstable` (and counted as an unstable rollout), so the message
+belongs in the log. The CLI entry point decides where that log goes.
 """
 
 from __future__ import annotations
 
 import itertools
+import logging
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -21,6 +29,38 @@ import numpy as np
 
 from elicit_jax.runtime import available_cpus
 from elicit_jax.sim.env import N_GRIPPER_Q, OBS_DIM, Task
+
+LOG = logging.getLogger("elicit_jax.sim.mujoco")
+_ROUTE_LOCK = threading.Lock()
+_route: dict[str, Any] = {"users": 0, "previous": None, "count": 0}
+
+
+def _log_warning(message: str) -> None:
+    _route["count"] += 1
+    LOG.info("MuJoCo warning: %s", message)
+
+
+def route_warnings(on: bool) -> None:
+    """Start (``on``) or stop routing C MuJoCo's warnings to :data:`LOG` (reference counted:
+    the handler found before the first start is restored when the last user stops)."""
+    import mujoco
+
+    with _ROUTE_LOCK:
+        if on:
+            if _route["users"] == 0:
+                _route["previous"] = mujoco.get_mju_user_warning()
+                mujoco.set_mju_user_warning(_log_warning)
+            _route["users"] += 1
+        elif _route["users"] > 0:
+            _route["users"] -= 1
+            if _route["users"] == 0:
+                mujoco.set_mju_user_warning(_route["previous"])
+                _route["previous"] = None
+
+
+def warning_count() -> int:
+    """C MuJoCo warnings routed to the log in this process so far."""
+    return int(_route["count"])
 
 
 def _bad_warnings(d: Any) -> int:
@@ -59,12 +99,17 @@ class BatchSim:
         self.obs = np.zeros((self.batch, 23))
         self.success = np.zeros(self.batch, bool)
         self.unstable = np.zeros(self.batch, bool)
+        self._routing = True
+        route_warnings(True)
 
     def close(self) -> None:
-        """Stop the worker threads."""
+        """Stop the worker threads and the routing of MuJoCo's warnings."""
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+        if self._routing:
+            self._routing = False
+            route_warnings(False)
 
     def __enter__(self) -> BatchSim:
         return self
