@@ -1,118 +1,244 @@
-"""Evidence the phenomenon is there: do a conflicting operator's demos hurt naive BC?
+"""Is the phenomenon there? Do a new operator's demos lower naive BC below base-only?
 
-For one task, collect ``--episodes`` successful demos of the base operator and of every
-operator in ``--operators`` (C MuJoCo; collection seed 0 for every operator, so all start
-from the same initial states), train an MLP ensemble on base-only and on base + each operator
-(naive union) for ``--seeds`` training seeds, evaluate every checkpoint on the same
-``--rollouts`` seeded initial states (C MuJoCo backend) and print a Markdown table of
-success % mean (std) over seeds, best checkpoint per seed (as the paper's protocol selects).
-Work files (demos, runs, rollouts) go under ``--work`` and are reused when present, so an
-interrupted run resumes.
+For one task and each collection seed: collect ``--episodes`` successful demos of the base
+operator and of every operator in ``--operators`` (C MuJoCo; within a collection seed every
+operator starts from the same initial states), train an MLP ensemble on base-only and on
+base + each operator (naive union) for the training seeds ``0..--seeds-1`` (vmapped in one
+call), evaluate every checkpoint on the same ``--rollouts`` seeded initial states of
+evaluation seed ``--eval-seed`` (C MuJoCo) and keep the best checkpoint per training seed (the
+paper's protocol). The report gives, per collection seed, success % mean (std) over training
+seeds and the paired difference (naive − base-only); over all collection seeds, the mean
+difference with a 95% bootstrap interval that resamples collection and training seeds
+(:func:`elicit_jax.stats.paired_difference`), and each operator's collection success rate
+(proficiency). Work files (demos, runs, rollouts) go under ``--work`` and are reused when
+present, so an interrupted run resumes.
 
 Example::
 
-    python benchmarks/phenomenon.py --task square-nut \
-        --operators same-style,conflict-flip --epochs 150 --hidden 256 --members 2 --seeds 3 \
+    python benchmarks/phenomenon.py --task square-nut --operators same-style,conflict-flip \\
+        --collect-seeds 1-5 --seeds 3 --epochs 150 --hidden 256 --members 2 \\
         --out benchmarks/results/phenomenon-square-nut.md
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from elicit_jax.runtime import configure
+
+
+def seed_list(text: str) -> list[int]:
+    """``"1-3,7"`` -> ``[1, 2, 3, 7]``."""
+    out: list[int] = []
+    for part in filter(None, text.split(",")):
+        lo, _, hi = part.partition("-")
+        out += list(range(int(lo), int(hi or lo) + 1))
+    return out
 
 
 def parse_args() -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--task", default="square-nut")
-    p.add_argument("--operators", default="same-style,mild,conflict-flip")
+    p.add_argument("--operators", default="same-style,conflict-flip")
     p.add_argument("--base", default="base", help="the base operator")
     p.add_argument("--episodes", type=int, default=50, help="demos per operator")
+    p.add_argument("--collect-seeds", type=seed_list, default=seed_list("1-5"))
     p.add_argument("--epochs", type=int, default=150)
+    p.add_argument("--checkpoint-every", type=int, default=25)
     p.add_argument("--hidden", type=int, default=256, help="width of the 2 hidden layers")
     p.add_argument("--members", type=int, default=2, help="ensemble members")
     p.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1")
     p.add_argument("--rollouts", type=int, default=50)
+    p.add_argument("--eval-seed", type=int, default=0, help="picks the evaluation states")
     p.add_argument("--work", type=Path, default=Path("/tmp/elicit-phenomenon"))
-    p.add_argument("--out", type=Path, default=None, help="also write the table here")
+    p.add_argument("--out", type=Path, default=None, help="also write the report here")
     return p.parse_args()
 
 
-def main() -> None:
-    args = parse_args()
-    configure()
-    from elicit_jax.data.demos import concat_demos, read_demos
-    from elicit_jax.policy.config import TrainConfig
-    from elicit_jax.policy.train import train_policy
-    from elicit_jax.sim.collect import CollectConfig, collect
-    from elicit_jax.sim.evaluate import EvalConfig, evaluate_policies
+def best_per_seed(rollouts: Any) -> np.ndarray:
+    """(training seeds,) success % of each seed's best checkpoint, in seed order."""
+    per = rollouts.groupby(["seed", "checkpoint"])["success"].mean().mul(100.0)
+    return per.groupby(level="seed").max().sort_index().to_numpy()
 
-    t0 = time.time()
-    ops = [o for o in args.operators.split(",") if o]
-    demo_dir = args.work / args.task / f"demos-{args.episodes}"
-    demo_dir.mkdir(parents=True, exist_ok=True)
-    demos = {}
-    for op in [args.base, *ops]:
-        path = demo_dir / f"{op}.parquet"
+
+def mean_std(x: np.ndarray) -> str:
+    return f"{np.mean(x):.1f} ({np.std(x):.1f})"
+
+
+class Study:
+    """Collect, train and evaluate one (collection seed, condition) cell at a time, reusing
+    whatever ``--work`` already holds."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from elicit_jax.policy.config import TrainConfig
+        from elicit_jax.sim.evaluate import EvalConfig
+
+        self.args = args
+        self.t0 = time.time()
+        self.train_cfg = TrainConfig(
+            hidden=(args.hidden, args.hidden),
+            ensemble_size=args.members,
+            epochs=args.epochs,
+            checkpoint_every=args.checkpoint_every,
+            seeds=tuple(range(args.seeds)),
+            progress_every=max(args.epochs // 10, 1),
+        )
+        self.eval_cfg = EvalConfig(
+            task=args.task, rollouts=args.rollouts, seed=args.eval_seed,
+            checkpoints=("all",), select="best", backend="mujoco",
+        )  # fmt: skip
+        self.root = args.work / args.task
+        self.run_tag = (
+            f"e{args.epochs}-c{args.checkpoint_every}-h{args.hidden}-k{args.members}"
+            f"-s{args.seeds}-n{args.episodes}"
+        )
+        self.proficiency: dict[tuple[int, str], float] = {}
+
+    def log(self, msg: str) -> None:
+        print(f"[{time.time() - self.t0:6.0f} s] {msg}", flush=True)
+
+    def demos(self, cseed: int, op: str) -> Any:
+        from elicit_jax.artifact import read_header
+        from elicit_jax.data.demos import read_demos
+        from elicit_jax.sim.collect import CollectConfig, collect
+
+        path = self.root / f"c{cseed}" / f"demos-{self.args.episodes}" / f"{op}.parquet"
         if not path.exists():
-            collect(
-                CollectConfig(task=args.task, operator=op, episodes=args.episodes, seed=0), path
+            path.parent.mkdir(parents=True, exist_ok=True)
+            cfg = CollectConfig(
+                task=self.args.task, operator=op, episodes=self.args.episodes, seed=cseed
             )
-        demos[op] = read_demos(path)
-    print(f"collected ({time.time() - t0:.0f} s)", flush=True)
+            collect(cfg, path)
+            self.log(f"collected c{cseed} {op}")
+        prov = read_header(path)["provenance"]
+        self.proficiency[(cseed, op)] = float(prov["attempt_success_rate"])
+        return read_demos(path)
 
-    cfg = TrainConfig(
-        hidden=(args.hidden, args.hidden),
-        ensemble_size=args.members,
-        epochs=args.epochs,
-        checkpoint_every=max(args.epochs // 4, 1),
-        seeds=tuple(range(args.seeds)),
-        progress_every=max(args.epochs // 10, 1),
-    )
-    run_root = args.work / args.task / f"e{args.epochs}-h{args.hidden}-k{args.members}"
-    run_root = run_root / f"s{args.seeds}-n{args.episodes}"
-    runs = []
-    for op in [args.base, *ops]:
-        run = run_root / f"run-{op}"
-        if not run.exists():
-            data = demos[op] if op == args.base else concat_demos([demos[args.base], demos[op]])
-            train_policy(data, cfg, run, quiet=True)
-        label = f"{args.base}-only" if op == args.base else f"+{op}"
-        runs.append(f"{label}={run}")
-        print(f"trained {label} ({time.time() - t0:.0f} s)", flush=True)
+    def success(self, cseed: int, op: str) -> np.ndarray:
+        """Best-checkpoint success % per training seed of base-only (``op`` = base) or of
+        base + ``op``."""
+        import pandas as pd
 
-    ecfg = EvalConfig(
-        task=args.task, rollouts=args.rollouts, checkpoints=("all",), select="best",
-        backend="mujoco",
-    )  # fmt: skip
-    _, summary = evaluate_policies(runs, ecfg, out=run_root / "rollouts.parquet")
-    order = {r.split("=")[0]: i for i, r in enumerate(runs)}
-    summary = summary.sort_values("policy", key=lambda s: s.map(order))
+        from elicit_jax.data.demos import concat_demos
+        from elicit_jax.policy.train import train_policy
+        from elicit_jax.sim.evaluate import evaluate_policies
+
+        a = self.args
+        run = self.root / f"c{cseed}" / self.run_tag / f"run-{op}"
+        rollouts = run.with_name(f"rollouts-{op}-eval{a.eval_seed}-r{a.rollouts}.parquet")
+        if not rollouts.exists():
+            if not run.exists():
+                base = self.demos(cseed, a.base)
+                data = base if op == a.base else concat_demos([base, self.demos(cseed, op)])
+                train_policy(data, self.train_cfg, run, quiet=True)
+                self.log(f"trained c{cseed} {op}")
+            evaluate_policies([f"{op}={run}"], self.eval_cfg, out=rollouts)
+            self.log(f"evaluated c{cseed} {op}")
+        self.demos(cseed, op)
+        return best_per_seed(pd.read_parquet(rollouts))
+
+
+def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -> str:
+    from elicit_jax.stats import paired_difference
+
+    ops, cseeds = args.operators, args.collect_seeds
+    cfg = study.train_cfg
     lines = [
         f"## Naive BC on `{args.task}`: base-only vs base + each operator",
         "",
         f"MLP {args.hidden}x{args.hidden}, {args.members} members, {args.epochs} epochs, "
-        f"checkpoints every {cfg.checkpoint_every}, best checkpoint per seed, "
-        f"{args.seeds} training seeds, {args.episodes} demos per operator, "
-        f"{args.rollouts} rollouts (C MuJoCo) on the same seeded initial states.",
+        f"checkpoints every {cfg.checkpoint_every}, best checkpoint per training seed, "
+        f"training seeds {', '.join(map(str, cfg.seeds))}; {args.episodes} demos per operator; "
+        f"collection seeds {', '.join(map(str, cseeds))}; {args.rollouts} rollouts (C MuJoCo) "
+        f"from evaluation seed {args.eval_seed}, the same initial states for every policy.",
         "",
-        "| training data | success % mean (std) over seeds | mean length |",
-        "|---|---|---|",
+        "### Per collection seed: success % mean (std) over training seeds; paired difference",
+        "",
+        "| collection seed | base-only | " + " | ".join(f"+{op} (naive)" for op in ops) + " |",
+        "|---|---|" + "---|" * len(ops),
     ]
-    for _, row in summary.iterrows():
+    for c in cseeds:
+        base = results[(c, args.base)]
+        cells = [
+            f"{mean_std(results[(c, op)])}, {np.mean(results[(c, op)]) - np.mean(base):+.1f}"
+            for op in ops
+        ]
+        lines.append(f"| {c} | {mean_std(base)} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "### Over collection seeds: paired difference naive − base-only, 95% bootstrap interval",
+        "",
+        "(10,000 resamples of collection seeds and, within each, of each condition's training "
+        "seeds.)",
+        "",
+        "| operator | base-only mean | naive mean | difference [95% interval] "
+        "| collection seeds below base | interval excludes 0 |",
+        "|---|---|---|---|---|---|",
+    ]
+    ref = {c: results[(c, args.base)] for c in cseeds}
+    for op in ops:
+        d = paired_difference({c: results[(c, op)] for c in cseeds}, ref)
+        below = int(np.sum(d.per_key < 0))
+        verdict = "yes, below" if d.high < 0 else "yes, above" if d.low > 0 else "**no**"
         lines.append(
-            f"| {row['policy']} | {row['success_mean']:.1f} ({row['success_std']:.1f}) "
-            f"| {row['mean_length']:.0f} |"
+            f"| {op} | {np.mean([np.mean(v) for v in ref.values()]):.1f} "
+            f"| {np.mean([np.mean(results[(c, op)]) for c in cseeds]):.1f} | {d.describe()} "
+            f"| {below} of {len(cseeds)} | {verdict} |"
         )
-    lines += ["", f"Wall time: {time.time() - t0:.0f} s."]
-    table = "\n".join(lines)
-    print(table, flush=True)
+    lines += [
+        "",
+        "### Proficiency: collection success rate of each operator (attempts that succeeded)",
+        "",
+        "| operator | " + " | ".join(f"c{c}" for c in cseeds) + " |",
+        "|---|" + "---|" * len(cseeds),
+    ]
+    for op in [args.base, *ops]:
+        rates = [f"{100 * study.proficiency[(c, op)]:.0f}%" for c in cseeds]
+        lines.append(f"| {op} | " + " | ".join(rates) + " |")
+    lines += [
+        "",
+        f"Wall time: {wall:.0f} s (work reused from earlier runs is not counted).",
+        "",
+        "Command:",
+        "",
+        "    " + command_line(args),
+    ]
+    return "\n".join(lines)
+
+
+def command_line(args: argparse.Namespace) -> str:
+    seeds = ",".join(map(str, args.collect_seeds))
+    return (
+        f"python benchmarks/phenomenon.py --task {args.task} --operators "
+        f"{','.join(args.operators)} --collect-seeds {seeds} --seeds {args.seeds} "
+        f"--epochs {args.epochs} --checkpoint-every {args.checkpoint_every} --hidden "
+        f"{args.hidden} --members {args.members} --episodes {args.episodes} --rollouts "
+        f"{args.rollouts} --eval-seed {args.eval_seed}"
+    )
+
+
+def main() -> None:
+    args = parse_args()
+    args.operators = [o for o in args.operators.split(",") if o]
+    configure()
+    study = Study(args)
+    study.log(f"{args.task}: {dataclasses.asdict(study.train_cfg)}")
+    results = {}
+    for c in args.collect_seeds:
+        for op in [args.base, *args.operators]:
+            results[(c, op)] = study.success(c, op)
+            study.log(f"c{c} {op}: {mean_std(results[(c, op)])}")
+    text = report(args, study, results, time.time() - study.t0)
+    print(text, flush=True)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(table + "\n")
+        args.out.write_text(text + "\n")
 
 
 if __name__ == "__main__":
