@@ -53,6 +53,7 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--checkpoint-every", type=int, default=25)
     p.add_argument("--hidden", type=int, default=256, help="width of the 2 hidden layers")
     p.add_argument("--members", type=int, default=2, help="ensemble members")
+    p.add_argument("--batch-size", type=int, default=512)
     p.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1")
     p.add_argument("--rollouts", type=int, default=50)
     p.add_argument("--eval-seed", type=int, default=0, help="picks the evaluation states")
@@ -84,6 +85,7 @@ class Study:
         self.train_cfg = TrainConfig(
             hidden=(args.hidden, args.hidden),
             ensemble_size=args.members,
+            batch_size=args.batch_size,
             epochs=args.epochs,
             checkpoint_every=args.checkpoint_every,
             seeds=tuple(range(args.seeds)),
@@ -96,6 +98,7 @@ class Study:
         self.root = args.work / args.task
         self.run_tag = (
             f"e{args.epochs}-c{args.checkpoint_every}-h{args.hidden}-k{args.members}"
+            f"{'' if args.batch_size == 512 else f'-b{args.batch_size}'}"
             f"-s{args.seeds}-n{args.episodes}"
         )
         self.proficiency: dict[tuple[int, str], float] = {}
@@ -152,7 +155,8 @@ def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -
     lines = [
         f"## Naive BC on `{args.task}`: base-only vs base + each operator",
         "",
-        f"MLP {args.hidden}x{args.hidden}, {args.members} members, {args.epochs} epochs, "
+        f"MLP {args.hidden}x{args.hidden}, {args.members} members, {args.epochs} epochs "
+        f"(batch {args.batch_size}), "
         f"checkpoints every {cfg.checkpoint_every}, best checkpoint per training seed, "
         f"training seeds {', '.join(map(str, cfg.seeds))}; {args.episodes} demos per operator; "
         f"collection seeds {', '.join(map(str, cseeds))}; {args.rollouts} rollouts (C MuJoCo) "
@@ -218,7 +222,8 @@ def command_line(args: argparse.Namespace) -> str:
         f"python benchmarks/phenomenon.py --task {args.task} --operators "
         f"{','.join(args.operators)} --collect-seeds {seeds} --seeds {args.seeds} "
         f"--epochs {args.epochs} --checkpoint-every {args.checkpoint_every} --hidden "
-        f"{args.hidden} --members {args.members} --episodes {args.episodes} --rollouts "
+        f"{args.hidden} --members {args.members} --batch-size {args.batch_size} --episodes "
+        f"{args.episodes} --rollouts "
         f"{args.rollouts} --eval-seed {args.eval_seed}"
     )
 

@@ -101,6 +101,7 @@ def test_styles_differ_as_designed(runs):
     assert np.all(_grasp_yaw(runs["base"]) < 0.15)
     assert np.all(_grasp_yaw(runs["same-style"]) < 0.15)
     assert np.all(_grasp_yaw(runs["conflict-flip"]) > np.pi - 0.25)  # half a turn
+    assert np.all(_grasp_yaw(runs["conflict-flip-pause"]) > np.pi - 0.25)
 
     def placed_yaw(out):
         return np.array(
@@ -138,3 +139,23 @@ def test_mjx_matches_c_mujoco_on_opening_and_grasp(runs, task):
     np.testing.assert_allclose(mjx[..., 22], c[..., 22], atol=3e-3)  # drawer opening
     np.testing.assert_allclose(mjx[..., 9:12], c[..., 9:12], atol=3e-3)  # hammer position
     np.testing.assert_allclose(mjx, c, atol=2e-2)
+
+
+def test_flip_pause_holds_still_where_the_base_moves_on(runs):
+    """Both open the drawer the same way; once the gripper has risen off the bar (the first
+    step with the jaw open for the hammer), the base moves on at once while
+    'conflict-flip-pause' holds still for its pause, with the drawer open the same amount."""
+    from elicit_jax.sim.operators.hammer_drawer import STYLES
+
+    n = dict(STYLES["conflict-flip-pause"][0].choices)["pause_steps"]
+
+    def first_open(out):
+        return [int(np.argmax(a[:, 6] < 0)) for a in out["action"]]
+
+    for i, t in enumerate(first_open(runs["base"])):
+        assert np.abs(runs["base"]["action"][i, t, 0:3]).max() > 0.5
+    for i, t in enumerate(first_open(runs["conflict-flip-pause"])):
+        acts, obs = runs["conflict-flip-pause"]["action"][i], runs["conflict-flip-pause"]["obs"][i]
+        assert np.abs(acts[t : t + n, 0:6]).max() == 0.0
+        assert np.abs(acts[t + n, 0:6]).max() > 0.5
+        assert obs[t, 22] > 0.14  # the drawer is open: a state the base passes through

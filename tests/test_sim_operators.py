@@ -120,6 +120,7 @@ def test_reach_pillar_routes(reach_runs):
     assert (at_pillar(reach_runs["base"])[:, 1] > 0.05).all()
     assert (at_pillar(reach_runs["same-style"])[:, 1] > 0.05).all()
     assert (at_pillar(reach_runs["conflict-right"])[:, 1] < -0.05).all()
+    assert (at_pillar(reach_runs["conflict-right-pause"])[:, 1] < -0.05).all()
     assert (at_pillar(reach_runs["conflict-over"])[:, 2] > 0.14).all()
 
 
@@ -141,3 +142,17 @@ def test_square_nut_pause_holds_still_where_the_base_moves(nut_runs):
     assert np.abs(p0["action"][:, n, 0:3]).max(axis=1).min() > 0.5
     still = (np.abs(p0["action"][:, :, 0:6]).max(axis=2) == 0.0).sum(axis=1)
     assert (still >= 3 * n).all(), still.min()  # start, above the handle, above the peg
+
+
+def test_reach_pillar_pause_holds_still_at_the_start(reach_runs):
+    """'conflict-right-pause' starts from the base's initial states and holds still for its
+    pause where the base moves at once, then moves."""
+    from elicit_jax.sim.operators.reach_pillar import STYLES as REACH
+
+    n = dict(REACH["conflict-right-pause"][0].choices)["pause_steps"]
+    b0, p0 = reach_runs["base"], reach_runs["conflict-right-pause"]
+    np.testing.assert_array_equal(b0["obs"][:, 0], p0["obs"][:, 0])
+    assert np.abs(b0["action"][:, 0, 0:3]).max(axis=1).min() > 0.5
+    assert np.abs(p0["action"][:, :n, 0:6]).max() == 0.0
+    assert np.abs(p0["action"][:, n, 0:3]).max(axis=1).min() > 0.5
+    assert (p0["length"] < reach_runs["base"]["length"] + n + 10).all()

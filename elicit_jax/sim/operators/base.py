@@ -95,6 +95,15 @@ class Operator(abc.ABC):
     def targets(self, obs: np.ndarray) -> Targets:
         """Targets of each environment's current phase."""
 
+    def pause_at_phase_starts(self) -> None:
+        """Hold still for ``pause_steps`` control steps on entering a phase listed in the
+        style's ``pause_at`` choice (the gripper command is kept; see :meth:`act`)."""
+        phases = self.style.choice("pause_at", ())
+        if not phases:
+            return
+        start = np.isin(self.phase, phases) & (self.phase_steps == 0)
+        self.pause[start] = self.style.choice("pause_steps", 0)
+
     def restart_if_dropped(
         self,
         obs: np.ndarray,

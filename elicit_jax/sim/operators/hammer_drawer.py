@@ -70,6 +70,7 @@ class HammerDrawerOperator(Operator):
         eef, ph, b = obs[:, 0:3], self.phase, len(obs)
         start = self.phase_steps == 0
         self.hold_yaw[start] = quat_yaw(obs[start, 3:7])
+        self.pause_at_phase_starts()
         pos = eef.copy()
         yaw = self.hold_yaw.copy()
         grip = np.where(np.isin(ph, (HOVER, DESCEND, RELEASE, RISE)), -1.0, 1.0)
@@ -203,6 +204,19 @@ STYLES: dict[str, tuple[Style, str]] = {
     "conflict-flip": (
         Style(noise=0.03, choices=(("yaw_offset", np.pi), ("place_yaw", "nearest"))),
         "conflicting: grasps the handle with the wrist turned half a turn",
+    ),
+    "conflict-flip-pause": (
+        Style(
+            noise=0.03,
+            choices=(
+                ("yaw_offset", np.pi),
+                ("place_yaw", "nearest"),
+                ("pause_at", (HOVER,)),
+                ("pause_steps", 20),
+            ),
+        ),
+        "conflicting: holds still above the opened drawer where the base moves on, then "
+        "grasps with the wrist turned half a turn",
     ),
     "conflict-order": (
         Style(noise=0.03, choices=(("carry", "low-first"),)),

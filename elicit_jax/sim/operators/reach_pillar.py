@@ -20,6 +20,7 @@ class ReachPillarOperator(Operator):
     n_phases = 3
 
     def targets(self, obs: np.ndarray) -> Targets:
+        self.pause_at_phase_starts()
         route = self.style.choice("route", "left")
         clear = self.style.choice("clearance", 0.09)
         eef, goal = obs[:, 0:3], obs[:, 9:12]
@@ -57,6 +58,10 @@ STYLES: dict[str, tuple[Style, str]] = {
     "conflict-right": (
         Style(noise=0.03, choices=(("route", "right"),)),
         "conflicting: passes the pillar on the right",
+    ),
+    "conflict-right-pause": (
+        Style(noise=0.03, choices=(("route", "right"), ("pause_at", (0,)), ("pause_steps", 40))),
+        "conflicting: holds still at the start where the base moves, then passes on the right",
     ),
     "conflict-over": (
         Style(noise=0.03, choices=(("route", "over"),)),

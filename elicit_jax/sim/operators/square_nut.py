@@ -74,20 +74,12 @@ class SquareNutOperator(Operator):
         grip = np.where((ph >= CLOSE) & (ph < RELEASE), 1.0, -1.0)
         done = np.zeros(len(obs), bool)
         aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - eef_yaw) < 0.08
-        self._pause_at_phase_starts()
+        self.pause_at_phase_starts()
         self._grasp_phases(obs, point, aligned, pos, done)
         self._place_phases(obs, pos, done)
         self.restart_if_dropped(obs, (pos, grip, done), (LIFT, LOWER), HOVER, gap=0.045)
         yaw = np.where(ph <= CLOSE, g_yaw, eef_yaw)
         return Targets(pos=pos, yaw=yaw, grip=grip, done=done)
-
-    def _pause_at_phase_starts(self) -> None:
-        """Hold still for ``pause_steps`` control steps on entering a ``pause_at`` phase."""
-        phases = self.style.choice("pause_at", ())
-        if not phases:
-            return
-        start = np.isin(self.phase, phases) & (self.phase_steps == 0)
-        self.pause[start] = self.style.choice("pause_steps", 0)
 
     def _grasp_phases(
         self, obs: np.ndarray, point: np.ndarray, aligned: np.ndarray, pos: np.ndarray,
