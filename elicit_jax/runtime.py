@@ -120,7 +120,8 @@ def configure_logging(path: Path | None = None, echo: bool = False) -> Path | No
     """Send the ``elicit_jax`` loggers' records (INFO and above) to a log file.
 
     The file rotates at 1 MB (two old files kept). Records never reach the terminal unless
-    ``echo`` (the CLI's ``--debug``), which also prints them on stderr.
+    ``echo`` (the CLI's ``--debug``), which also prints them on stderr. Calling it again
+    replaces the handlers it added before.
 
     Args:
       path: log file; defaults to :func:`default_log_path`.
@@ -131,6 +132,9 @@ def configure_logging(path: Path | None = None, echo: bool = False) -> Path | No
       echoed).
     """
     logger = logging.getLogger("elicit_jax")
+    for old in [h for h in logger.handlers if getattr(h, "elicit_jax_cli", False)]:
+        logger.removeHandler(old)  # called again (e.g. in-process CLI runs): replace, not add
+        old.close()
     logger.setLevel(logging.INFO)
     logger.propagate = False
     fmt = logging.Formatter("%(asctime)s %(process)d %(name)s %(levelname)s %(message)s")
@@ -142,10 +146,9 @@ def configure_logging(path: Path | None = None, echo: bool = False) -> Path | No
         )
     except OSError:
         handler, path = logging.NullHandler(), None
-    handler.setFormatter(fmt)
-    logger.addHandler(handler)
-    if echo:
-        stream = logging.StreamHandler()
-        stream.setFormatter(fmt)
-        logger.addHandler(stream)
+    handlers = [handler, logging.StreamHandler()] if echo else [handler]
+    for h in handlers:
+        h.setFormatter(fmt)
+        h.elicit_jax_cli = True  # type: ignore[attr-defined]
+        logger.addHandler(h)
     return path

@@ -3,11 +3,19 @@
 The tests step MJX, so XLA's CPU pool gets the threads MJX needs (``mjx=True``).
 """
 
+import os
+import tempfile
+from pathlib import Path
+
 import pytest
 
-from elicit_jax.runtime import configure
+from elicit_jax.runtime import LOG_ENV, configure
 
 configure(mjx=True)
+# In-process CLI runs log to a scratch file, not to the user's state directory.
+os.environ.setdefault(
+    LOG_ENV, str(Path(tempfile.gettempdir()) / f"elicit-jax-tests-{os.getpid()}.log")
+)
 
 
 @pytest.fixture(scope="session")

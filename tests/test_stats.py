@@ -66,6 +66,9 @@ def test_configure_logging_writes_records_to_the_file_only(tmp_path, capfd):
         assert "elicit_jax.sim.mujoco INFO MuJoCo warning: unstable" in path.read_text()
         out, err = capfd.readouterr()
         assert "unstable" not in out + err
+        configure_logging(tmp_path / "again.log")  # a second call replaces, not adds
+        ours = [h for h in logger.handlers if getattr(h, "elicit_jax_cli", False)]
+        assert len(ours) == 1 and ours[0].baseFilename == str(tmp_path / "again.log")
     finally:
         for h in logger.handlers:
             if h not in saved[0]:
