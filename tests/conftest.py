@@ -13,9 +13,7 @@ from elicit_jax.runtime import LOG_ENV, configure
 
 configure(mjx=True)
 # In-process CLI runs log to a scratch file, not to the user's state directory.
-os.environ.setdefault(
-    LOG_ENV, str(Path(tempfile.gettempdir()) / f"elicit-jax-tests-{os.getpid()}.log")
-)
+os.environ.setdefault(LOG_ENV, str(Path(tempfile.gettempdir()) / "elicit-jax-tests.log"))
 
 
 @pytest.fixture(scope="session")
