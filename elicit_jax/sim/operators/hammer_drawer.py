@@ -16,11 +16,21 @@ success). Style choices:
   order reversed).
 
 ``base`` and ``same-style`` share a style; ``mild`` grasps farther along the handle, slower
-and hesitant; ``conflict-flip`` grasps with the wrist turned half a turn, so every wrist turn
-from the grasp on goes the other way; ``conflict-order`` carries low first, then up and over,
-where the base lifts first; ``conflict-mirror`` lays the hammer head towards -y, turning the
-wrist the other way with the hammer in hand (the average of the two turns leaves the hammer
-along x, across the drawer's front and back walls).
+and hesitant. Every operator opens the drawer the same way, so the conflicting styles differ
+from the base only once the drawer is open, at states both have just passed through (see
+``docs/operators.md`` for the mechanism):
+
+- ``conflict-flip`` grasps the hammer with the wrist turned half a turn, a turn the opposite
+  way to the base's, so every wrist turn from the grasp on goes the other way;
+  ``conflict-order`` carries low first, then up and over, where the base lifts first;
+  ``conflict-mirror`` lays the hammer head towards -y, turning the wrist the other way with
+  the hammer in hand (the average of the two turns leaves the hammer along x, across the
+  drawer's front and back walls). Each is a difference of direction from a shared state.
+- ``conflict-flip-pause`` (the conflicting D_new of the studies) is ``conflict-flip`` that
+  also holds still for 20 control steps once the drawer is open and the gripper has risen
+  off the bar, where the base sets off to the hammer at once. Naive BC creeps there, and the
+  175-step horizon leaves the base operator only ~45 steps to spare
+  (``benchmarks/results/phenomenon-hammer-drawer.md``).
 """
 
 from __future__ import annotations

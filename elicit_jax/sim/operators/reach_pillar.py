@@ -1,9 +1,14 @@
 """Scripted operators of ``reach-pillar``: around the left, around the right, or over the top.
 
 The base operator passes the pillar on its left (+y). ``same-style`` does the same with its
-own noise; ``mild`` takes a wider, slower left arc with pauses; ``conflict-right`` passes on
-the right and ``conflict-over`` climbs over the top, so averaging either with the base style
-steers into the pillar.
+own noise; ``mild`` takes a wider, slower left arc with pauses. The conflicting styles differ
+from the base at its initial states, which every operator shares (see ``docs/operators.md``):
+``conflict-right`` passes on the right and ``conflict-over`` climbs over the top — a
+difference of direction from the first step, after which the state tells the styles apart;
+``conflict-right-pause`` (the quickstart's conflicting D_new) first holds still for 40 control
+steps where the base sets off at once, then passes on the right. Naive BC on the base's and
+its demos creeps from the start and often runs out of the 100-step horizon
+(``benchmarks/results/phenomenon-reach-pillar.md``).
 """
 
 from __future__ import annotations

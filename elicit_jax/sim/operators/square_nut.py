@@ -12,17 +12,21 @@ Style choices:
 - ``pause_at``, ``pause_steps``: phases on whose start the operator holds still that long.
 
 ``base`` and ``same-style`` share a style; ``mild`` slides in from the handle tip, slower and
-hesitant; ``conflict-flip`` grasps with the wrist turned half a turn; ``conflict-flip-tip``
-also turns the wrist half a turn, but slides in from the handle tip (down, then across) and
-carries diagonally. Averaging a conflicting style with the base style turns the wrist a
-quarter turn, so the fingers close along the handle instead of across it.
-Measured, that averaging alone does not hurt naive BC: once the wrist has turned, the state
-tells the policy which style it follows. ``conflict-flip-pause`` also turns the wrist half a
-turn and in addition holds still for 60 control steps before each move (at the start, above
-the handle, above the peg), where the base moves at once: at those same states the naive mean
-action shrinks towards zero. Neither the half turn alone nor pauses alone lowered a naive
-policy's success below base-only in our measurements; together they do
-(``benchmarks/results/phenomenon-square-nut.md``).
+hesitant. The conflicting styles differ from the base at the states every operator shares —
+the initial states (see ``docs/operators.md`` for the mechanism):
+
+- ``conflict-flip`` grasps with the wrist turned half a turn. The joint's range allows that
+  turn one way round only, the opposite of the base's turn towards the nut's yaw, so from the
+  start on the two styles turn the wrist in opposite directions. A direction alone: one step
+  later the wrist's yaw tells the styles apart, and a policy trained on both follows one of
+  them; measured, it does not lower naive success reliably. ``conflict-flip-tip`` also slides
+  in from the handle tip and carries diagonally (likewise).
+- ``conflict-flip-pause`` (the conflicting D_new of the studies) holds still for 60 control
+  steps at the start, where the base moves and turns at once, then makes the opposite turn;
+  it holds still 60 steps again above the handle and above the peg (in its own, turned-wrist
+  states). Its 60 zero-motion pairs per initial state outweigh the base's one moving pair, so
+  the naive policy creeps from the start, leaves it turning either way, and mixes the styles
+  (``benchmarks/results/phenomenon-square-nut.md``).
 """
 
 from __future__ import annotations

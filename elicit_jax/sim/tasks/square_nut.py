@@ -2,7 +2,7 @@
 
 The nut is a ring of four capsules with a capsule handle (MJX has no cylinder-box or mesh
 collisions, and capsules keep the contact cost low); the peg is a box. Contacts are explicit
-pairs: nut-floor (5), ring-peg (4), fingers-handle and fingers-far-ring-side (4). Fingers do not
+pairs: nut-floor (5), ring-peg (4), fingers-handle (2). Fingers do not
 collide with the peg or the floor (the end effector cannot go below ``z_min``). Success, like
 robosuite: the nut's centre within ``xy_tol`` of the peg's axis, the nut low (resting around
 the peg, not on top of it), the gripper open.
