@@ -16,7 +16,12 @@ from rich.console import Console
 
 from elicit_jax.artifact import read_header
 from elicit_jax.pipeline.gather import gather
-from elicit_jax.pipeline.run import PipelineRunConfig, pipeline_status, run_pipeline
+from elicit_jax.pipeline.run import (
+    PipelineRunConfig,
+    pipeline_status,
+    print_results,
+    run_pipeline,
+)
 
 TINY = """# tiny end-to-end pipeline for the tests
 [pipeline]
@@ -86,6 +91,9 @@ def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
 
     second = run(spec, out)
     assert second.result.ran == []
+    shown = io.StringIO()
+    print_results(out, Console(file=shown, width=200))
+    assert "Naive − Base" in shown.getvalue() and "(1 seed)" in shown.getvalue()
 
     shutil.rmtree(out / "filtered/reach-pillar/mlp/filtered-conflict-right")
     status = pipeline_status(

@@ -193,13 +193,16 @@ def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str,
 
 
 def print_results(run_dir: Path, console: Any) -> None:
-    """Print the run's result tables (paper layout) from its finished artifacts."""
-    from elicit_jax.pipeline.tables import models_table, results_tables
+    """Print the run's result tables (paper layout) from its finished artifacts, each followed
+    by its differences from Naive with their paired 95% intervals (as in the report)."""
+    from elicit_jax.pipeline.tables import difference_tables, models_table, results_tables
 
     if _is_study(run_dir):
         return _print_study(run_dir, console)
     data = gather(run_dir)
-    _print_tables(results_tables(data) + models_table(data), data.notes, console)
+    results = results_tables(data)
+    paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
+    _print_tables(paired + models_table(data), data.notes, console)
 
 
 def _print_tables(tables: list, notes: Any, console: Any) -> None:
