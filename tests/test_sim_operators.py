@@ -125,7 +125,7 @@ def test_reach_pillar_routes(reach_runs):
 
 
 def test_round_nut_base_and_conflict_are_proficient():
-    for op in ("base", "conflict-flip"):
+    for op in ("base", "same-style", "conflict-flip", "conflict-flip-pause"):
         out = _run("round-nut", op, seeds=np.arange(10))
         assert out["success"].mean() >= 0.9, op
 
