@@ -180,9 +180,9 @@ def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -
         "### Over collection seeds: paired difference naive − base-only, 95% bootstrap interval",
         "",
         "(10,000 resamples of collection seeds and, within each, of each condition's training "
-        "seeds.) A bootstrap over 5 collection seeds draws from few values and tends to be "
-        "narrow, so beside it: Student's t interval over the per-collection-seed differences "
-        "(the pipeline reports' interval; `*` marks one that excludes 0).",
+        f"seeds.) A bootstrap over {len(cseeds)} collection seeds draws from few values and "
+        "tends to be narrow, so beside it: Student's t interval over the per-collection-seed "
+        "differences (the pipeline reports' interval; `*` marks one that excludes 0).",
         "",
         "| operator | base-only mean | naive mean | difference [95% bootstrap interval] "
         "| collection seeds below base | bootstrap interval excludes 0 "
