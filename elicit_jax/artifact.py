@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import functools
 import hashlib
 import json
 import os
@@ -48,13 +49,21 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 
 def library_versions() -> dict[str, str]:
     """Versions of the libraries that shape results, without importing heavy modules."""
+    return dict(_library_versions())
+
+
+@functools.cache
+def _library_versions() -> tuple[tuple[str, str], ...]:
+    """Looked up once per process: reading package metadata takes milliseconds of Python
+    (about 40 ms per artifact header before), and an installed version does not change under
+    a running process."""
     from importlib import metadata
 
-    out = {}
+    out = []
     for name in ("elicit-jax", "jax", "jaxlib", "flax", "optax", "mujoco", "mujoco-mjx", "numpy"):
         with contextlib.suppress(metadata.PackageNotFoundError):
-            out[name] = metadata.version(name)
-    return out
+            out.append((name, metadata.version(name)))
+    return tuple(out)
 
 
 def runtime_settings() -> dict[str, Any]:
@@ -129,6 +138,10 @@ def _temp_prefix(path: Path) -> str:
     return f".{path.name}.p{os.getpid()}-{_host_tag()}."
 
 
+_TEMP_SUFFIX = re.compile(r"^(?:p(\d+)-([0-9a-f]{8})\..*\.tmp|old-(\d+))$")
+"""What follows ``.<name>.`` in a temporary's name (see :func:`_temp_prefix`)."""
+
+
 def clean_stale_temporaries(path: str | Path) -> list[Path]:
     """Remove temporaries of ``path`` left by killed writers; returns what was removed.
 
@@ -139,12 +152,10 @@ def clean_stale_temporaries(path: str | Path) -> list[Path]:
     path = Path(path)
     if not path.parent.is_dir():
         return []
-    pattern = re.compile(
-        rf"^\.{re.escape(path.name)}\.(?:p(\d+)-([0-9a-f]{{8}})\..*\.tmp|old-(\d+))$"
-    )
+    prefix = f".{path.name}."
     removed = []
     for p in path.parent.iterdir():
-        m = pattern.match(p.name)
+        m = _TEMP_SUFFIX.match(p.name[len(prefix) :]) if p.name.startswith(prefix) else None
         if not m:
             continue
         pid = int(m.group(1) or m.group(3))

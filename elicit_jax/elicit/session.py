@@ -7,10 +7,12 @@ A :class:`Session` is driven one control step at a time, by whoever owns the loo
         session.step(operator.act(session.observation()))
 
 (:func:`elicit_jax.elicit.run.run_session` is exactly this loop for a synchronous operator;
-a web server calls the same two methods from its own loop.) Everything else — ending an
+a web server calls the same methods from its own loop.) Everything else — ending an
 episode, judging it, writing it, feedback, retraining, starting the next — happens inside
 :meth:`Session.step` when an episode ends, and is announced through the listeners as events
-(:mod:`elicit_jax.elicit.events`).
+(:mod:`elicit_jax.elicit.events`). A caller that must show the episode's last state before
+that work (a web page's last frame) steps with ``finish=False`` and calls
+:meth:`Session.finish_episode` once it has: the result is the same.
 
 Phases: ``practice`` (``config.practice`` episodes, recorded, never demonstrations) →
 ``prompt`` (informed mode: the ``config.prompt`` base demonstrations the base policy fits
@@ -72,6 +74,7 @@ class Session:
         self._buf: dict[str, list[Any]] = {}
         self._robot_action: tuple[int, np.ndarray] | None = None
         self._prompted = False
+        self._ended: bool | None = None
 
     # --- public driving API ----------------------------------------------------------------
     def start(self) -> None:
@@ -96,8 +99,15 @@ class Session:
             operator_in_control=bool(self._buf["operator"] and self._buf["operator"][-1]),
         )
 
-    def step(self, action: np.ndarray | None) -> None:
-        """Apply one control step (``None``: the robot's action, DAgger only)."""
+    def step(self, action: np.ndarray | None, finish: bool = True) -> None:
+        """Apply one control step (``None``: the robot's action, DAgger only).
+
+        Args:
+          action: (A,) the operator's action, or None.
+          finish: when this step ends the episode, judge and write it now (and begin the next
+            one). With False the episode is left :attr:`episode_over` — its last state still
+            in :attr:`sim_data` — until :meth:`finish_episode` is called.
+        """
         self._require_running()
         t0 = time.perf_counter()
         obs = self._sim.obs[0].astype(np.float32)
@@ -126,9 +136,23 @@ class Session:
         self._sim.step(applied[None].astype(np.float64))
         length = len(buf["obs"])
         if self._sim.success[0]:
-            self._finish(success=True)
+            self._ended = True
         elif self._sim.unstable[0] or length >= self.setup.task.config.horizon:
-            self._finish(success=False)
+            self._ended = False
+        if finish:
+            self.finish_episode()
+
+    @property
+    def episode_over(self) -> bool:
+        """The current episode has ended and waits for :meth:`finish_episode`."""
+        return self._ended is not None
+
+    def finish_episode(self) -> None:
+        """Judge and write the episode that ended (``step(..., finish=False)``), announce it,
+        and begin the next one; nothing happens while no episode has ended."""
+        if self._ended is not None:
+            success, self._ended = self._ended, None
+            self._finish(success)
 
     def end_episode(self) -> None:
         """End the current episode now (the operator gives up); it counts as not solved."""
@@ -165,6 +189,8 @@ class Session:
             raise ElicitError("the session is over")
         if self._sim is None:
             raise ElicitError("the session has not started (call start())")
+        if self._ended is not None:
+            raise ElicitError("the episode has ended (call finish_episode())")
 
     def _check_action(self, action: Any) -> np.ndarray:
         a = np.asarray(action, np.float64)

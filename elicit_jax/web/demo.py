@@ -5,10 +5,11 @@ thresholds fitted on contrast sets — with the library's own stages, the quicks
 20 demonstrations of the scripted ``base`` operator (it passes the pillar on the left), a
 5 x 128-128 ensemble trained on them, and (λ, η) fitted on 4 held-out ``base``
 demonstrations against 4 of ``conflict-over`` (it climbs over the pillar). Everything lands
-in ``CACHE/serve-demo/<hash>/``, where the hash covers the recipe, the task's model and the
-scripted operators' code, so a changed recipe or operator builds anew and an unchanged one
-is reused (about a minute the first time on a 2-core CPU, instant after). The directory is
-written atomically: a build cut short leaves nothing that looks finished.
+in ``CACHE/serve-demo/<hash>/``, where the hash covers the recipe, the resolved training
+config, the task's model, the scripted operators' code and the elicit-jax version, so a
+changed recipe, training default or operator — or an upgrade — builds anew and an unchanged
+one is reused (about a minute the first time on a 2-core CPU, instant after). The directory
+is written atomically: a build cut short leaves nothing that looks finished.
 """
 
 from __future__ import annotations
@@ -67,8 +68,25 @@ class DemoInputs:
     thresholds: Path
 
 
+def train_config(recipe: DemoRecipe) -> Any:
+    """The ``TrainConfig`` the base policy is trained with (the ``cpu`` profile's defaults,
+    with the recipe's sizes)."""
+    from elicit_jax.policy.config import TrainConfig
+
+    return TrainConfig.from_profile(
+        "cpu",
+        hidden=recipe.hidden,
+        ensemble_size=recipe.ensemble_size,
+        epochs=recipe.epochs,
+        checkpoint_every=recipe.epochs // 4,
+        progress_every=10,
+    )
+
+
 def recipe_hash(recipe: DemoRecipe) -> str:
-    """SHA-256 of the recipe, the task's MJCF and the source of its scripted operators."""
+    """SHA-256 of the recipe, its training config, the task's MJCF, the source of its
+    scripted operators and the elicit-jax version."""
+    from elicit_jax import __version__
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.operators import base as operator_base
 
@@ -76,6 +94,8 @@ def recipe_hash(recipe: DemoRecipe) -> str:
     module = inspect.getmodule(type(_operator(task, recipe.operator)))
     parts = [
         json.dumps(dataclasses.asdict(recipe), sort_keys=True),
+        json.dumps(train_config(recipe).to_dict(), sort_keys=True, default=str),
+        __version__,
         task.xml(),
         inspect.getsource(operator_base),
         inspect.getsource(module) if module else "",
@@ -142,7 +162,6 @@ def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
     from elicit_jax.compat.score_file import score_file
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
     from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.policy.config import TrainConfig
     from elicit_jax.policy.train import train_policy
     from elicit_jax.sim.collect import CollectConfig, collect
 
@@ -158,17 +177,9 @@ def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
     parts = [read_demos(out / name) for name, *_ in sets[1:]]
     write_demos(out / CONTRAST_FILE, concat_demos(parts))
     echo(f"  train the base policy ({r.ensemble_size} x {r.hidden}, {r.epochs} epochs)")
-    config = TrainConfig.from_profile(
-        "cpu",
-        hidden=r.hidden,
-        ensemble_size=r.ensemble_size,
-        epochs=r.epochs,
-        checkpoint_every=r.epochs // 4,
-        progress_every=10,
-    )
     train_policy(
         read_demos(out / BASE_FILE),
-        config,
+        train_config(r),
         out / POLICY_DIR,
         inputs={"demos": out / BASE_FILE},
         quiet=True,

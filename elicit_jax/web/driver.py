@@ -190,8 +190,11 @@ class OperatorDriver:
     def _open(self) -> None:
         from elicit_jax.elicit.session import Session
         from elicit_jax.elicit.setup import open_session
+        from elicit_jax.web import operator as browser  # registers the ``browser`` kind
         from elicit_jax.web.clips import ClipMaker
 
+        if self.config.operator.partition(":")[0] != browser.KIND:
+            raise ElicitError(f"a browser session needs a '{browser.KIND}:NAME' operator")
         setup, operator, resumed = open_session(self.config, self.out, quiet=True)
         self.setup, self.operator = setup, operator
         task = setup.task
@@ -247,17 +250,16 @@ class OperatorDriver:
             obs = s.observation()
             action = self.operator.act(obs)
             self._m = math.nan
-            episode = obs.episode
-            s.step(action)
+            s.step(action, finish=False)
             self.steps += 1
-            if not self._review_pending and s.sim_data is not None and episode == self._index:
-                self._step = obs.step + 1
-                frame = pack_frame(
-                    body_poses(s.sim_data), episode, self._step, self._m, action is not None
-                )
-                with self._lock:
-                    self._frame = frame
-                    self._send(frame, droppable=True)
+            self._step = obs.step + 1
+            frame = pack_frame(
+                body_poses(s.sim_data), obs.episode, self._step, self._m, action is not None
+            )
+            with self._lock:
+                self._frame = frame
+                self._send(frame, droppable=not s.episode_over)
+            s.finish_episode()  # after the last frame is out: judging and writing take a while
         if self._review_pending and not s.done:
             with self._lock:
                 if self.state == RUNNING:
@@ -311,8 +313,7 @@ class OperatorDriver:
         self._go = False
         self._review_pending = True
         self._step = event.length
-        frame = pack_frame(body_poses(self.session.sim_data), event.episode, event.length, self._m)
-        self._review = [frame, messages.event(event)]
+        self._review = [messages.event(event)]  # the episode's last frame went out before
         self._sendall(self._review)
         row = self.session.progress.rows[-1]
         c = event.counts

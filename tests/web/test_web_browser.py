@@ -192,6 +192,7 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         page.keyboard.press("Backspace")
         screen(page, "progress")
         assert page.inner_text("#last-result") == "Practice 1 of 1 done."
+        assert page.inner_text("#phase") == "progress"
 
         # the prompt: two base demonstrations replayed with play / pause / scrub; a reload
         page.keyboard.press("Enter")
@@ -225,6 +226,7 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         shot(page, "demonstrate")
         assert "red" in driven(page)["seen"]
         screen(page, "review")
+        assert page.inner_text("#phase") == "review"  # the screen, not the next episode's phase
         page.wait_for_selector("#verdict[data-verdict=rejected]")
         assert page.locator("#review-windows button").count() == 3
         page.wait_for_selector("#split-labels:not([hidden])")

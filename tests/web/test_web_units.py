@@ -181,3 +181,23 @@ def test_serve_refuses_bad_settings_in_one_line():
     for args, message in cases:
         result = CliRunner().invoke(app, args)
         assert result.exit_code != 0 and message in str(result.exception), args
+
+
+def test_the_demo_cache_key_covers_the_version_and_the_training_config(monkeypatch):
+    """An upgrade or a changed training default builds the `serve --demo` inputs anew."""
+    import dataclasses
+
+    import elicit_jax
+    from elicit_jax.web import demo
+
+    recipe = demo.DemoRecipe()
+    key = demo.recipe_hash(recipe)
+    assert demo.recipe_hash(recipe) == key  # stable
+    with monkeypatch.context() as m:
+        m.setattr(elicit_jax, "__version__", elicit_jax.__version__ + ".post1")
+        assert demo.recipe_hash(recipe) != key
+    trained = demo.train_config
+    with monkeypatch.context() as m:
+        m.setattr(demo, "train_config", lambda r: dataclasses.replace(trained(r), lr=0.002))
+        assert demo.recipe_hash(recipe) != key
+    assert demo.recipe_hash(recipe) == key

@@ -169,6 +169,8 @@ function onEvent(ev) {
 }
 
 // --- screens -----------------------------------------------------------------------------
+const TOP_BAR_SCREENS = new Set(['practice', 'prompt', 'demonstrate', 'review', 'progress', 'retrain', 'done']);
+
 function informed() { return S.welcome && S.welcome.mode === 'informed'; }
 
 function pickScreen() {
@@ -202,7 +204,9 @@ function render() {
     $('progress').dataset.accepted = counts.accepted;
     $('progress').dataset.wanted = counts.wanted;
   }
-  $('phase').textContent = S.phase ? S.phase.phase : '';
+  // the screen the operator is on, not the session's phase: by the time the review shows,
+  // the session has already begun the next episode (its phase reads 'demonstrate')
+  $('phase').textContent = TOP_BAR_SCREENS.has(screen) ? screen : (S.phase ? S.phase.phase : '');
   if (w) {
     const goal = GOALS[w.task] || 'Solve the task.';
     $('task-goal').textContent = goal;
