@@ -325,8 +325,8 @@ def write_report(path: Path, ours: list[dict], ref: list[dict], args, started: f
         "Each simulated operator: reach-pillar, informed mode (live scorer every step), an "
         "action message every 50 ms, episodes of 100 steps started back to back; intervals "
         "between consecutive frames of an episode at the client (episode boundaries left out). "
-        "An episode's last frame waits for the episode to be judged and written (tens of ms); "
-        "the p99 is also shown without those.",
+        "An episode's last frame is sent before the episode is judged and written; "
+        "the p99 is also shown without those frames.",
         "",
         "## elicit-jax serve --demo",
         "",
