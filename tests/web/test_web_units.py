@@ -62,9 +62,10 @@ def test_the_rate_limit_allows_bursts_then_the_average_rate():
         limiter.take(t)
     with pytest.raises(ProtocolError, match="too many"):
         limiter.take(t)
-    limiter.take(t + 0.1)  # one token back after 1/rate seconds
+    # one token back after 1/rate seconds (1 us more: (t + 0.1) - t can round below 0.1)
+    limiter.take(t + 0.100001)
     with pytest.raises(ProtocolError):
-        limiter.take(t + 0.1)
+        limiter.take(t + 0.100001)
 
 
 def test_binary_frames_and_clips_round_trip():
