@@ -50,3 +50,16 @@ def test_mjx_refuses_a_pool_that_deadlocks_it(monkeypatch):
 )
 def test_cli_sizes_the_pool_for_mjx_only_when_asked(argv, mjx):
     assert _steps_mjx(argv) is mjx
+
+
+def test_cli_sizes_the_pool_for_a_definition_that_evaluates_with_mjx(tmp_path):
+    mjx = tmp_path / "mjx.toml"
+    mjx.write_text('[pipeline]\nname = "x"\n[tasks.square-nut.evaluate]\nbackend = "mjx"\n')
+    c = tmp_path / "c.toml"
+    c.write_text('[pipeline]\nname = "x"\n[evaluate]\nbackend = "mujoco"\n')
+    assert _steps_mjx(["pipeline", "run", str(mjx), "--profile", "cpu"]) is True
+    assert _steps_mjx(["--debug", "pipeline", "run", "--out", "o", str(mjx)]) is True
+    assert _steps_mjx(["pipeline", "run", str(c)]) is False
+    assert _steps_mjx(["pipeline", "run", str(tmp_path / "missing.toml")]) is False
+    assert _steps_mjx(["pipeline", "status", str(mjx)]) is False
+    assert _steps_mjx(["pipeline", "run", "quickstart"]) is False

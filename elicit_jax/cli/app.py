@@ -116,7 +116,43 @@ def _steps_mjx(argv: list[str]) -> bool:
     XLA's CPU pool must then be sized for MJX before JAX starts (see
     :func:`elicit_jax.runtime.check_mjx_threads`)."""
     pairs = zip(argv, [*argv[1:], ""], strict=True)
-    return any(a == "--backend=mjx" or (a == "--backend" and b == "mjx") for a, b in pairs)
+    if any(a == "--backend=mjx" or (a == "--backend" and b == "mjx") for a, b in pairs):
+        return True
+    return _definition_steps_mjx(argv)
+
+
+def _definition_steps_mjx(argv: list[str]) -> bool:
+    """``pipeline run DEFINITION`` where the definition evaluates with MJX (an ``evaluate``
+    table with ``backend = "mjx"``, at any level). Unreadable definitions count as no: the
+    command itself then reports them."""
+    import tomllib
+
+    from elicit_jax.pipeline.spec import resolve_path
+
+    run_at = [i for i in range(len(argv) - 1) if argv[i : i + 2] == ["pipeline", "run"]]
+    if not run_at:
+        return False
+    for arg in argv[run_at[0] + 2 :]:
+        if arg.startswith("-"):
+            continue
+        try:
+            data = tomllib.loads(resolve_path(arg).read_text())
+        except (ElicitError, OSError, ValueError):
+            continue
+        if _evaluates_with_mjx(data):
+            return True
+    return False
+
+
+def _evaluates_with_mjx(table: object) -> bool:
+    if isinstance(table, list):
+        return any(_evaluates_with_mjx(t) for t in table)
+    if not isinstance(table, dict):
+        return False
+    evaluate = table.get("evaluate")
+    if isinstance(evaluate, dict) and evaluate.get("backend") == "mjx":
+        return True
+    return any(_evaluates_with_mjx(v) for v in table.values())
 
 
 def main() -> None:
