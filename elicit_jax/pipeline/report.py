@@ -76,10 +76,17 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
         blocks.append(("Compatibility maps (per operator)", list(data.maps)))
     if data.lengths:
         blocks.append(("Mean demonstration length per operator", length_table(data)))
-    blocks.append(("Pipeline definition", ("code", data.spec_text or "(not recorded)")))
-    blocks.append(("Stage configs", ("code", dumps(dict(data.configs)))))
-    blocks.append(("Library versions", ("code", dumps(dict(data.versions)))))
-    return blocks
+    return blocks + provenance_blocks(data, "Pipeline definition")
+
+
+def provenance_blocks(data: Any, definition_title: str) -> list[tuple[str, Any]]:
+    """The closing blocks every report ends with: the definition's text, each stage's config
+    and the library versions (``data`` has ``spec_text``, ``configs`` and ``versions``)."""
+    return [
+        (definition_title, ("code", data.spec_text or "(not recorded)")),
+        ("Stage configs", ("code", dumps(dict(data.configs)))),
+        ("Library versions", ("code", dumps(dict(data.versions)))),
+    ]
 
 
 def _intro(data: ReportData) -> list[str]:

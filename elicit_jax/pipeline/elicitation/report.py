@@ -29,7 +29,13 @@ from elicit_jax.pipeline.elicitation.tables import (
     table2,
     threshold_table,
 )
-from elicit_jax.pipeline.report import _CSS, CPU_NOTE, _html_inline, _md_table
+from elicit_jax.pipeline.report import (
+    _CSS,
+    CPU_NOTE,
+    _html_inline,
+    _md_table,
+    provenance_blocks,
+)
 
 FIGURES = "figures"
 INTERVAL_NOTE = (
@@ -114,10 +120,7 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
         blocks.append(("What the M-filter kept of each naive session", filter_table(data)))
     if data.thresholds:
         blocks.append(("Thresholds (every session and the M-filter)", threshold_table(data)))
-    blocks.append(("Study definition", ("code", data.spec_text or "(not recorded)")))
-    blocks.append(("Stage configs", ("code", dumps(dict(data.configs)))))
-    blocks.append(("Library versions", ("code", dumps(dict(data.versions)))))
-    return blocks
+    return blocks + provenance_blocks(data, "Study definition")
 
 
 def _intro(data: StudyData) -> list[str]:
