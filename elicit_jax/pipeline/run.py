@@ -26,7 +26,7 @@ class PipelineRunConfig:
 
     Attributes:
       pipeline: a definition file, or the name of a shipped one (``quickstart``,
-        ``filtering``, ``models``).
+        ``filtering``, ``models``, ``elicitation``).
       profile: ``paper`` or ``cpu``; default: the definition's own.
       out: run directory; default ``runs/<name>-<profile>``.
       progress: draw progress bars.

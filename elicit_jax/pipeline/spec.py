@@ -170,7 +170,7 @@ def builtin_dir() -> Path:
 
 
 def builtin_names() -> list[str]:
-    """Names of the shipped definitions (``quickstart``, ``filtering``, ``models``)."""
+    """Names of the shipped definitions (quickstart, filtering, models, elicitation)."""
     return sorted(p.stem for p in builtin_dir().glob("*.toml"))
 
 
