@@ -196,6 +196,12 @@ def test_table2_and_ablation_by_hand():
     # df = .0125² / (.0025² / 1 + .01² / 1) = 1.4706, t(0.975, 1.4706) = 6.1881 (scipy)
     assert one.high - one.mean == pytest.approx(6.1881 * 0.0125**0.5, rel=1e-4)
     assert not one.excludes_zero
+    # naive − base: people .20, .20 (no spread), base seeds .2, .4 → se = √(.02 / 2) = .1,
+    # Welch df = .01² / (.01² / 1) = 1, t(0.975, 1) = 12.7062 → −10 ± 127.1 points
+    assert cols["Naive − Base"] == "-10.0 [-137.1, +117.1]"
+    assert list(header[6:10]) == [
+        "Naive − Base", "Informed − Naive", "Naive + M-filtered − Naive", "Informed − Base"
+    ]  # fmt: skip
     header, rows = ablation_table(data, "t", "mlp")
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"

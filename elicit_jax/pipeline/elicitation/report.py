@@ -15,6 +15,7 @@ from elicit_jax.artifact import atomic_path, dumps, make_header
 from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.pipeline.elicitation.tables import (
     CONDITION_LABELS,
+    DIFFERENCES,
     ablation_table,
     cells_of,
     compare,
@@ -55,9 +56,8 @@ MODEL_NOTE = (
 def _verdicts(data: StudyData) -> list[str]:
     cells = success_cells(data)
     out = []
-    pairs = (("informed", "naive"), ("filtered", "naive"), ("informed", "base"))
     for task, model in cells_of(data):
-        for a, b in pairs:
+        for a, b in DIFFERENCES:
             d = compare(cells, task, model, a, b)
             if d is None:
                 continue
