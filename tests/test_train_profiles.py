@@ -135,3 +135,38 @@ def test_import_warns_about_constant_action_dims(demos_file, tmp_path):
     r = CliRunner().invoke(app, ["import", str(npz), "-o", str(tmp_path / "d.parquet")])
     assert r.exit_code == 0, r.output
     assert "action dims [2] are constant" in r.output
+
+
+def _saturated_task(seed: int, episodes: int) -> list[dict]:
+    """Actions a fixed function of obs: a smooth dim, a dim saturated at ±1 a third of the
+    time, a constant dim and a ±1 gripper."""
+    rng = np.random.default_rng(seed)
+    eps = []
+    for _ in range(episodes):
+        obs = rng.normal(size=(25, 3)).astype(np.float32)
+        a = np.stack(
+            [np.tanh(obs[:, 0]), np.clip(obs[:, 1], -1, 1), 0 * obs[:, 0], np.sign(obs[:, 2])], -1
+        )
+        eps.append({"obs": obs, "action": a.astype(np.float32)})
+    return eps
+
+
+def test_cpu_profile_mdn_learns_as_well_as_the_mlp(tmp_path):
+    """The cpu profile's MDN (lr 1e-3, std floor 0.01, 500 epochs) must match the cpu MLP's
+    held-out action error on a task with a constant and a ±1 dim; with the paper's lr 1e-4,
+    a 1e-4 std floor and 100 epochs it did not (~5x the MLP's error on square-nut)."""
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.train import train_policy
+
+    write_demos(tmp_path / "d.parquet", from_episodes(_saturated_task(0, 12), operators="op"))
+    test = from_episodes(_saturated_task(1, 4), operators="op")
+    demos = read_demos(tmp_path / "d.parquet")
+    errors = {}
+    for model in ("mlp", "mdn"):
+        cfg = TrainConfig.from_profile("cpu", model=model, hidden=(32, 32), batch_size=100)
+        train_policy(demos, cfg, tmp_path / model, quiet=True)
+        pred = load_policy(tmp_path / model).members(jnp.asarray(test.obs)).mean(0)
+        errors[model] = np.mean((np.asarray(pred) - test.action) ** 2, axis=0)
+    assert errors["mdn"][2] < 1e-3  # the constant dim
+    assert np.mean(errors["mdn"]) < 1.5 * np.mean(errors["mlp"]), errors

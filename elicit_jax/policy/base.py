@@ -48,6 +48,7 @@ class Policy:
         PyTorch 1e-5).
       dropout_last: dropout also after the last hidden layer (the original code), not only
         between hidden layers (the paper).
+      mdn_min_std: MDN only: floor on the mixture components' stds.
       action_std: (A,) std of the training actions per dim (action scaling), or None for
         checkpoints that predate it.
     """
@@ -66,6 +67,7 @@ class Policy:
     obs_fields: tuple[str, ...] = struct.field(pytree_node=False, default=())
     layer_norm_eps: float = struct.field(pytree_node=False, default=models.LAYER_NORM_EPS)
     dropout_last: bool = struct.field(pytree_node=False, default=False)
+    mdn_min_std: float = struct.field(pytree_node=False, default=models.MDN_MIN_STD)
     action_std: Any = None
 
     @property
@@ -79,6 +81,7 @@ class Policy:
             self.n_components,
             layer_norm_eps=self.layer_norm_eps,
             dropout_last=self.dropout_last,
+            mdn_min_std=self.mdn_min_std,
         )
 
     def normalize(self, obs: jax.Array) -> jax.Array:
@@ -240,6 +243,7 @@ def init_policy(
     obs_std: Any = None,
     layer_norm_eps: float = models.LAYER_NORM_EPS,
     dropout_last: bool = False,
+    mdn_min_std: float = models.MDN_MIN_STD,
 ) -> Policy:
     """A freshly initialised policy (identity normalisation unless stats are given)."""
     module = models.make_module(
@@ -250,6 +254,7 @@ def init_policy(
         n_components,
         layer_norm_eps=layer_norm_eps,
         dropout_last=dropout_last,
+        mdn_min_std=mdn_min_std,
     )
     params = models.init_members(module, kind, key, obs_dim, n_members)
     return Policy(
@@ -267,4 +272,5 @@ def init_policy(
         obs_fields=tuple(obs_fields),
         layer_norm_eps=float(layer_norm_eps),
         dropout_last=bool(dropout_last),
+        mdn_min_std=float(mdn_min_std),
     )

@@ -42,6 +42,7 @@ SPEC_KEYS = (
     "obs_fields",
     "layer_norm_eps",
     "dropout_last",
+    "mdn_min_std",
 )
 _EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
 
@@ -208,6 +209,7 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
         obs_fields=tuple(spec.get("obs_fields", ())),
         layer_norm_eps=float(spec.get("layer_norm_eps", models.LAYER_NORM_EPS)),
         dropout_last=bool(spec.get("dropout_last", False)),
+        mdn_min_std=float(spec.get("mdn_min_std", models.MDN_MIN_STD)),
         action_std=jnp.asarray(norm["action_std"]) if "action_std" in norm else None,
     )
 

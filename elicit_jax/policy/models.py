@@ -9,7 +9,7 @@ Architectures (paper defaults, ``docs/method.md``):
     hidden layers (``dropout_last``: after every hidden layer, before the head too, as the
     original code does), a Dense head and ``tanh``.
   * ``mdn``: the same trunk; heads for ``n_components`` mixture logits, tanh-bounded means and
-    softplus scales (plus a floor of ``MDN_MIN_STD``) per action dim.
+    softplus scales plus a floor ``min_std`` (default ``MDN_MIN_STD``) per action dim.
   * ``lstm``: stacked LSTM cells of sizes ``hidden``, a Dense head and ``tanh``.
 """
 
@@ -24,7 +24,7 @@ import jax.numpy as jnp
 
 from elicit_jax.policy.dropout import BitDropout
 
-MDN_MIN_STD = 1e-4
+MDN_MIN_STD = 1e-4  # the MDN's default floor on component stds (paper profile)
 LAYER_NORM_EPS = 1e-6  # Flax's default; PyTorch (the original code) uses 1e-5
 Params = Any
 LSTMCarry = tuple[tuple[jax.Array, jax.Array], ...]
@@ -76,6 +76,7 @@ class MDNMember(nn.Module):
     n_components: int
     layer_norm_eps: float = LAYER_NORM_EPS
     dropout_last: bool = False
+    min_std: float = MDN_MIN_STD
 
     @nn.compact
     def __call__(self, x: jax.Array, train: bool = False) -> tuple[jax.Array, ...]:
@@ -84,7 +85,7 @@ class MDNMember(nn.Module):
         logits = nn.Dense(c, name="logits")(x)
         means = jnp.tanh(nn.Dense(c * a, name="means")(x)).reshape(*x.shape[:-1], c, a)
         raw = nn.Dense(c * a, name="scales")(x).reshape(*x.shape[:-1], c, a)
-        return logits, means, nn.softplus(raw) + MDN_MIN_STD
+        return logits, means, nn.softplus(raw) + self.min_std
 
 
 class LSTMStep(nn.Module):
@@ -111,14 +112,16 @@ def make_module(
     *,
     layer_norm_eps: float = LAYER_NORM_EPS,
     dropout_last: bool = False,
+    mdn_min_std: float = MDN_MIN_STD,
 ) -> nn.Module:
-    """The Flax module of one member of a ``kind`` model."""
+    """The Flax module of one member of a ``kind`` model (``mdn_min_std``: the MDN's floor on
+    component stds)."""
     hidden = tuple(int(h) for h in hidden)
     eps, last = float(layer_norm_eps), bool(dropout_last)
     if kind == "mlp":
         return MLPMember(hidden, action_dim, dropout, eps, last)
     if kind == "mdn":
-        return MDNMember(hidden, action_dim, dropout, n_components, eps, last)
+        return MDNMember(hidden, action_dim, dropout, n_components, eps, last, float(mdn_min_std))
     if kind == "lstm":
         return LSTMStep(hidden, action_dim)
     raise ValueError(f"unknown model kind {kind!r} (expected mlp, mdn or lstm)")

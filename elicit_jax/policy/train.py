@@ -51,6 +51,7 @@ def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: i
         config.n_components,
         layer_norm_eps=config.layer_norm_eps,
         dropout_last=config.dropout_last,
+        mdn_min_std=config.mdn_min_std,
     )
     return LoopSpec(
         kind=config.model,
@@ -85,6 +86,7 @@ def _template(config: TrainConfig, demos: Demos, data: TrainData, params: Any) -
         obs_fields=tuple(f.name for f in demos.obs_fields),
         layer_norm_eps=config.layer_norm_eps,
         dropout_last=config.dropout_last,
+        mdn_min_std=config.mdn_min_std,
     )
 
 
