@@ -166,7 +166,21 @@ def test_cpu_profile_mdn_learns_as_well_as_the_mlp(tmp_path):
     for model in ("mlp", "mdn"):
         cfg = TrainConfig.from_profile("cpu", model=model, hidden=(32, 32), batch_size=100)
         train_policy(demos, cfg, tmp_path / model, quiet=True)
-        pred = load_policy(tmp_path / model).members(jnp.asarray(test.obs)).mean(0)
+        policy = load_policy(tmp_path / model)
+        assert policy.mdn_min_std == (0.01 if model == "mdn" else models.MDN_MIN_STD)
+        pred = policy.members(jnp.asarray(test.obs)).mean(0)
         errors[model] = np.mean((np.asarray(pred) - test.action) ** 2, axis=0)
     assert errors["mdn"][2] < 1e-3  # the constant dim
     assert np.mean(errors["mdn"]) < 1.5 * np.mean(errors["mlp"]), errors
+
+
+def test_mdn_std_floor_setting():
+    cpu, paper = (TrainConfig.from_profile(p, model="mdn") for p in ("cpu", "paper"))
+    assert (cpu.mdn_min_std, cpu.lr, cpu.epochs) == (0.01, 1e-3, 500)
+    assert (paper.mdn_min_std, paper.lr, paper.epochs) == (1e-4, 1e-4, 1000)
+    assert TrainConfig.from_dict(cpu.to_dict()) == cpu
+    assert "mdn_min_std" not in TrainConfig.from_profile("cpu").to_dict()  # MLP: unchanged
+    module = models.make_module("mdn", (4,), 2, 0.0, 2, mdn_min_std=0.01)
+    params = module.init(jax.random.key(0), jnp.zeros((1, 3)), False)["params"]
+    _, _, std = module.apply({"params": jax.tree.map(jnp.zeros_like, params)}, jnp.zeros((1, 3)))
+    np.testing.assert_allclose(std, np.log(2.0) + 0.01, rtol=1e-6)  # softplus(0) + floor

@@ -269,6 +269,8 @@ def policy_spec(policy: Any) -> dict[str, Any]:
     spec = {k: getattr(policy, k) for k in SPEC_KEYS}
     spec["hidden"] = list(spec["hidden"])
     spec["obs_fields"] = list(spec["obs_fields"])
+    if spec["kind"] != "mdn":
+        del spec["mdn_min_std"]  # unused; older checkpoints and other models go without it
     return spec
 
 

@@ -157,8 +157,13 @@ class TrainConfig:
         return cls(**{**PROFILES[profile](model), **overrides})
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (tuples become lists)."""
-        return dataclasses.asdict(self)
+        """JSON-ready dict (tuples become lists). ``mdn_min_std`` only for the MDN: other models
+        ignore it, and leaving it out keeps their stored configs (and the pipeline's stage
+        identities) as they were before the setting existed."""
+        out = dataclasses.asdict(self)
+        if self.model != "mdn":
+            del out["mdn_min_std"]
+        return out
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
