@@ -148,8 +148,7 @@ class Study:
 
 
 def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -> str:
-    from elicit_jax.pipeline.stats import format_diff, paired_t_interval
-    from elicit_jax.stats import paired_difference
+    from elicit_jax.stats import format_diff, paired_difference, paired_t_interval
 
     ops, cseeds = args.operators, args.collect_seeds
     cfg = study.train_cfg

@@ -6,13 +6,13 @@ import math
 
 import pytest
 
-from elicit_jax.pipeline.stats import (
+from elicit_jax.pipeline.tables import ReportData, ResultRow, difference_tables, paired_diff
+from elicit_jax.stats import (
     format_diff,
     paired_t_interval,
     t_quantile,
     welch_t_interval,
 )
-from elicit_jax.pipeline.tables import ReportData, ResultRow, difference_tables, paired_diff
 
 
 def test_t_interval_by_hand():

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from elicit_jax.pipeline.stats import t_quantile
 from elicit_jax.pipeline.tables import ReportData
+from elicit_jax.stats import t_quantile
 
 _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.pipeline.stats import PairedDiff, format_diff, paired_t_interval
+from elicit_jax.stats import PairedDiff, format_diff, paired_t_interval
 
 METHOD_LABELS = {
     "base": "Base",

@@ -5,7 +5,7 @@ population of each person's policy success (best checkpoint per seed, 50 rollout
 mean (std) over seeds (std with ddof 0, as the filtering report). Differences between two
 conditions are paired by person: each person's difference of mean success over seeds, with
 the pipeline's paired 95% Student t interval
-(:func:`~elicit_jax.pipeline.stats.paired_t_interval`), here over people — the person is the
+(:func:`~elicit_jax.stats.paired_t_interval`), here over people — the person is the
 unit a user study replicates; the training-seed noise enters through each person's mean.
 A difference from the base policy (one policy per seed, no person) is Welch's t over the
 people's means and the base policy's seeds.
@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
-from elicit_jax.pipeline.stats import (
+from elicit_jax.pipeline.tables import Table, mean_std
+from elicit_jax.stats import (
     PairedDiff,
     format_diff,
     paired_t_interval,
     welch_t_interval,
 )
-from elicit_jax.pipeline.tables import Table, mean_std
 
 CONDITION_LABELS = {
     "base": "Base",
@@ -46,7 +46,7 @@ CURVE_ATTEMPTS = 10
 
 def diff_text(diff: PairedDiff | None) -> str:
     """A paired difference in points, ``+10.0 [−5.2, +25.2]`` (``*``: the interval excludes
-    0), as :func:`~elicit_jax.pipeline.stats.format_diff` writes it; one person: no interval."""
+    0), as :func:`~elicit_jax.stats.format_diff` writes it; one person: no interval."""
     if diff is None:
         return "–"
     if diff.n < 2:
@@ -104,7 +104,7 @@ def compare(
     """``a − b`` in success (fraction), paired by person; None when no person has both.
 
     ``b = "base"``: the people's mean against the base policy's mean over its seeds, Welch's
-    t over the people and the base seeds (:func:`~elicit_jax.pipeline.stats.welch_t_interval`),
+    t over the people and the base seeds (:func:`~elicit_jax.stats.welch_t_interval`),
     so the base policy's own seed noise widens the interval."""
     ma = person_means(cells, task, model, a)
     if b == "base":
