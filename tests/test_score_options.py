@@ -128,7 +128,7 @@ def test_thresholds_follow_the_task(run):
     assert header["thresholds_source"] == "preset round-nut (task NutAssemblyRound)"
     r, out = _score(run, "my-task.parquet")
     assert r.exit_code == 0 and "has no paper preset" in r.output
-    assert "placeholder" in read_scores(out)[0]["thresholds_source"]
+    assert "borrowed" in read_scores(out)[0]["thresholds_source"]
     r, _ = _score(run, "my-task.parquet", "--preset", "hammer")
     assert "unknown preset 'hammer'" in str(r.exception)
     help_text = CliRunner().invoke(app, ["score", "--help"]).output

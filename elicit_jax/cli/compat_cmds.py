@@ -60,7 +60,7 @@ def score(
         None,
         "--preset",
         help="Paper thresholds: square-nut, round-nut or hammer-drawer. Default: the preset of "
-        "the demos' task if it has one, else square-nut as a placeholder (with a warning).",
+        "the demos' task if it has one, else square-nut's, borrowed (with a warning).",
     ),
     likelihood: str = typer.Option(
         "ensemble-mean", "--likelihood", help="ensemble-mean (paper) or member-average (code)."
@@ -129,7 +129,7 @@ def score(
 
 def _task_preset(demos: Path) -> tuple[tuple[float, float], str]:
     """(λ, η) and their source when none are given: the paper preset of the demos' task, or
-    square-nut's values as a placeholder (said on stderr)."""
+    square-nut's values, borrowed and marked as such (said on stderr)."""
     from elicit_jax.artifact import read_header
     from elicit_jax.compat.measures import PRESETS, preset_for_task
 
@@ -142,11 +142,11 @@ def _task_preset(demos: Path) -> tuple[tuple[float, float], str]:
     lam, eta = PRESETS["square-nut"]
     typer.echo(
         f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
-        f"λ={lam}, η={eta} as a placeholder. Fit your own (elicit-jax fit-thresholds) and pass "
-        "--thresholds to filter and map.",
+        f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
+        "(elicit-jax fit-thresholds) and pass --thresholds to filter and map.",
         err=True,
     )
-    return (lam, eta), f"placeholder: square-nut preset (task {task} has none)"
+    return (lam, eta), f"borrowed: square-nut preset, not fitted for task {task} (it has no preset)"
 
 
 @app.command("fit-thresholds", rich_help_panel=COMPAT)
