@@ -486,7 +486,7 @@ def rollout_length_table(data: ReportData) -> Table:
         "operator",
         "training set",
         "mean rollout length",
-        "selected checkpoint per seed",
+        "selected checkpoint per seed (epoch; best: lowest validation loss)",
     ]
     rows = [
         [
