@@ -72,7 +72,8 @@ def test_difference_table_naive_against_base_and_methods_against_naive():
     rows += [_row("filtered", "x", s, v) for s, v in enumerate((0.52, 0.50, 0.54))]
     data = ReportData("p", "cpu", "", ".", "", tuple(rows))
     ((title, (header, body)),) = difference_tables(data)
-    assert header == ["operator", "Naive − Base", "M-Filtered − Naive"]
+    assert header == ["operator", "Naive − Base", "M-Filtered − Naive", "M-Filtered − Base"]
     # filtered - naive: d = (0.02, -0.06, -0.02), mean -0.02, sd 0.04, half 0.099367
-    assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]"]]
+    # filtered - base: d = (0.12, 0.14, 0.16), mean 0.14, sd 0.02, half 4.3027 * 0.02 / √3
+    assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]", "+14.0 [+9.0, +19.0] *"]]
     assert "paired 95% interval" in title
