@@ -10,6 +10,7 @@ from elicit_jax.curation.classifier import ClassifierConfig, fit_classifiers, pr
 from elicit_jax.curation.demo_score import (
     DemoScoreConfig,
     Rollouts,
+    at_chance,
     score_demos,
     train_demo_score,
 )
@@ -71,7 +72,7 @@ def test_demo_score_cross_validates_and_drops_failure_like_demos():
     assert rep["validation_epoch"] == 30  # the last checkpoint validates
     assert [c["train_epoch"] for c in rep["candidates"]] == [10, 20]
     assert rep["chosen_train_epoch"] in (10, 20)
-    assert rep["validation_balanced_accuracy"] == 1.0
+    assert rep["validation_balanced_accuracy"] == 1.0 and not at_chance(rep)
     assert 0.0 < model.threshold < 1.0
     # demos: 3 whose states look like successes, 2 like failures
     demos = []
@@ -94,6 +95,15 @@ def test_no_signal_when_every_candidate_is_one_class():
     assert not scores.trusted and "all successes or all failures" in scores.report["why"]
     drop, why = select_drop(scores, OwnRule())
     assert not drop.any() and "no signal" in why
+
+
+def test_at_chance_flags_a_classifier_no_better_than_chance_on_held_out_rollouts():
+    assert at_chance({"validation_balanced_accuracy": 0.5})
+    assert at_chance({"validation_balanced_accuracy": 0.31})
+    assert not at_chance({"validation_balanced_accuracy": 0.51})
+    # one class among the held-out rollouts: the accuracy is of that class alone, not balanced
+    assert not at_chance({"validation_balanced_accuracy": 0.4, "validation_one_class": True})
+    assert not at_chance({})
 
 
 def test_config_validation():

@@ -6,7 +6,14 @@ import math
 
 import pytest
 
-from elicit_jax.pipeline.tables import ReportData, ResultRow, difference_tables, paired_diff
+from elicit_jax.pipeline.tables import (
+    CurationRow,
+    ReportData,
+    ResultRow,
+    curation_table,
+    difference_tables,
+    paired_diff,
+)
 from elicit_jax.stats import (
     format_diff,
     paired_t_interval,
@@ -77,3 +84,28 @@ def test_difference_table_naive_against_base_and_methods_against_naive():
     # filtered - base: d = (0.12, 0.14, 0.16), mean 0.14, sd 0.02, half 4.3027 * 0.02 / √3
     assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]", "+14.0 [+9.0, +19.0] *"]]
     assert "paired 95% interval" in title
+
+
+def test_curation_table_says_when_demo_score_is_no_better_than_chance():
+    rep = {
+        "checkpoints": [{"epoch": 25, "successes": 54, "rollouts": 100}],
+        "chosen_train_epoch": 25,
+        "validation_epoch": 100,
+    }
+    rows = [
+        CurationRow(
+            "t",
+            "mlp",
+            "demo-score",
+            op,
+            (0.55, 0.56),
+            0.55,
+            True,
+            rep | {"validation_balanced_accuracy": acc},
+        )
+        for op, acc in (("x", 0.5), ("y", 0.87))
+    ]
+    data = ReportData("p", "cpu", "", ".", "", (), curation=tuple(rows))
+    _, body = curation_table(data)
+    assert "rollout balanced accuracy 0.50 (no better than chance" in body[0][-1]
+    assert "balanced accuracy 0.87" in body[1][-1] and "chance" not in body[1][-1]

@@ -332,7 +332,7 @@ def _curate(
     """``filter --method deminf|demo-score``: build the config, make ONE library call, print."""
     from elicit_jax.artifact import read_header
     from elicit_jax.curation.deminf import DemInfConfig
-    from elicit_jax.curation.demo_score import DemoScoreConfig
+    from elicit_jax.curation.demo_score import DemoScoreConfig, at_chance
     from elicit_jax.curation.select import CurateConfig, curate_file, scores_path_for
 
     if level not in ("pair", "episode"):
@@ -361,6 +361,13 @@ def _curate(
     )
     if not per_demo.trusted:
         typer.echo(f"warning: {method} had no signal: {per_demo.report.get('why')}", err=True)
+    elif method == "demo-score" and at_chance(per_demo.report):
+        acc = per_demo.report["validation_balanced_accuracy"]
+        typer.echo(
+            f"warning: demo-score's classifier is no better than chance on held-out rollouts "
+            f"(balanced accuracy {acc:.2f}): its ranking of the demos carries no signal",
+            err=True,
+        )
     typer.echo(
         f"{out}: dropped {result.pairs_dropped}/{result.pairs_in} pairs of D_new "
         f"({result.episodes_in} -> {result.episodes_out} episodes; {result.reason}); "

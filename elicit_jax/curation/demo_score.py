@@ -253,6 +253,14 @@ def train_demo_score(rollouts: Rollouts, config: DemoScoreConfig) -> DemoScoreMo
     return dataclasses.replace(model, threshold=threshold, report=report)
 
 
+def at_chance(report: dict[str, Any]) -> bool:
+    """True when the classifier told held-out successful from failed rollouts no better than
+    chance (balanced accuracy ≤ 0.5): its cut still applies, but its ranking of demos carries
+    no evidence about success."""
+    acc = report.get("validation_balanced_accuracy")
+    return acc is not None and not report.get("validation_one_class", False) and acc <= 0.5
+
+
 def jax_index(tree: Any, i: int) -> Any:
     """Entry ``i`` of every leaf of a K-batched pytree."""
     import jax

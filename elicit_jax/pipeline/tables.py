@@ -295,6 +295,8 @@ def models_table(data: ReportData) -> list[tuple[str, Table]]:
 
 def curation_table(data: ReportData) -> Table:
     """What each curation baseline saw: its per-demo scores, its own cut, its diagnostics."""
+    from elicit_jax.curation.demo_score import at_chance
+
     header = [
         "task",
         "model",
@@ -330,6 +332,8 @@ def curation_table(data: ReportData) -> Table:
                     f"{rep.get('validation_epoch')}: rollout balanced accuracy "
                     f"{rep.get('validation_balanced_accuracy', math.nan):.2f}"
                 )
+                if at_chance(rep):
+                    diag += " (no better than chance: the ranking carries no signal)"
         if not c.trusted:
             diag += f"; NO SIGNAL ({rep.get('why', '')}): nothing dropped"
         rows.append(
