@@ -177,7 +177,8 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     assert {(c.method, c.model) for c in data.curation} == {("deminf", None), ("demo-score", "mlp")}
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
     lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
-    _, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
+    header, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
+    assert header["thresholds_source"].startswith("provisional")  # scored before the fit
     budget = int(is_incompatible(pairs["likelihood"], pairs["novelty"], lam, eta).sum())
     deminf = read_episode_scores(out / "curation/reach-pillar/deminf-conflict-right.parquet")
     cum = np.cumsum(deminf.length[np.argsort(deminf.score, kind="stable")])

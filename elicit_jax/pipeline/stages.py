@@ -291,6 +291,10 @@ def score_stage(ctx: StageContext) -> None:
             tmp / SCORES_FILE,
             config_from_dict(cfg["score"]),
             policy_path=ctx.inputs["policy"],
+            thresholds_source=(
+                "provisional: the [score] settings' λ and η; the pipeline fits (λ, η) after "
+                "scoring, and its filters and maps use the fitted values"
+            ),
         )
         header = make_header(
             "pipeline-scores",
