@@ -166,13 +166,41 @@ def bench_size(hidden: int, steps: int, rounds: int) -> dict:
     }
 
 
-def _report(results: dict, load: tuple, seconds: float) -> str:
+def busy_cores(window: float = 1.0) -> float | None:
+    """CPU cores kept busy by whatever runs now, from two reads of /proc/stat ``window`` s
+    apart (None off Linux). Unlike the 1-minute load average, it does not still count a
+    benchmark that finished a minute ago."""
+
+    def read() -> tuple[int, int]:
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+        idle = v[3] + (v[4] if len(v) > 4 else 0)
+        return sum(v) - idle, sum(v)
+
+    try:
+        b0, t0 = read()
+        time.sleep(window)
+        b1, t1 = read()
+    except (OSError, ValueError, IndexError):
+        return None
+    return (os.cpu_count() or 1) * (b1 - b0) / max(t1 - t0, 1)
+
+
+def _busy_text(busy: float | None) -> str:
+    if busy is None:
+        return "other work at the start not measured"
+    kind = "a shared machine" if busy > 0.5 else "a quiet machine"
+    return f"{busy:.2f} cores busy with other work just before the start ({kind})"
+
+
+def _report(results: dict, load: tuple, seconds: float, busy: float | None = None) -> str:
     lines = [
         "# Live M per control step: elicit-jax vs the original PyTorch per-step call",
         "",
         f"{dt.datetime.now().isoformat(timespec='minutes')}, {platform.machine()}, "
-        f"{os.cpu_count()} CPUs; load average {load[0]:.2f} before, {load[1]:.2f} after "
-        f"({'shared, loaded machine' if max(load) > 1.5 else 'quiet machine'}); {seconds:.0f} s.",
+        f"{os.cpu_count()} CPUs; load average (1 min) {load[0]:.2f} before, {load[1]:.2f} "
+        f"after (both include recent work, the after one this benchmark's); {_busy_text(busy)}; "
+        f"{seconds:.0f} s.",
         "",
         "| size | contender | p50 ms | p99 ms | mean ms | CPU ms p50 | CPU ms p99 | steps |",
         "|---|---|---:|---:|---:|---:|---:|---:|",
@@ -221,6 +249,7 @@ def main() -> None:
 
     configure()
     a = _args()
+    busy = busy_cores()
     t0 = time.time()
     load0 = os.getloadavg()[0]
     results = {}
@@ -234,7 +263,7 @@ def main() -> None:
             f"{r['stats'][r['torch_best']]['p99']:.3f} ms; speed-up {r['ratio_p50']:.1f}x "
             f"(p50) {r['ratio_p99']:.1f}x (p99)"
         )
-    text = _report(results, (load0, os.getloadavg()[0]), time.time() - t0)
+    text = _report(results, (load0, os.getloadavg()[0]), time.time() - t0, busy)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(text)
     a.out.with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
