@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 from bench_score import _torch_models
+from machine import busy_cores, busy_text
 
 OBS, ACT, K = 23, 7, 5
 SIZES = {"paper": 1024, "cpu": 256}
@@ -166,40 +167,13 @@ def bench_size(hidden: int, steps: int, rounds: int) -> dict:
     }
 
 
-def busy_cores(window: float = 1.0) -> float | None:
-    """CPU cores kept busy by whatever runs now, from two reads of /proc/stat ``window`` s
-    apart (None off Linux). Unlike the 1-minute load average, it does not still count a
-    benchmark that finished a minute ago."""
-
-    def read() -> tuple[int, int]:
-        with open("/proc/stat") as f:
-            v = [int(x) for x in f.readline().split()[1:]]
-        idle = v[3] + (v[4] if len(v) > 4 else 0)
-        return sum(v) - idle, sum(v)
-
-    try:
-        b0, t0 = read()
-        time.sleep(window)
-        b1, t1 = read()
-    except (OSError, ValueError, IndexError):
-        return None
-    return (os.cpu_count() or 1) * (b1 - b0) / max(t1 - t0, 1)
-
-
-def _busy_text(busy: float | None) -> str:
-    if busy is None:
-        return "other work at the start not measured"
-    kind = "a shared machine" if busy > 0.5 else "a quiet machine"
-    return f"{busy:.2f} cores busy with other work just before the start ({kind})"
-
-
 def _report(results: dict, load: tuple, seconds: float, busy: float | None = None) -> str:
     lines = [
         "# Live M per control step: elicit-jax vs the original PyTorch per-step call",
         "",
         f"{dt.datetime.now().isoformat(timespec='minutes')}, {platform.machine()}, "
         f"{os.cpu_count()} CPUs; load average (1 min) {load[0]:.2f} before, {load[1]:.2f} "
-        f"after (both include recent work, the after one this benchmark's); {_busy_text(busy)}; "
+        f"after (both include recent work, the after one this benchmark's); {busy_text(busy)}; "
         f"{seconds:.0f} s.",
         "",
         "| size | contender | p50 ms | p99 ms | mean ms | CPU ms p50 | CPU ms p99 | steps |",

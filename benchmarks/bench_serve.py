@@ -37,6 +37,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from machine import busy_cores, busy_text
+
 PERIOD = 0.05
 FRAME_BYTES = 16 + 5 * 7 * 4
 
@@ -315,12 +317,8 @@ def write_report(path: Path, ours: list[dict], ref: list[dict], args, started: f
         f"({os.cpu_count()} CPUs), {time.time() - started:.0f} s in all; "
         f"`python benchmarks/bench_serve.py --levels {args.levels} --duration {args.duration:g}`.",
         f"Process niceness {os.nice(0)} (the servers inherit it). "
-        f"Load average (1 min) at the start: {args.load_start:.1f}"
-        + (
-            " — **a shared machine under other jobs' load**; a quiet run will differ."
-            if args.load_start > 1.5
-            else "."
-        ),
+        f"Load average (1 min) at the start: {args.load_start:.1f}; {busy_text(args.busy)}"
+        + (" — a quiet run will differ." if args.busy is None or args.busy > 0.5 else "."),
         "",
         "Each simulated operator: reach-pillar, informed mode (live scorer every step), an "
         "action message every 50 ms, episodes of 100 steps started back to back; intervals "
@@ -350,6 +348,7 @@ def main() -> None:
         run_reference_server(args.reference_server)
         return
     started = time.time()
+    args.busy = busy_cores()
     args.load_start = os.getloadavg()[0]
     levels = [int(x) for x in args.levels.split(",")]
     cli = [sys.executable, "-c", "from elicit_jax.cli import main; main()"]
