@@ -239,22 +239,19 @@ def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
             dict.fromkeys(k[3] for k in rows_of if k[:2] == (task, model) and k[3] is not None)
         )
         base = rows_of.get((task, model, "base", None), [])
-        from_base = [m for m in FROM_BASE if m in methods and base]
+        columns = [(m, "base" if m == "naive" else "naive") for m in methods]
+        columns += [(m, "base") for m in FROM_BASE if m in methods and base]
         rows = []
         for op in ops:
-            naive = rows_of.get((task, model, "naive", op), [])
+            refs = {"base": base, "naive": rows_of.get((task, model, "naive", op), [])}
             cells = []
-            for m, ref in [(m, base if m == "naive" else naive) for m in methods] + [
-                (m, base) for m in from_base
-            ]:
+            for m, ref in columns:
                 mine = rows_of.get((task, model, m, op), [])
-                cells.append(format_diff(paired_diff(mine, ref)) if mine and ref else "–")
+                cells.append(
+                    format_diff(paired_diff(mine, refs[ref])) if mine and refs[ref] else "–"
+                )
             rows.append([op, *cells])
-        header = [
-            "operator",
-            *["Naive − Base" if m == "naive" else f"{METHOD_LABELS[m]} − Naive" for m in methods],
-            *[f"{METHOD_LABELS[m]} − Base" for m in from_base],
-        ]
+        header = ["operator", *[f"{METHOD_LABELS[m]} − {METHOD_LABELS[r]}" for m, r in columns]]
         title = (
             f"{task} — {model}: difference from Naive (M-filters also from Base), points "
             "(paired 95% interval)"
