@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 import re
 
 import pytest
@@ -153,3 +154,77 @@ def test_report_of_a_directory_that_is_not_a_run_fails_in_one_line(tmp_path):
 
     with pytest.raises(ElicitError, match=r"not a pipeline run directory \(no run.json\)"):
         render_run_report(tmp_path)
+
+
+FINDINGS = """### What the table shows
+
+The filter **helps** the `conflict-ring` operator: +12 points [see the
+report](report.md).
+
+- first point
+  continues here
+- second point
+
+| a | b |
+|---|---|
+| 1 | x&y |
+"""
+
+
+def test_findings_html_renders_the_markdown_subset_by_hand():
+    from elicit_jax.pipeline.findings import findings_html
+
+    assert findings_html(FINDINGS) == (
+        "<h3>What the table shows</h3>"
+        "<p>The filter <b>helps</b> the <code>conflict-ring</code> operator: +12 points "
+        '<a href="report.md">see the report</a>.</p>'
+        "<ul><li>first point continues here</li><li>second point</li></ul>"
+        "<table><thead><tr><th>a</th><th>b</th></tr></thead>"
+        "<tbody><tr><td>1</td><td>x&amp;y</td></tr></tbody></table>"
+    )
+
+
+def test_findings_come_first_travel_with_the_report_and_survive_a_rebuild(tmp_path):
+    from elicit_jax.pipeline.findings import TITLE, read_findings
+
+    source = tmp_path / "notes.md"
+    source.write_text(FINDINGS)
+    d = data(tmp_path)
+    out = tmp_path / "report"
+    write_report(type(d)(**{**d.__dict__, "findings": read_findings(source)}), out)
+    md = (out / "report.md").read_text()
+    assert md.index(f"## {TITLE}") < md.index("## square-nut — mlp")
+    assert "- first point\n  continues here" in md
+    assert "<li>first point continues here</li>" in (out / "report.html").read_text()
+    assert (out / "findings.md").read_text() == FINDINGS
+    header = read_header(out)
+    assert header["findings"]["source"] == "notes.md"
+    assert header["findings"]["sha256"] == hashlib.sha256(FINDINGS.encode()).hexdigest()
+    assert "findings.md" in header["files"]
+    # Rebuilding into the same directory from the copy inside it keeps the text.
+    write_report(type(d)(**{**d.__dict__, "findings": read_findings(out / "findings.md")}), out)
+    assert (out / "findings.md").read_text() == FINDINGS
+    write_report(d, out)
+    assert not (out / "findings.md").exists() and TITLE not in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, "findings file not found"),
+        (b"  \n\n", "findings file is empty"),
+        (b"ok \xff\xfe", "not UTF-8 text"),
+        (b"# Title\n\ntext", "top-level '# ' heading"),
+    ],
+)
+def test_bad_findings_file_is_one_line_error_and_writes_nothing(tmp_path, content, message):
+    from elicit_jax.errors import ElicitError
+    from elicit_jax.pipeline.run import render_run_report
+
+    path = tmp_path / "findings.md"
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(ElicitError, match=re.escape(message)) as err:
+        render_run_report(tmp_path, tmp_path / "out", findings=path)
+    assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
+    assert not (tmp_path / "out").exists()

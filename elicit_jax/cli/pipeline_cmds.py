@@ -86,12 +86,19 @@ def pipeline_status(
 def report(
     run_dir: Path = typer.Argument(..., help="A pipeline run or an elicitation session."),
     out: Path = typer.Option(None, "--out", "-o", help="Report directory [RUN_DIR/report]."),
+    findings: Path = typer.Option(
+        None,
+        "--findings",
+        help="Markdown file of your reading of the run, put first in a pipeline or study "
+        "report and copied beside it as findings.md (it may be the previous report's copy).",
+    ),
 ) -> None:
     """Write the Markdown and self-contained HTML report of a pipeline run or a session.
 
     Examples:
       elicit-jax report runs/filtering-cpu
       elicit-jax report sessions/op4
+      elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
     """
     from elicit_jax.artifact import read_json
 
@@ -99,12 +106,17 @@ def report(
     if isinstance(header, dict) and header.get("kind") == "elicit-session":
         from elicit_jax.elicit.report import write_session_report
 
+        if findings is not None:
+            from elicit_jax.errors import ElicitError
+
+            raise ElicitError("--findings is for pipeline and study reports", run_dir)
+
         md, page = write_session_report(run_dir, out)
         typer.echo(f"wrote {md} and {page}")
         return
     from elicit_jax.pipeline.run import render_run_report
 
-    md, page = render_run_report(run_dir, out)
+    md, page = render_run_report(run_dir, out, findings)
     typer.echo(f"wrote {md} and {page}")
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, dumps
+from elicit_jax.pipeline.findings import html_section, markdown_section, write_beside
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
     ReportData,
@@ -107,6 +108,7 @@ def render_markdown(data: ReportData, map_dir: str = "") -> str:
     """The report as Markdown; maps are linked as files relative to the report."""
     out = [f"# elicit-jax report: {data.pipeline} ({data.profile} profile)", ""]
     out += [line + "\n" for line in _intro(data)]
+    out += markdown_section(data.findings)
     for title, content in _sections(data):
         out += [f"## {title}", ""]
         if isinstance(content, tuple) and content and content[0] == "code":
@@ -124,7 +126,7 @@ _CSS = (
     "color:#222}table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #ccc;"
     "padding:4px 8px;text-align:left}th{background:#f3f3f3}pre{background:#f7f7f7;padding:1em;"
     "overflow-x:auto;font-size:12px}.note{background:#fff3cd;padding:.6em 1em;border-radius:4px}"
-    "img{max-width:100%}"
+    "img{max-width:100%}.findings{border-left:4px solid #4a7;padding-left:1em}"
 )
 
 
@@ -142,6 +144,7 @@ def render_html(data: ReportData) -> str:
     for line in _intro(data):
         cls = ' class="note"' if line == CPU_NOTE else ""
         body.append(f"<p{cls}>{_html_inline(line)}</p>")
+    body.append(html_section(data.findings))
     for title, content in _sections(data):
         body.append(f"<h2>{esc(title)}</h2>")
         if isinstance(content, tuple) and content and content[0] == "code":
@@ -180,12 +183,14 @@ def write_report(data: ReportData, out_dir: str | Path) -> tuple[Path, Path]:
         data = dataclasses.replace(data, figures=tuple(figures))
         (tmp / "report.md").write_text(render_markdown(data, map_dir="maps/"))
         (tmp / "report.html").write_text(render_html(data))
+        findings = write_beside(data.findings, tmp)
         header = make_header(
             "pipeline-report",
             1,
             config={"pipeline": data.pipeline, "profile": data.profile},
             n_results=len(data.results),
-            files=["report.md", "report.html"],
+            files=["report.md", "report.html", *([findings["file"]] if findings else [])],
+            **({"findings": findings} if findings else {}),
         )
         (tmp / "artifact.json").write_text(dumps(header) + "\n")
     return out_dir / "report.md", out_dir / "report.html"

@@ -237,16 +237,28 @@ def _print_study(run_dir: Path, console: Any) -> None:
     _print_tables(tables, data.notes, console)
 
 
-def render_run_report(run_dir: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
+def render_run_report(
+    run_dir: str | Path, out: str | Path | None = None, findings: str | Path | None = None
+) -> tuple[Path, Path]:
     """(Re)write the report of a run directory (a filtering pipeline or an elicitation
-    study); returns the Markdown and HTML paths."""
+    study); returns the Markdown and HTML paths.
+
+    Args:
+      run_dir: the run directory.
+      out: the report directory (default ``run_dir/report``).
+      findings: a Markdown file of the authors' reading of the run, put first in the report
+        and copied beside it (:mod:`elicit_jax.pipeline.findings`); it may live in ``out``.
+    """
+    from elicit_jax.pipeline.findings import read_findings
     from elicit_jax.pipeline.report import write_report
 
     run_dir = Path(run_dir)
     target = Path(out) if out else run_dir / REPORT_DIR
+    notes = None if findings is None else read_findings(findings)
     if _is_study(run_dir):
         from elicit_jax.pipeline.elicitation.gather import gather_study
         from elicit_jax.pipeline.elicitation.report import write_study_report
 
-        return write_study_report(gather_study(run_dir), target)
-    return write_report(gather(run_dir), target)
+        study = dataclasses.replace(gather_study(run_dir), findings=notes)
+        return write_study_report(study, target)
+    return write_report(dataclasses.replace(gather(run_dir), findings=notes), target)

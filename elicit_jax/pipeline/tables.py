@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.pipeline.findings import Findings
 from elicit_jax.stats import PairedDiff, format_diff, paired_t_interval
 
 METHOD_LABELS = {
@@ -145,6 +146,7 @@ class ReportData:
     configs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    findings: Findings | None = None
 
 
 Table = tuple[list[str], list[list[str]]]

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
+from elicit_jax.pipeline.findings import Findings
 from elicit_jax.pipeline.gather import read_manifest, result_rows
 from elicit_jax.pipeline.tables import ResultRow
 
@@ -93,6 +94,7 @@ class StudyData:
     configs: Mapping[str, Any]
     versions: Mapping[str, str]
     notes: tuple[str, ...] = ()
+    findings: Findings | None = None
 
 
 def _lengths(path: Path) -> tuple[float, float, int]:

@@ -30,6 +30,7 @@ from elicit_jax.pipeline.elicitation.tables import (
     table2,
     threshold_table,
 )
+from elicit_jax.pipeline.findings import html_section, markdown_section, write_beside
 from elicit_jax.pipeline.report import (
     _CSS,
     CPU_NOTE,
@@ -139,6 +140,7 @@ def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
     """The study report as Markdown; figures are linked as files beside it."""
     out = [f"# elicit-jax study: {data.pipeline} ({data.profile} profile)", ""]
     out += [line + "\n" for line in _intro(data)]
+    out += markdown_section(data.findings)
     for title, content in _sections(data, figures):
         out += [f"## {title}", ""]
         if isinstance(content, tuple) and content and content[0] == "code":
@@ -158,6 +160,7 @@ def render_html(data: StudyData, figures: dict[str, bytes]) -> str:
     for line in _intro(data):
         cls = ' class="note"' if line in (CPU_NOTE, MODEL_NOTE) else ""
         body.append(f"<p{cls}>{_html_inline(line)}</p>")
+    body.append(html_section(data.findings))
     for title, content in _sections(data, figures):
         body.append(f"<h2>{esc(title)}</h2>")
         if isinstance(content, tuple) and content and content[0] == "code":
@@ -194,13 +197,20 @@ def write_study_report(data: StudyData, out_dir: str | Path) -> tuple[Path, Path
             (tmp / FIGURES / name).write_bytes(png)
         (tmp / "report.md").write_text(render_markdown(data, figures))
         (tmp / "report.html").write_text(render_html(data, figures))
+        findings = write_beside(data.findings, tmp)
         header = make_header(
             "study-report",
             1,
             config={"pipeline": data.pipeline, "profile": data.profile},
             n_results=len(data.results),
             n_sessions=len(data.sessions),
-            files=["report.md", "report.html", *[f"{FIGURES}/{n}" for n in figures]],
+            files=[
+                "report.md",
+                "report.html",
+                *[f"{FIGURES}/{n}" for n in figures],
+                *([findings["file"]] if findings else []),
+            ],
+            **({"findings": findings} if findings else {}),
         )
         (tmp / "artifact.json").write_text(dumps(header) + "\n")
     return out_dir / "report.md", out_dir / "report.html"
