@@ -83,7 +83,16 @@ def test_difference_table_naive_against_base_and_methods_against_naive():
     # filtered - naive: d = (0.02, -0.06, -0.02), mean -0.02, sd 0.04, half 0.099367
     # filtered - base: d = (0.12, 0.14, 0.16), mean 0.14, sd 0.02, half 4.3027 * 0.02 / √3
     assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]", "+14.0 [+9.0, +19.0] *"]]
-    assert "paired 95% interval" in title
+    assert (
+        title
+        == "t — mlp: difference from Naive (M-filters also from Base), points (paired 95% interval)"
+    )
+    only_naive = ReportData(
+        "p", "cpu", "", ".", "", tuple(r for r in rows if r.method != "filtered")
+    )
+    ((title, (header, _)),) = difference_tables(only_naive)
+    assert header == ["operator", "Naive − Base"]
+    assert title == "t — mlp: Naive − Base, points (paired 95% interval)"
 
 
 def test_curation_table_says_when_demo_score_is_no_better_than_chance():

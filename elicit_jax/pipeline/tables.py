@@ -254,11 +254,10 @@ def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
                 )
             rows.append([op, *cells])
         header = ["operator", *[f"{METHOD_LABELS[m]} − {METHOD_LABELS[r]}" for m, r in columns]]
-        title = (
-            f"{task} — {model}: difference from Naive (M-filters also from Base), points "
-            "(paired 95% interval)"
-        )
-        out.append((title, (header, rows)))
+        what = "difference from Naive" if any(r == "naive" for _, r in columns) else "Naive − Base"
+        if any(r == "base" and m != "naive" for m, r in columns):
+            what += " (M-filters also from Base)"
+        out.append((f"{task} — {model}: {what}, points (paired 95% interval)", (header, rows)))
     return out
 
 
