@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, dumps
-from elicit_jax.pipeline.findings import html_section, markdown_section, write_beside
+from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.render import html_document, markdown_document
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
     ReportData,
-    Table,
     curation_table,
     decisions_table,
     difference_tables,
@@ -35,14 +35,6 @@ CPU_NOTE = (
     "**CPU profile**: network sizes and epochs are shrunk to fit a 2-core machine "
     "(sizes below); the numbers are not the paper's setting."
 )
-
-
-def _md_table(table: Table) -> str:
-    header, rows = table
-    esc = [[str(c).replace("|", "\\|") for c in row] for row in [header, *rows]]
-    lines = ["| " + " | ".join(esc[0]) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in esc[1:]]
-    return "\n".join(lines)
 
 
 def _sections(data: ReportData) -> list[tuple[str, Any]]:
@@ -106,66 +98,37 @@ def _intro(data: ReportData) -> list[str]:
 
 def render_markdown(data: ReportData, map_dir: str = "") -> str:
     """The report as Markdown; maps are linked as files relative to the report."""
-    out = [f"# elicit-jax report: {data.pipeline} ({data.profile} profile)", ""]
-    out += [line + "\n" for line in _intro(data)]
-    out += markdown_section(data.findings)
-    for title, content in _sections(data):
-        out += [f"## {title}", ""]
-        if isinstance(content, tuple) and content and content[0] == "code":
-            out += ["```", content[1].rstrip(), "```", ""]
-        elif isinstance(content, list):
-            for caption, png in content:
-                out += [f"![{caption}]({map_dir}{Path(png).name})", "", f"*{caption}*", ""]
-        else:
-            out += [_md_table(content), ""]
-    return "\n".join(out)
 
+    def figure(_: str, item: tuple[str, str]) -> list[str]:
+        caption, png = item
+        return [f"![{caption}]({map_dir}{Path(png).name})", "", f"*{caption}*", ""]
 
-_CSS = (
-    "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;"
-    "color:#222}table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #ccc;"
-    "padding:4px 8px;text-align:left}th{background:#f3f3f3}pre{background:#f7f7f7;padding:1em;"
-    "overflow-x:auto;font-size:12px}.note{background:#fff3cd;padding:.6em 1em;border-radius:4px}"
-    "img{max-width:100%}.findings{border-left:4px solid #4a7;padding-left:1em}"
-)
-
-
-def _html_inline(text: str) -> str:
-    out, parts = [], html.escape(text).split("**")
-    for i, part in enumerate(parts):
-        out.append(f"<b>{part}</b>" if i % 2 else part)
-    return "".join(out).replace("`", "")
+    return markdown_document(_heading(data), _intro(data), data.findings, _sections(data), figure)
 
 
 def render_html(data: ReportData) -> str:
     """The report as one self-contained HTML page (maps inlined as base64 PNG)."""
-    esc = html.escape
-    body = [f"<h1>elicit-jax report: {esc(data.pipeline)} ({esc(data.profile)} profile)</h1>"]
-    for line in _intro(data):
-        cls = ' class="note"' if line == CPU_NOTE else ""
-        body.append(f"<p{cls}>{_html_inline(line)}</p>")
-    body.append(html_section(data.findings))
-    for title, content in _sections(data):
-        body.append(f"<h2>{esc(title)}</h2>")
-        if isinstance(content, tuple) and content and content[0] == "code":
-            body.append(f"<details><summary>show</summary><pre>{esc(content[1])}</pre></details>")
-        elif isinstance(content, list):
-            for caption, png in content:
-                b64 = base64.b64encode(Path(png).read_bytes()).decode()
-                body.append(
-                    f'<figure><img alt="{esc(caption)}" src="data:image/png;base64,'
-                    f'{b64}"><figcaption>{esc(caption)}</figcaption></figure>'
-                )
-        else:
-            header, rows = content
-            head = "".join(f"<th>{esc(h)}</th>" for h in header)
-            trs = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
-            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{trs}</tbody></table>")
-    return (
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        f"<title>elicit-jax report: {esc(data.pipeline)}</title><style>{_CSS}</style></head>"
-        f"<body>{''.join(body)}</body></html>\n"
+
+    def figure(_: str, item: tuple[str, str]) -> list[str]:
+        caption, png = html.escape(item[0]), base64.b64encode(Path(item[1]).read_bytes()).decode()
+        return [
+            f'<figure><img alt="{caption}" src="data:image/png;base64,{png}">'
+            f"<figcaption>{caption}</figcaption></figure>"
+        ]
+
+    return html_document(
+        f"elicit-jax report: {data.pipeline}",
+        _heading(data),
+        _intro(data),
+        [CPU_NOTE],
+        data.findings,
+        _sections(data),
+        figure,
     )
+
+
+def _heading(data: ReportData) -> str:
+    return f"elicit-jax report: {data.pipeline} ({data.profile} profile)"
 
 
 def write_report(data: ReportData, out_dir: str | Path) -> tuple[Path, Path]:

@@ -30,14 +30,9 @@ from elicit_jax.pipeline.elicitation.tables import (
     table2,
     threshold_table,
 )
-from elicit_jax.pipeline.findings import html_section, markdown_section, write_beside
-from elicit_jax.pipeline.report import (
-    _CSS,
-    CPU_NOTE,
-    _html_inline,
-    _md_table,
-    provenance_blocks,
-)
+from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.render import html_document, markdown_document
+from elicit_jax.pipeline.report import CPU_NOTE, provenance_blocks
 
 FIGURES = "figures"
 INTERVAL_NOTE = (
@@ -138,48 +133,37 @@ def _intro(data: StudyData) -> list[str]:
 
 def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
     """The study report as Markdown; figures are linked as files beside it."""
-    out = [f"# elicit-jax study: {data.pipeline} ({data.profile} profile)", ""]
-    out += [line + "\n" for line in _intro(data)]
-    out += markdown_section(data.findings)
-    for title, content in _sections(data, figures):
-        out += [f"## {title}", ""]
-        if isinstance(content, tuple) and content and content[0] == "code":
-            out += ["```", content[1].rstrip(), "```", ""]
-        elif isinstance(content, list):
-            for _, name in content:
-                out += [f"![{title}]({FIGURES}/{name})", ""]
-        else:
-            out += [_md_table(content), ""]
-    return "\n".join(out)
+
+    def figure(title: str, item: tuple[str, str]) -> list[str]:
+        return [f"![{title}]({FIGURES}/{item[1]})", ""]
+
+    blocks = _sections(data, figures)
+    return markdown_document(_heading(data), _intro(data), data.findings, blocks, figure)
 
 
 def render_html(data: StudyData, figures: dict[str, bytes]) -> str:
     """The study report as one self-contained HTML page."""
-    esc = html.escape
-    body = [f"<h1>elicit-jax study: {esc(data.pipeline)} ({esc(data.profile)} profile)</h1>"]
-    for line in _intro(data):
-        cls = ' class="note"' if line in (CPU_NOTE, MODEL_NOTE) else ""
-        body.append(f"<p{cls}>{_html_inline(line)}</p>")
-    body.append(html_section(data.findings))
-    for title, content in _sections(data, figures):
-        body.append(f"<h2>{esc(title)}</h2>")
-        if isinstance(content, tuple) and content and content[0] == "code":
-            body.append(f"<details><summary>show</summary><pre>{esc(content[1])}</pre></details>")
-        elif isinstance(content, list):
-            for _, name in content:
-                b64 = base64.b64encode(figures[name]).decode()
-                body.append(f'<figure><img alt="{esc(title)}" src="data:image/png;base64,{b64}">')
-                body.append("</figure>")
-        else:
-            header, rows = content
-            head = "".join(f"<th>{esc(h)}</th>" for h in header)
-            trs = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
-            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{trs}</tbody></table>")
-    return (
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        f"<title>elicit-jax study: {esc(data.pipeline)}</title><style>{_CSS}</style></head>"
-        f"<body>{''.join(body)}</body></html>\n"
+
+    def figure(title: str, item: tuple[str, str]) -> list[str]:
+        b64 = base64.b64encode(figures[item[1]]).decode()
+        return [
+            f'<figure><img alt="{html.escape(title)}" src="data:image/png;base64,{b64}">',
+            "</figure>",
+        ]
+
+    return html_document(
+        f"elicit-jax study: {data.pipeline}",
+        _heading(data),
+        _intro(data),
+        [CPU_NOTE, MODEL_NOTE],
+        data.findings,
+        _sections(data, figures),
+        figure,
     )
+
+
+def _heading(data: StudyData) -> str:
+    return f"elicit-jax study: {data.pipeline} ({data.profile} profile)"
 
 
 def write_study_report(data: StudyData, out_dir: str | Path) -> tuple[Path, Path]:
