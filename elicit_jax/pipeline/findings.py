@@ -57,7 +57,7 @@ def read_findings(path: str | Path) -> Findings:
         raise ElicitError(f"findings file is not UTF-8 text (byte {e.start})", path) from e
     if not text:
         raise ElicitError("findings file is empty", path)
-    if text.startswith("# ") or "\n# " in f"\n{text}":
+    if "\n# " in f"\n{text}":
         raise ElicitError(
             "findings file has a top-level '# ' heading; start headings at '###' (the report "
             "puts the text under its own '## Findings' section)",

@@ -13,8 +13,8 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from elicit_jax.pipeline.findings import Findings, html_section, markdown_section
+from elicit_jax.pipeline.tables import Table
 
-Table = tuple[list[str], list[list[str]]]
 Block = tuple[str, Any]
 FigureRenderer = Callable[[str, Any], list[str]]
 

@@ -110,9 +110,9 @@ def render_html(data: ReportData) -> str:
     """The report as one self-contained HTML page (maps inlined as base64 PNG)."""
 
     def figure(_: str, item: tuple[str, str]) -> list[str]:
-        caption, png = html.escape(item[0]), base64.b64encode(Path(item[1]).read_bytes()).decode()
+        caption, b64 = html.escape(item[0]), base64.b64encode(Path(item[1]).read_bytes()).decode()
         return [
-            f'<figure><img alt="{caption}" src="data:image/png;base64,{png}">'
+            f'<figure><img alt="{caption}" src="data:image/png;base64,{b64}">'
             f"<figcaption>{caption}</figcaption></figure>"
         ]
 
