@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import atomic_path, dumps
-from elicit_jax.data.demos import TASK_COLUMN, Demos
+from elicit_jax.data.demos import SOURCE_EPISODE, TASK_COLUMN, Demos
 from elicit_jax.data.lerobot_layout import (
     CURRENT_VERSION,
     EXPORT_VERSIONS,
@@ -90,8 +90,8 @@ def frames(demos: Demos, fps: int) -> tuple[Any, list[dict[str, Any]], dict[str,
     skipped = []
     for k, v in sorted(demos.extra.items()):
         v = np.asarray(v)
-        if k == TASK_COLUMN:
-            continue  # written as task_index (below)
+        if k in (TASK_COLUMN, SOURCE_EPISODE):
+            continue  # written as task_index (below); names kept in artifact.json
         if v.dtype.kind not in "biuf" or k in cols or k in BOOKKEEPING:
             skipped.append(k)
             continue
