@@ -161,3 +161,17 @@ def test_operator_labels_kept_after_lerobot_resume_appends_episodes(tmp_path):
     # the record still gives the declared action bounds, whatever the appended actions span
     assert back.provenance["labels_from"] == "artifact.json (elicit-jax export)"
     assert (back.action_low, back.action_high) == (-90.0, 90.0)
+    # an episode the record describes with another length is not trusted either
+    record = json.loads((tmp_path / "lr/artifact.json").read_text())
+    record["episodes"][1]["length"] += 1
+    (tmp_path / "lr/artifact.json").write_text(json.dumps(record))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DemosWarning)
+        again = import_lerobot(tmp_path / "lr")
+    said = " ".join(str(w.message) for w in caught)
+    assert "does not describe 1 episodes (1) as they are now" in said
+    assert [str(again.operator[s]) for _, s, _ in again.episode_bounds()][:3] == [
+        "ann",
+        "unknown",
+        "bob",
+    ]
