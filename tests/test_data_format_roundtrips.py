@@ -161,6 +161,7 @@ def test_operator_labels_kept_after_lerobot_resume_appends_episodes(tmp_path):
     # the record still gives the declared action bounds, whatever the appended actions span
     assert back.provenance["labels_from"] == "artifact.json (elicit-jax export)"
     assert (back.action_low, back.action_high) == (-90.0, 90.0)
+    assert back.provenance["unlabelled_episodes"] == [4, 5]
     # an episode the record describes with another length is not trusted either
     record = json.loads((tmp_path / "lr/artifact.json").read_text())
     record["episodes"][1]["length"] += 1

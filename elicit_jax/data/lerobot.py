@@ -32,7 +32,7 @@ from elicit_jax.data.demos import (
     make_provenance,
     validate,
 )
-from elicit_jax.data.lerobot_record import read_record, restore_names
+from elicit_jax.data.lerobot_record import read_record, restore_names, restored_provenance
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -279,11 +279,8 @@ def import_lerobot(
 
     Outcome: any ``next.success`` if that column exists, else assumed successful. Rewards:
     ``next.reward`` if present, else 0. Each frame's task text goes to the ``task`` column.
-    A folder written by ``elicit-jax export`` gives back (:mod:`.lerobot_record`) operators
-    (unless ``operator`` is given; episodes appended since are ``unknown``), robomimic
-    ``env_args``, the episodes' names in the dataset they first came from (``demo_12`` as
-    ``source_episode``, that dataset as ``provenance['origin']``), and, for a dataset
-    written from demonstrations, the observation fields and action bounds.
+    A folder written by ``elicit-jax export`` gives back what its record holds
+    (:mod:`.lerobot_record`: operators unless ``operator`` is given, names, ``env_args``...).
     """
     root = Path(root)
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
@@ -312,17 +309,8 @@ def import_lerobot(
             bounds_from = "artifact.json (elicit-jax export)"
         if "obs_fields" in labels and labels["obs_fields"][-1].stop == fields[-1].stop:
             fields = labels["obs_fields"]
-        restored = {k: labels[k] for k in ("env_args", "origin") if k in labels}
-        if any(n != str(e) for e, n in names.items()):
-            restored["episode_index"] = {n: e for e, n in names.items()}
-        else:
-            restored.pop("origin", None)  # the names are this folder's own
-    actions = np.concatenate([ep["action"] for ep in eps])
-    low, high = (
-        (np.nanmin(actions, 0).tolist(), np.nanmax(actions, 0).tolist())
-        if action_bounds is None
-        else action_bounds
-    )
+        restored = restored_provenance(labels, names)
+    low, high = _bounds(eps, action_bounds)
     texts = np.concatenate([ep[TASK_COLUMN] for ep in eps])
     demos = from_episodes(
         eps,
@@ -330,8 +318,8 @@ def import_lerobot(
         successes=successes,
         task=task or " | ".join(dict.fromkeys(str(t) for t in texts)),
         obs_fields=fields,
-        action_low=tuple(low) if isinstance(low, list | tuple) else float(low),
-        action_high=tuple(high) if isinstance(high, list | tuple) else float(high),
+        action_low=low,
+        action_high=high,
         provenance=make_provenance(
             root,
             "lerobot",
@@ -346,6 +334,14 @@ def import_lerobot(
         ),
     )
     return validate(demos, str(root), bounds=None, finite=finite)
+
+
+def _bounds(eps: list[dict[str, np.ndarray]], given: Any) -> tuple[Any, Any]:
+    """Declared action bounds: ``given``, else each dimension's min/max over the data."""
+    if given is None:
+        actions = np.concatenate([ep["action"] for ep in eps])
+        given = (np.nanmin(actions, 0).tolist(), np.nanmax(actions, 0).tolist())
+    return tuple(tuple(b) if isinstance(b, list | tuple) else float(b) for b in given)  # type: ignore[return-value]
 
 
 def _check_features(root: Path, info: dict[str, Any], obs_keys: Sequence[str]) -> None:

@@ -96,7 +96,8 @@ def read_record(
     Returns ``None`` if there is no such record, else ``operators`` (episode index -> name,
     ``unknown`` for an episode the record does not describe as it is now, e.g. one appended
     by LeRobot's ``resume()``; each such case is warned about), ``names`` (episode index ->
-    recorded ``source_episode``, for the described episodes), ``origin`` and ``env_args``
+    recorded ``source_episode``, for the described episodes), ``unlabelled`` (the episode
+    indices it does not describe), ``origin`` and ``env_args``
     when recorded, and, when the folder was written from demonstrations and ``obs_keys`` is
     its one observation feature, ``obs_fields``, ``action_low`` and ``action_high``.
     """
@@ -104,6 +105,15 @@ def read_record(
     header = read_json(path) if path.is_file() else None
     if not isinstance(header, dict) or header.get("kind") != "export" or "episodes" not in header:
         return None
+    try:
+        return _parse_record(path, header, rows, obs_keys)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as e:
+        raise ElicitError(f"malformed export record ({type(e).__name__}: {e})", path) from e
+
+
+def _parse_record(
+    path: Path, header: dict[str, Any], rows: Sequence[dict[str, Any]], obs_keys: Sequence[str]
+) -> dict[str, Any]:
     listed = {int(e["episode_index"]): e for e in header["episodes"]}
     described = {
         int(r["episode_index"]): listed[int(r["episode_index"])]
@@ -121,6 +131,9 @@ def read_record(
         "names": {
             e: str(d["source_episode"]) for e, d in described.items() if "source_episode" in d
         },
+        "unlabelled": [
+            int(r["episode_index"]) for r in rows if int(r["episode_index"]) not in described
+        ],
     }
     if isinstance(header.get("origin"), dict):
         out["origin"] = header["origin"]
@@ -193,4 +206,17 @@ def lerobot_indices(names: Sequence[str], provenance: dict[str, Any], source: st
             out.append(int(n))
         else:
             raise ElicitError(f"has no episode {n!r} (LeRobot episodes are numbered)", source)
+    return out
+
+
+def restored_provenance(labels: dict[str, Any], names: dict[int, str]) -> dict[str, Any]:
+    """Provenance an export's record gives back: ``env_args``, and, when the episodes carry
+    names from their ``origin``, that origin and the name -> ``episode_index`` map."""
+    out = {k: labels[k] for k in ("env_args", "origin") if k in labels}
+    if labels.get("unlabelled"):  # episodes the record does not describe (appended since)
+        out["unlabelled_episodes"] = labels["unlabelled"]
+    if any(n != str(e) for e, n in names.items()):
+        out["episode_index"] = {n: e for e, n in names.items()}
+    else:
+        out.pop("origin", None)  # the names are this folder's own
     return out
