@@ -33,6 +33,7 @@ from elicit_jax.data.demos import DemosWarning, concat_demos, read_demos, write_
 from elicit_jax.data.export import ExportConfig, export_dataset
 from elicit_jax.data.lerobot import import_lerobot
 from elicit_jax.data.robomimic import import_robomimic
+from elicit_jax.errors import ElicitError
 
 TASKS = ["pick the cube", "stack the cube"]
 ENV_ARGS = {"env_name": "NutAssemblySquare", "type": 1, "env_kwargs": {"reward_shaping": False}}
@@ -133,7 +134,7 @@ def test_demo_names_survive_a_lerobot_leg_and_a_mask_goes_back(tmp_path):
     # a changed HDF5 demo is still caught through the recorded hashes
     with h5py.File(h5, "r+") as f:
         f["data/demo_4/actions"][0, 0] += 0.5
-    with pytest.raises(Exception, match="episode demo_4 differs from the one imported"):
+    with pytest.raises(ElicitError, match="episode demo_4 differs from the one imported"):
         export(lr, "robomimic", tmp_path / "m2.hdf5", mask_key="kept", episodes=(3,))
 
 
@@ -176,3 +177,8 @@ def test_operator_labels_kept_after_lerobot_resume_appends_episodes(tmp_path):
         "unknown",
         "bob",
     ]
+    # and a record that is not one is a one-line error naming it
+    record["episodes"][0] = {"length": 4}
+    (tmp_path / "lr/artifact.json").write_text(json.dumps(record))
+    with pytest.raises(ElicitError, match=r"lr/artifact.json: malformed export record \(KeyError"):
+        import_lerobot(tmp_path / "lr")
