@@ -126,6 +126,8 @@ def test_demo_names_survive_a_lerobot_leg_and_a_mask_goes_back(tmp_path):
     # the LeRobot side still maps to its own episode indices: an episode list, a selection
     export(lr, "lerobot", tmp_path / "sel.json", episodes=(1, 3))
     assert json.loads((tmp_path / "sel.json").read_text())["source_episodes"] == [1, 3]
+    listed = export(tmp_path / "sel.json", "robomimic", tmp_path / "m1.hdf5", mask_key="kept")
+    assert listed["demos"] == ["demo_2", "demo_4"]  # the list maps back to the HDF5 too
     sub = export(lr, "lerobot", tmp_path / "sub", episodes=(1, 3))
     assert sub["source_episodes"] == [1, 3]
     again = import_lerobot(tmp_path / "sub")

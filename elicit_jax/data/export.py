@@ -128,21 +128,28 @@ def _selected_demos(cfg: ExportConfig, sel: Selection) -> Demos:
     return read_demos(cfg.selection, bounds="warn").select_episodes(sel.episodes)
 
 
-def _source(cfg: ExportConfig, sel: Selection, importer: str, instead: str) -> tuple[dict, str]:
+def _source(
+    cfg: ExportConfig, sel: Selection, importer: str, instead: str
+) -> tuple[dict, str, Selection]:
+    """The selection's source dataset (its provenance and path) for an ``importer`` export,
+    and the selection with names in that dataset: demos imported from a LeRobot folder that
+    elicit-jax wrote from robomimic demos name their ``origin`` file's demos."""
     try:
         prov = single_source(sel.provenance, cfg.selection)
     except ElicitError as e:
         raise ElicitError(f"{e}; {instead}") from e
     origin = prov.get("origin") or {}
     if prov.get("importer") != importer and origin.get("importer") == importer:
-        prov = dict(origin)  # names restored from an elicit-jax export's record
+        by_index = {str(i): n for n, i in (prov.get("episode_index") or {}).items()}
+        names = tuple(by_index.get(n, n) for n in sel.source_episodes)  # episode lists
+        sel, prov = dataclasses.replace(sel, source_episodes=names), dict(origin)
     if prov.get("importer") != importer:
         raise ElicitError(
             f"the demonstrations were imported from {prov.get('importer')} data "
             f"({prov.get('source')}), not {importer}; {instead}",
             cfg.selection,
         )
-    return prov, str(cfg.source or prov["source"])
+    return prov, str(cfg.source or prov["source"]), sel
 
 
 def _fps(cfg: ExportConfig, demos: Demos) -> tuple[int, str]:
@@ -208,7 +215,7 @@ def _mask(cfg: ExportConfig, sel: Selection, header: dict, progress: Any) -> dic
     from elicit_jax.data.robomimic_export import add_mask
 
     instead = "drop --mask-key to write them as a new robomimic file"
-    prov, source = _source(cfg, sel, "robomimic", instead)
+    prov, source, sel = _source(cfg, sel, "robomimic", instead)
     check_selection(sel, prov, source, "robomimic", instead + " with only the kept steps")
     names = add_mask(
         source,
@@ -284,7 +291,7 @@ def _flat(bound: Any) -> list[float]:
 
 def _episode_list(cfg: ExportConfig, sel: Selection) -> dict[str, Any]:
     instead = "an episode list names episodes of a LeRobot dataset; write a folder instead"
-    prov, source = _source(cfg, sel, "lerobot", instead)
+    prov, source, sel = _source(cfg, sel, "lerobot", instead)
     check_selection(sel, prov, source, "lerobot", "write a folder with --fresh instead")
     indices = lerobot_indices(sel.source_episodes, prov, source)
     sel = dataclasses.replace(sel, source_episodes=tuple(str(i) for i in indices))
