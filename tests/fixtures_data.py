@@ -455,6 +455,70 @@ def write_lerobot_v30(
     return root
 
 
+# the keys LeRobot 0.6.x's DatasetInfo knows; it drops any other key of meta/info.json when
+# it rewrites the file (resume(), save_episode())
+LEROBOT_INFO_KEYS = (
+    "codebase_version", "fps", "features", "total_episodes", "total_frames", "total_tasks",
+    "chunks_size", "data_files_size_in_mb", "video_files_size_in_mb", "data_path", "video_path",
+    "robot_type", "splits", "tools",
+)  # fmt: skip
+
+
+def append_lerobot_v30(root: Path, episodes: list[dict], task: str) -> Path:
+    """Append episodes to a v3.0 folder as LeRobot 0.6.x's ``resume()`` + ``save_episode()``
+    do: the new frames and their metadata rows go to the next data / episodes-metadata file
+    (resuming never writes into the existing ones), ``episode_index`` and ``index`` continue,
+    a task not yet known is appended to ``meta/tasks.parquet``, and ``meta/info.json`` is
+    rewritten with its counters updated and only the keys LeRobot knows."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    info = json.loads((root / "meta" / "info.json").read_text())
+    tasks = pd.read_parquet(root / "meta" / "tasks.parquet")
+    if task not in tasks.index:
+        tasks.loc[task] = len(tasks)
+        tasks.to_parquet(root / "meta" / "tasks.parquet")
+    old_meta = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
+    last = pq.read_table(old_meta[-1]).to_pylist()[-1]
+    file_index = int(last["meta/episodes/file_index"]) + 1
+    start = int(last["dataset_to_index"])
+    for ep in episodes:
+        ep["task_index"] = int(tasks.loc[task, "task_index"])
+    table = _frames_table(episodes, start)
+    _write_by_episode(root / "data" / "chunk-000" / f"file-{file_index:03d}.parquet", table)
+    records, offset = [], 0
+    for ep in episodes:
+        t = len(ep["state"])
+        rec = {
+            "episode_index": ep["episode_index"],
+            "tasks": [task],
+            "length": t,
+            "data/chunk_index": 0,
+            "data/file_index": file_index,
+            "dataset_from_index": start + offset,
+            "dataset_to_index": start + offset + t,
+        }
+        for f, st in _json(_numeric_stats(table.slice(offset, t), quantiles=True)).items():
+            rec.update({f"stats/{f}/{k}": v for k, v in st.items()})
+        rec.update({"meta/episodes/chunk_index": 0, "meta/episodes/file_index": file_index})
+        records.append(rec)
+        offset += t
+    pq.write_table(
+        pa.Table.from_pylist(records),
+        root / "meta" / "episodes" / "chunk-000" / f"file-{file_index:03d}.parquet",
+    )
+    info.update(
+        total_episodes=info["total_episodes"] + len(episodes),
+        total_frames=info["total_frames"] + table.num_rows,
+        total_tasks=len(tasks),
+    )
+    info["splits"] = {"train": f"0:{info['total_episodes']}"}
+    info = {k: v for k, v in info.items() if k in LEROBOT_INFO_KEYS}
+    (root / "meta" / "info.json").write_text(json.dumps(info, indent=4))
+    return root
+
+
 def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40) -> Path:
     """A robomimic file shaped like a real teleoperated one, to walk the whole tool through.
 

@@ -231,14 +231,18 @@ def test_lerobot_version_written_by_default(tmp_path, writer, version):
     rng = np.random.default_rng(0)
     root = writer(tmp_path / "ds", [lerobot_episode(rng, i, 4) for i in range(3)], ["t"])
     write_demos(tmp_path / "d.parquet", import_lerobot(root, operator="ann"))
-    # a selection of the source keeps its version; anything else is the current v3.0
-    assert export(tmp_path / "d.parquet", "lerobot", tmp_path / "sub")["version"] == version
+    # a selection of the source and a new dataset are both the current v3.0 (LeRobot 0.4+
+    # reads nothing else), and v2.1 when asked
+    sub = export(tmp_path / "d.parquet", "lerobot", tmp_path / "sub")
+    assert sub["version"] == "v3.0" and sub["mode"] == "selection of the source"
+    assert any("the source is v2.1" in n for n in sub["notes"]) == (version == "v2.1")
     fresh = export(tmp_path / "d.parquet", "lerobot", tmp_path / "new", fresh=True)
     assert fresh["version"] == "v3.0"
+    assert export(tmp_path / "d.parquet", "lerobot", tmp_path / "old", version="v2.1")
     imported = read_demos(tmp_path / "d.parquet")
-    for out in ("sub", "new"):
+    for out in ("sub", "new", "old"):
         info = json.loads((tmp_path / out / "meta/info.json").read_text())
-        assert info["codebase_version"] == (version if out == "sub" else "v3.0")
+        assert info["codebase_version"] == ("v2.1" if out == "old" else "v3.0")
         # both read back as imported (operators from the export's record)
         same_core(import_lerobot(tmp_path / out), imported)
     # and as a new robomimic file (joint-angle actions: data bounds)

@@ -169,8 +169,22 @@ def test_export_refuses_self_and_unknown_versions(dataset, tmp_path):
         export_lerobot(root, tmp_path / "o", [0], version="v2.0")
     with pytest.raises(ElicitError, match="not a LeRobot dataset folder"):
         import_lerobot(tmp_path / "nowhere")
-    # the default is the source's version
-    assert export_lerobot(root, tmp_path / "d", [0])["version"] == root.name.split("-")[1]
+    # the default is v3.0 whatever the source's (LeRobot 0.4+ refuses v2.1), and it is said
+    written = export_lerobot(root, tmp_path / "d", [0])
+    info = json.loads((tmp_path / "d/meta/info.json").read_text())
+    assert written["version"] == info["codebase_version"] == "v3.0"
+    assert (tmp_path / "d/meta/tasks.parquet").is_file()
+    assert not (tmp_path / "d/meta/episodes.jsonl").exists()
+    src = root.name.split("-")[1]
+    assert any(f"the source is {src}" in n for n in written["notes"]) == (src == "v2.1")
+    # v2.1 only when asked, with the command that converts it for today's LeRobot
+    old = export_lerobot(root, tmp_path / "old", [0], version="v2.1")
+    assert (tmp_path / "old/meta/episodes.jsonl").is_file()
+    assert any(
+        "LeRobot 0.4 and later refuse" in n
+        and f"convert_dataset_v21_to_v30 --repo-id=REPO_ID --root={tmp_path / 'old'}" in n
+        for n in old["notes"]
+    )
 
 
 @pytest.mark.parametrize("src, out", [("v3.0", "v3.0"), ("v2.1", "v2.1"), ("v2.1", "v3.0")])
@@ -254,7 +268,7 @@ def test_v21_chunks(tmp_path):
     demos = import_lerobot(root)
     np.testing.assert_allclose(demos.obs[-8:], eps[4]["state"], rtol=1e-6)
     out = tmp_path / "out"
-    export_lerobot(root, out, [0, 2, 4])
+    export_lerobot(root, out, [0, 2, 4], version="v2.1")
     # new indices 0, 1, 2 -> chunks 0, 0, 1 with chunks_size 2
     assert (out / "data/chunk-001/episode_000002.parquet").is_file()
     assert json.loads((out / "meta/info.json").read_text())["total_chunks"] == 2

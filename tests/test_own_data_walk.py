@@ -107,3 +107,39 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     names = {str(n) for n in kept.extra["source_episode"]}
     assert names == {f"demo_{i}" for i in range(12)}
     assert np.isfinite(s["novelty"]).all()
+
+
+def test_step_7_hands_the_result_back_directly_and_across_a_lerobot_leg(walk):
+    """The README's step 7 on the same file: a robomimic filter key in a copy of the file,
+    and the same through a LeRobot dataset (its import still names the demos demo_N, so the
+    mask goes back into the original file, and a new robomimic file keeps its env_args)."""
+    import h5py
+
+    d, src = walk["dir"], walk["src"]
+    kept = [f"demo_{i}" for i in range(12)]
+
+    def mask(path, key):
+        with h5py.File(path, "r") as f:
+            return sorted((x.decode() for x in f["mask"][key][:]), key=lambda n: int(n[5:]))
+
+    out = _ok(
+        "export", d / "filtered.parquet", "-f", "robomimic", "--mask-key", "compatible",
+        "-o", d / "low_dim_compatible.hdf5",
+    )  # fmt: skip
+    assert "config.train.hdf5_filter_key=compatible" in out
+    assert mask(d / "low_dim_compatible.hdf5", "compatible") == kept
+    out = _ok("export", d / "filtered.parquet", "-f", "lerobot", "--fps", "20", "-o", d / "lr")
+    assert "lerobot v3.0, new dataset" in out
+    _ok("import", d / "lr", "-o", d / "lr.parquet")
+    back = read_demos(d / "lr.parquet")
+    assert sorted(set(back.operator)) == ["op_base"]
+    assert sorted(set(back.extra["source_episode"]), key=lambda n: int(n[5:])) == kept
+    _ok(
+        "export", d / "lr.parquet", "-f", "robomimic", "--mask-key", "via_lerobot",
+        "-o", d / "via_lerobot.hdf5",
+    )  # fmt: skip
+    assert mask(d / "via_lerobot.hdf5", "via_lerobot") == kept
+    out = _ok("export", d / "lr.parquet", "-f", "robomimic", "-o", d / "new.hdf5")
+    assert "cannot instantiate" not in out
+    with h5py.File(src, "r") as a, h5py.File(d / "new.hdf5", "r") as b:
+        assert json.loads(b["data"].attrs["env_args"]) == json.loads(a["data"].attrs["env_args"])

@@ -209,8 +209,8 @@ def export_cmd(
     version: str = typer.Option(
         None,
         "--version",
-        help="LeRobot codebase version: v3.0 (LeRobot 0.4 and later; the default) or v2.1 "
-        "(LeRobot 0.1-0.3). A selection of a LeRobot dataset defaults to the source's.",
+        help="LeRobot codebase version: v3.0 (the default, also for a selection of a v2.1 "
+        "dataset: LeRobot 0.4 and later read only v3.0) or v2.1 (LeRobot 0.1-0.3).",
     ),
     fresh: bool = typer.Option(
         False,
@@ -273,8 +273,9 @@ def _with_hash_progress(cfg: Any, export: Callable[..., dict]) -> dict:
     target = cfg.source
     if target is None:
         try:
-            target = single_source(read_selection(cfg.selection).provenance, cfg.selection)
-            target = target["source"]
+            prov = single_source(read_selection(cfg.selection).provenance, cfg.selection)
+            origin = prov.get("origin") or {}  # names restored across a LeRobot leg
+            target = (origin if prov.get("importer") != "robomimic" and origin else prov)["source"]
         except ElicitError:  # export_dataset reports it, with what to do instead
             target = ""
     total = 2 * Path(target).stat().st_size if Path(target).is_file() else None

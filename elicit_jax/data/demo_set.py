@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 SOURCE_EPISODE = "source_episode"
+TASK_COLUMN = "task"  # per-step task text, when a dataset records one per frame (LeRobot)
 ARRAY_FIELDS = ("obs", "action", "episode", "operator", "step", "reward", "success")
 
 

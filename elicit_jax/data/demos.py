@@ -28,6 +28,7 @@ from elicit_jax.data.columns import (
 from elicit_jax.data.demo_set import (
     ARRAY_FIELDS,
     SOURCE_EPISODE,
+    TASK_COLUMN,
     Demos,
     ObsField,
     fields_from_sizes,
@@ -295,6 +296,7 @@ __all__ = [
     "DEMOS_KIND",
     "DEMOS_SCHEMA_VERSION",
     "SOURCE_EPISODE",
+    "TASK_COLUMN",
     "BoundsPolicy",
     "Demos",
     "DemosWarning",

@@ -31,15 +31,18 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Literal
 
-from elicit_jax.artifact import file_sha256, make_header, read_header
+from elicit_jax.artifact import make_header, read_header
 from elicit_jax.data.demos import Demos, read_demos
+from elicit_jax.data.lerobot_record import carried_record, lerobot_indices
 from elicit_jax.data.selection import (
     Selection,
     provenance_leaves,
     read_selection,
+    recorded_env_args,
     single_source,
     write_episode_list,
 )
+from elicit_jax.data.source_check import check_selection
 from elicit_jax.errors import ElicitError
 
 Format = Literal["robomimic", "lerobot", "npz"]
@@ -65,8 +68,8 @@ class ExportConfig:
       mask_key: robomimic: mark the selected demos of the source file with this filter key.
       in_place: robomimic: write the mask into the source file itself.
       overwrite: replace an existing output, or an existing ``mask/<mask_key>``.
-      version: LeRobot codebase version (``v2.1`` or ``v3.0``); default v3.0, or the
-        source's for a selection of a LeRobot dataset.
+      version: LeRobot codebase version, ``v3.0`` (the default: LeRobot 0.4 and later read
+        nothing else) or ``v2.1`` (LeRobot 0.1-0.3), also for a selection of a v2.x dataset.
       fresh: lerobot: write the demos' own arrays even for whole episodes of a LeRobot source.
       fps: frame rate of a new LeRobot dataset when the demos do not tell it.
       valid_fraction: new robomimic file: share of demos in ``mask/valid``.
@@ -125,85 +128,28 @@ def _selected_demos(cfg: ExportConfig, sel: Selection) -> Demos:
     return read_demos(cfg.selection, bounds="warn").select_episodes(sel.episodes)
 
 
-def check_selection(
-    sel: Selection, prov: dict[str, Any], source: str, importer: str, hint: str
-) -> list[int]:
-    """Check that each selected episode is a whole source episode, unchanged since import.
-
-    Args:
-      sel: the selection.
-      prov: its single source's provenance (obs keys, per-episode hashes).
-      source: the dataset to check against.
-      importer: ``robomimic`` or ``lerobot``.
-      hint: what to do instead when episodes are not whole (appended to the error).
-
-    Returns:
-      The source length of each selected episode.
-    """
-    names = list(sel.source_episodes)
-    keys = prov.get("obs_keys") or None
-    if importer == "robomimic":
-        from elicit_jax.data.robomimic import DEFAULT_OBS_KEYS
-        from elicit_jax.data.robomimic_export import read_demo_digests
-
-        found = read_demo_digests(source, list(dict.fromkeys(names)), keys or DEFAULT_OBS_KEYS)
-    else:
-        from elicit_jax.data.lerobot import import_lerobot
-
-        back = import_lerobot(source, obs_keys=keys, episodes=[int(n) for n in set(names)])
-        digests = back.provenance["episode_sha256"]
-        found = {
-            str(back.extra["source_episode"][s]): (
-                e - s,
-                digests[str(back.extra["source_episode"][s])],
-            )
-            for _, s, e in back.episode_bounds()
-        }
-    recorded = prov.get("episode_sha256")
-    for i, name in enumerate(names):
-        length, digest = found[name]
-        if names.count(name) > 1:
-            raise ElicitError(
-                f"source episode {name} is split over {names.count(name)} episodes of the "
-                f"selection (filter --pair-mode split?), and a selection of the source lists "
-                f"whole episodes; {hint}",
-                source,
-            )
-        if sel.lengths is not None and sel.lengths[i] != length:
-            raise ElicitError(
-                f"episode {sel.episodes[i]} holds {sel.lengths[i]} of source episode {name}'s "
-                f"{length} steps (pairs dropped by filter --level pair?), and a selection of the "
-                f"source lists whole episodes; {hint}",
-                source,
-            )
-        if recorded is not None and recorded.get(name) != digest:
-            raise ElicitError(
-                f"episode {name} differs from the one imported (its obs, actions or rewards "
-                "changed); pass the original dataset as --source",
-                source,
-            )
-    if recorded is None and prov.get("sha256") and file_sha256(source) != prov["sha256"]:
-        raise ElicitError(
-            "content differs from the dataset the demonstrations were imported from (sha256 "
-            "mismatch; they were imported before per-episode hashes were recorded: re-import "
-            "to check episodes, not bytes); pass the original as --source",
-            source,
-        )
-    return [found[n][0] for n in names]
-
-
-def _source(cfg: ExportConfig, sel: Selection, importer: str, instead: str) -> tuple[dict, str]:
+def _source(
+    cfg: ExportConfig, sel: Selection, importer: str, instead: str
+) -> tuple[dict, str, Selection]:
+    """The selection's source dataset (its provenance and path) for an ``importer`` export,
+    and the selection with names in that dataset: demos imported from a LeRobot folder that
+    elicit-jax wrote from robomimic demos name their ``origin`` file's demos."""
     try:
         prov = single_source(sel.provenance, cfg.selection)
     except ElicitError as e:
         raise ElicitError(f"{e}; {instead}") from e
+    origin = prov.get("origin") or {}
+    if prov.get("importer") != importer and origin.get("importer") == importer:
+        by_index = {str(i): n for n, i in (prov.get("episode_index") or {}).items()}
+        names = tuple(by_index.get(n, n) for n in sel.source_episodes)  # episode lists
+        sel, prov = dataclasses.replace(sel, source_episodes=names), dict(origin)
     if prov.get("importer") != importer:
         raise ElicitError(
             f"the demonstrations were imported from {prov.get('importer')} data "
             f"({prov.get('source')}), not {importer}; {instead}",
             cfg.selection,
         )
-    return prov, str(cfg.source or prov["source"])
+    return prov, str(cfg.source or prov["source"]), sel
 
 
 def _fps(cfg: ExportConfig, demos: Demos) -> tuple[int, str]:
@@ -269,7 +215,7 @@ def _mask(cfg: ExportConfig, sel: Selection, header: dict, progress: Any) -> dic
     from elicit_jax.data.robomimic_export import add_mask
 
     instead = "drop --mask-key to write them as a new robomimic file"
-    prov, source = _source(cfg, sel, "robomimic", instead)
+    prov, source, sel = _source(cfg, sel, "robomimic", instead)
     check_selection(sel, prov, source, "robomimic", instead + " with only the kept steps")
     names = add_mask(
         source,
@@ -298,7 +244,7 @@ def _fresh_robomimic(cfg: ExportConfig, sel: Selection, header: dict) -> dict[st
         prov = single_source(demos.provenance, cfg.selection)
     except ElicitError:
         prov = {}
-    env = prov.get("env_args") if prov.get("importer") == "robomimic" else None
+    env = recorded_env_args(prov or demos.provenance)
     written = write_fresh(
         demos,
         str(cfg.out),
@@ -345,15 +291,17 @@ def _flat(bound: Any) -> list[float]:
 
 def _episode_list(cfg: ExportConfig, sel: Selection) -> dict[str, Any]:
     instead = "an episode list names episodes of a LeRobot dataset; write a folder instead"
-    prov, source = _source(cfg, sel, "lerobot", instead)
+    prov, source, sel = _source(cfg, sel, "lerobot", instead)
     check_selection(sel, prov, source, "lerobot", "write a folder with --fresh instead")
+    indices = lerobot_indices(sel.source_episodes, prov, source)
+    sel = dataclasses.replace(sel, source_episodes=tuple(str(i) for i in indices))
     write_episode_list(
         str(cfg.out), sel, config=dataclasses.asdict(cfg), inputs={"selection": cfg.selection}
     )
     return {
         "mode": "episode list",
         "source": source,
-        "source_episodes": [int(n) for n in sel.source_episodes],
+        "source_episodes": indices,
         "load": LOAD_LIST.format(path=cfg.out),
     }
 
@@ -383,18 +331,17 @@ def _lerobot(cfg: ExportConfig, sel: Selection, header: dict) -> dict[str, Any]:
     lengths = check_selection(
         sel, prov, source, "lerobot", "pass --fresh to write the kept steps as a new dataset"
     )
-    chosen = sorted(
-        zip(sel.source_episodes, lengths, sel.operators, strict=True), key=lambda x: int(x[0])
-    )
+    indices = lerobot_indices(sel.source_episodes, prov, source)
+    chosen = sorted(zip(indices, sel.source_episodes, lengths, sel.operators, strict=True))
     header["episodes"] = [
         {"episode_index": i, "length": n, "operator": op, "source_episode": name}
-        for i, (name, n, op) in enumerate(chosen)
+        for i, (_, name, n, op) in enumerate(chosen)
     ]
-    written = export_lerobot(
-        source,
-        str(cfg.out),
-        [int(n) for n in sel.source_episodes],
-        version=cfg.version,
-        header=header,
-    )
+    # what the source's own record says of its features, and where the names come from
+    header.update(carried_record(Path(source)))
+    if "origin" in prov:
+        header["origin"] = prov["origin"]
+    else:  # the names are the source folder's own episode indices
+        header.pop("origin", None)
+    written = export_lerobot(source, str(cfg.out), indices, version=cfg.version, header=header)
     return {"mode": "selection of the source", "source": source, **written}

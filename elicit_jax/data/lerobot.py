@@ -24,6 +24,7 @@ import numpy as np
 from elicit_jax.artifact import read_json
 from elicit_jax.data.demos import (
     SOURCE_EPISODE,
+    TASK_COLUMN,
     Demos,
     episode_digest,
     fields_from_sizes,
@@ -31,7 +32,7 @@ from elicit_jax.data.demos import (
     make_provenance,
     validate,
 )
-from elicit_jax.data.lerobot_record import read_record
+from elicit_jax.data.lerobot_record import read_record, restore_names, restored_provenance
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -243,6 +244,17 @@ def select_rows(
     return [by_index[e] for e in sorted({int(e) for e in episodes})]
 
 
+def frame_tasks(part: Any, row: dict[str, Any], tasks: dict[int, str]) -> np.ndarray:
+    """Each frame's task text: from its ``task_index`` (LeRobot records one per frame), else
+    the episode's one listed task (several listed without frame indices: joined)."""
+    if "task_index" in part.column_names:
+        index = part.column("task_index").to_numpy(zero_copy_only=False)
+        texts = {int(i): tasks.get(int(i), "unknown") for i in np.unique(index)}
+        return np.array([texts[int(i)] for i in index], dtype=object)
+    listed = [str(t) for t in row.get("tasks") or []] or ["unknown"]
+    return np.full(part.num_rows, " | ".join(listed), dtype=object)
+
+
 def import_lerobot(
     root: str | Path,
     *,
@@ -265,91 +277,49 @@ def import_lerobot(
         the data (LeRobot actions are often joint targets, not in [-1, 1]).
       finite: reject non-finite values here (False: the caller skips such episodes).
 
-    Episode outcome: any ``next.success`` if that column exists, else assumed successful.
-    Rewards: ``next.reward`` if present, else 0. A folder written by ``elicit-jax export``
-    gives back its operators (unless ``operator`` is given), and, for a dataset written from
-    demonstrations, the observation fields and action bounds
-    (:func:`elicit_jax.data.lerobot_record.read_record`).
+    Outcome: any ``next.success`` if that column exists, else assumed successful. Rewards:
+    ``next.reward`` if present, else 0. Each frame's task text goes to the ``task`` column.
+    A folder written by ``elicit-jax export`` gives back what its record holds
+    (:mod:`.lerobot_record`: operators unless ``operator`` is given, names, ``env_args``...).
     """
     root = Path(root)
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
     info = read_info(root)
-    for key in (*obs_keys, "action"):
-        if key not in info["features"]:
-            raise ElicitError(
-                f"meta/info.json has no feature '{key}' (features: "
-                f"{', '.join(sorted(info['features']))})",
-                root,
-            )
-        if info["features"][key].get("dtype") in NON_TABULAR:
-            raise ElicitError(f"feature '{key}' is a {info['features'][key]['dtype']}", root)
-    tasks = read_tasks(root, info)
+    _check_features(root, info, obs_keys)
     rows = select_rows(root, read_episodes(root, info), episodes)
     if not rows:
         raise ElicitError("dataset lists no episodes", root)
-    columns = (*obs_keys, "action", "episode_index", "frame_index")
-    optional = ("next.reward", "next.success", "task_index")
-    by_episode = split_episodes(load_frames(root, info, rows, columns, optional), rows)
-    eps, successes, task_names = [], [], []
-    has_success = all("next.success" in t.column_names for _, t in by_episode.values())
-    for r in rows:
-        e = int(r["episode_index"])
-        path, part = by_episode[e]
-        obs = np.concatenate([_to_matrix(part.column(k), k, path) for k in obs_keys], axis=1)
-        ep = {
-            "obs": obs,
-            "action": _to_matrix(part.column("action"), "action", path),
-            SOURCE_EPISODE: np.full(part.num_rows, str(e), dtype=object),
-        }
-        if "next.reward" in part.column_names:
-            ep["reward"] = _to_matrix(part.column("next.reward"), "next.reward", path)[:, 0]
-        eps.append(ep)
-        successes.append(
-            bool(_to_matrix(part.column("next.success"), "next.success", path).any())
-            if has_success
-            else True
-        )
-        if "task_index" in part.column_names:
-            task_names.append(tasks.get(int(part.column("task_index")[0].as_py()), "unknown"))
-        else:
-            task_names.extend(r.get("tasks") or ["unknown"])
-    if any("reward" not in ep for ep in eps):
-        for ep in eps:
-            ep.pop("reward", None)
+    labels = read_record(root, rows, obs_keys)
+    names = restore_names(rows, labels)
+    eps, successes, sizes, has_success = _read_frames(
+        root, info, rows, obs_keys, read_tasks(root, info), names
+    )
     digests = {
-        str(r["episode_index"]): episode_digest(ep["obs"], ep["action"], ep.get("reward"))
+        names[int(r["episode_index"])]: episode_digest(ep["obs"], ep["action"], ep.get("reward"))
         for r, ep in zip(rows, eps, strict=True)
     }
-    labels = read_record(root, rows, obs_keys)
+    fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
     bounds_from = "data min/max" if action_bounds is None else "given"
+    restored: dict[str, Any] = {}
     if labels is not None:
         if operator == "unknown":
             operator = [labels["operators"][int(r["episode_index"])] for r in rows]
         if action_bounds is None and "action_low" in labels:
             action_bounds = (labels["action_low"], labels["action_high"])
             bounds_from = "artifact.json (elicit-jax export)"
-    sizes = [eps[0]["obs"].shape[1]] if len(obs_keys) == 1 else None
-    if sizes is None:
-        part = by_episode[int(rows[0]["episode_index"])][1]
-        sizes = [_to_matrix(part.column(k), k, root).shape[1] for k in obs_keys]
-    actions = np.concatenate([ep["action"] for ep in eps])
-    low, high = (
-        (np.nanmin(actions, 0).tolist(), np.nanmax(actions, 0).tolist())
-        if action_bounds is None
-        else action_bounds
-    )
-    fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
-    if labels is not None and "obs_fields" in labels:
-        fields = labels["obs_fields"]
-    unique_tasks = list(dict.fromkeys(task_names))
+        if "obs_fields" in labels and labels["obs_fields"][-1].stop == fields[-1].stop:
+            fields = labels["obs_fields"]
+        restored = restored_provenance(labels, names)
+    low, high = _bounds(eps, action_bounds)
+    texts = np.concatenate([ep[TASK_COLUMN] for ep in eps])
     demos = from_episodes(
         eps,
         operators=operator,
         successes=successes,
-        task=task or " | ".join(unique_tasks),
+        task=task or " | ".join(dict.fromkeys(str(t) for t in texts)),
         obs_fields=fields,
-        action_low=tuple(low) if isinstance(low, list | tuple) else float(low),
-        action_high=tuple(high) if isinstance(high, list | tuple) else float(high),
+        action_low=low,
+        action_high=high,
         provenance=make_provenance(
             root,
             "lerobot",
@@ -360,6 +330,67 @@ def import_lerobot(
             success_from="next.success" if has_success else "assumed (no next.success)",
             labels_from="artifact.json (elicit-jax export)" if labels is not None else None,
             episode_sha256=digests,
+            **restored,
         ),
     )
     return validate(demos, str(root), bounds=None, finite=finite)
+
+
+def _bounds(eps: list[dict[str, np.ndarray]], given: Any) -> tuple[Any, Any]:
+    """Declared action bounds: ``given``, else each dimension's min/max over the data."""
+    if given is None:
+        actions = np.concatenate([ep["action"] for ep in eps])
+        given = (np.nanmin(actions, 0).tolist(), np.nanmax(actions, 0).tolist())
+    return tuple(tuple(b) if isinstance(b, list | tuple) else float(b) for b in given)  # type: ignore[return-value]
+
+
+def _check_features(root: Path, info: dict[str, Any], obs_keys: Sequence[str]) -> None:
+    for key in (*obs_keys, "action"):
+        if key not in info["features"]:
+            raise ElicitError(
+                f"meta/info.json has no feature '{key}' (features: "
+                f"{', '.join(sorted(info['features']))})",
+                root,
+            )
+        if info["features"][key].get("dtype") in NON_TABULAR:
+            raise ElicitError(f"feature '{key}' is a {info['features'][key]['dtype']}", root)
+
+
+def _read_frames(
+    root: Path,
+    info: dict[str, Any],
+    rows: list[dict[str, Any]],
+    obs_keys: Sequence[str],
+    tasks: dict[int, str],
+    names: dict[int, str],
+) -> tuple[list[dict[str, np.ndarray]], list[bool], list[int], bool]:
+    """Episodes (obs, action, reward, source name, frame tasks), outcomes, obs key widths and
+    whether the outcomes were recorded (``next.success``)."""
+    columns = (*obs_keys, "action", "episode_index", "frame_index")
+    optional = ("next.reward", "next.success", "task_index")
+    by_episode = split_episodes(load_frames(root, info, rows, columns, optional), rows)
+    eps, successes, sizes = [], [], []
+    has_success = all("next.success" in t.column_names for _, t in by_episode.values())
+    for r in rows:
+        e = int(r["episode_index"])
+        path, part = by_episode[e]
+        mats = [_to_matrix(part.column(k), k, path) for k in obs_keys]
+        sizes = sizes or [m.shape[1] for m in mats]
+        ep = {
+            "obs": np.concatenate(mats, axis=1),
+            "action": _to_matrix(part.column("action"), "action", path),
+            SOURCE_EPISODE: np.full(part.num_rows, names[e], dtype=object),
+            TASK_COLUMN: frame_tasks(part, r, tasks),
+        }
+        if "next.reward" in part.column_names:
+            ep["reward"] = _to_matrix(part.column("next.reward"), "next.reward", path)[:, 0]
+        eps.append(ep)
+        successes.append(
+            bool(_to_matrix(part.column("next.success"), "next.success", path).any())
+            if has_success
+            else True
+        )
+    if any("reward" not in ep for ep in eps):
+        for ep in eps:
+            ep.pop("reward", None)
+    return eps, successes, sizes, has_success

@@ -37,16 +37,12 @@ from elicit_jax.data.lerobot_layout import (
     V3_VIDEO_PATH,
     camera_keys,
     finish_info,
+    version_notes,
     video_keys,
     write_folder,
 )
 from elicit_jax.data.lerobot_stats import QUANTILE_KEYS, Stats, from_json
 from elicit_jax.errors import ElicitError
-
-
-def default_version(source_version: str) -> str:
-    """The version a selection of a ``source_version`` dataset is written in by default."""
-    return CURRENT_VERSION if str(source_version).startswith("v3") else "v2.1"
 
 
 def _gather(source: Path, info: dict[str, Any], episodes: Sequence[int]) -> tuple[Any, list]:
@@ -208,8 +204,8 @@ def export_lerobot(
       source: a LeRobot dataset folder (v2.x or v3.0).
       out: the new folder (written atomically; replaced if it exists).
       episodes: source ``episode_index`` values to keep.
-      version: codebase version of the new folder, ``v2.1`` or ``v3.0``; default
-        :func:`default_version` of the source's.
+      version: codebase version of the new folder, ``v3.0`` (the default, whatever the
+        source's) or ``v2.1``; the returned notes say what either means for LeRobot.
       header: elicit-jax artifact header, stored as ``artifact.json`` at the folder's root.
 
     Returns:
@@ -221,7 +217,7 @@ def export_lerobot(
     if out.resolve() == source.resolve():
         raise ElicitError("output must differ from the source dataset folder", out)
     info = read_info(source)
-    version = version or default_version(info["codebase_version"])
+    version = version or CURRENT_VERSION
     if version not in EXPORT_VERSIONS:
         raise ElicitError(f"cannot write LeRobot codebase version {version!r} ({EXPORT_VERSIONS})")
     tasks = read_tasks(source, info)
@@ -237,7 +233,7 @@ def export_lerobot(
         if header is not None:
             (tmp / "artifact.json").write_text(dumps(header) + "\n")
     bare = sorted({c for st in cam_stats for c, s in st.items() if QUANTILE_KEYS[0] not in s})
-    notes = (
+    notes = version_notes(info["codebase_version"], version, out) + (
         [
             f"the source's statistics of {', '.join(bare)} have no quantiles (the LeRobot that "
             "recorded it computed none, and they cannot be recomputed without decoding frames): "

@@ -8,9 +8,12 @@ features of their own, and LeRobot's bookkeeping columns (``timestamp`` = frame 
 ``frame_index``, ``episode_index``, ``index``, ``task_index``). Vectors are fixed-size
 float32 lists, as LeRobot's own writer stores them.
 
-LeRobot has no place for operators, observation-field slices or declared action bounds:
-they go to the folder's ``artifact.json`` (``episodes``, ``demos``), from which
-``elicit-jax import`` restores them. Everything not written is listed in the notes.
+Each step's task text (the demos' ``task`` column, from a multi-task LeRobot import; else
+their one task) becomes its ``task_index``, each episode's metadata lists its own tasks.
+LeRobot has no place for operators, observation-field slices, declared action bounds,
+robomimic ``env_args`` or the demos' names in their source dataset: they go to the folder's
+``artifact.json`` (:mod:`elicit_jax.data.lerobot_record`), from which ``elicit-jax import``
+restores them. Everything not written is listed in the notes.
 """
 
 from __future__ import annotations
@@ -22,11 +25,12 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import atomic_path, dumps
-from elicit_jax.data.demos import Demos
+from elicit_jax.data.demos import SOURCE_EPISODE, TASK_COLUMN, Demos
 from elicit_jax.data.lerobot_layout import (
     CURRENT_VERSION,
     EXPORT_VERSIONS,
     finish_info,
+    version_notes,
     write_folder,
 )
 from elicit_jax.data.lerobot_record import OBS_FEATURE, export_record
@@ -86,6 +90,8 @@ def frames(demos: Demos, fps: int) -> tuple[Any, list[dict[str, Any]], dict[str,
     skipped = []
     for k, v in sorted(demos.extra.items()):
         v = np.asarray(v)
+        if k in (TASK_COLUMN, SOURCE_EPISODE):
+            continue  # written as task_index (below); names kept in artifact.json
         if v.dtype.kind not in "biuf" or k in cols or k in BOOKKEEPING:
             skipped.append(k)
             continue
@@ -96,16 +102,36 @@ def frames(demos: Demos, fps: int) -> tuple[Any, list[dict[str, Any]], dict[str,
         frame_index=pa.array(frame.astype(np.int64)),
         episode_index=pa.array(new_ep.astype(np.int64)),
         index=pa.array(np.arange(n, dtype=np.int64)),
-        task_index=pa.array(np.zeros(n, np.int64)),
     )
     features.update(
         {k: _feature("float32" if k == "timestamp" else "int64", None) for k in BOOKKEEPING}
     )
+    task_of, tasks = frame_task_index(demos)
+    cols["task_index"] = pa.array(task_of)
     episodes = [
-        {"episode_index": i, "tasks": [demos.task], "length": e - s, "from": s, "to": e}
+        {
+            "episode_index": i,
+            "tasks": [tasks[t] for t in dict.fromkeys(task_of[s:e].tolist())],
+            "length": e - s,
+            "from": s,
+            "to": e,
+        }
         for i, (_, s, e) in enumerate(bounds)
     ]
     return pa.table(cols), episodes, features, skipped
+
+
+def frame_task_index(demos: Demos) -> tuple[np.ndarray, dict[int, str]]:
+    """Each step's ``task_index`` and the task texts (index -> text, in order of first use):
+    the demos' per-step ``task`` column when they have one (a multi-task LeRobot import),
+    else their one task."""
+    texts = demos.extra.get(TASK_COLUMN)
+    if texts is None:
+        return np.zeros(demos.n_steps, np.int64), {0: demos.task}
+    texts = np.asarray([str(t) for t in texts], dtype=object)
+    order = list(dict.fromkeys(texts.tolist()))
+    lookup = {t: i for i, t in enumerate(order)}
+    return np.array([lookup[t] for t in texts], np.int64), dict(enumerate(order))
 
 
 def write_fresh(
@@ -134,19 +160,21 @@ def write_fresh(
     if int(fps) != fps or fps <= 0:
         raise ElicitError(f"LeRobot needs a positive integer frame rate, not {fps}")
     table, episodes, features, skipped = frames(demos, int(fps))
+    tasks = frame_task_index(demos)[1]
     base = {"codebase_version": version, "robot_type": None, "fps": int(fps), "features": features}
-    info = finish_info(base, version, len(episodes), table.num_rows, 1)
+    info = finish_info(base, version, len(episodes), table.num_rows, len(tasks))
     fields = ", ".join(f"{f.name} [{f.start}:{f.stop}]" for f in demos.obs_fields)
     notes = [
         f"{OBS_FEATURE} holds the demos' observation" + (f" ({fields})" if fields else ""),
-        "operators, obs fields and action bounds have no place in LeRobot's format: kept in "
-        "artifact.json, from which elicit-jax import restores them",
+        "operators, obs fields, action bounds, env_args and source demo names have no place "
+        "in LeRobot's format: kept in artifact.json, from which elicit-jax import restores them",
     ]
     if skipped:
         notes.append(f"non-numeric columns not written: {', '.join(skipped)}")
+    notes += version_notes(CURRENT_VERSION, version, out)
     with atomic_path(out) as tmp:
         tmp.mkdir()
-        write_folder(tmp, table, episodes, {0: demos.task}, info)
+        write_folder(tmp, table, episodes, tasks, info)
         record = {**dict(header or {}), **export_record(demos), "notes": notes}
         (tmp / "artifact.json").write_text(dumps(record) + "\n")
     return {"version": version, "features": list(features), "notes": notes}

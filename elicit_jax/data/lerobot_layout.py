@@ -37,6 +37,27 @@ CAMERA_DTYPES = ("video", "image")
 NO_STATS_DTYPES = ("video", "image", "string", "language")
 
 
+CONVERT_V21 = (
+    "python -m lerobot.scripts.convert_dataset_v21_to_v30 --repo-id=REPO_ID --root={out} "
+    "--push-to-hub=false"
+)
+
+
+def version_notes(source_version: str, version: str, out: str | Path) -> list[str]:
+    """What to know about the codebase version written (LeRobot 0.4 and later read v3.0 only)."""
+    if version != CURRENT_VERSION:
+        return [
+            f"written as {version}, which LeRobot 0.4 and later refuse (BackwardCompatibility"
+            f"Error); use it with LeRobot 0.1-0.3, or convert it: {CONVERT_V21.format(out=out)}"
+        ]
+    if not str(source_version).startswith("v3"):
+        return [
+            f"the source is {source_version}; written as {CURRENT_VERSION}, the version "
+            "LeRobot 0.4 and later read (pass --version v2.1 to keep the old layout)"
+        ]
+    return []
+
+
 def camera_keys(info: Mapping[str, Any]) -> list[str]:
     """Features holding images or videos."""
     return [k for k, ft in info["features"].items() if ft.get("dtype") in CAMERA_DTYPES]

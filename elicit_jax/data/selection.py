@@ -189,4 +189,25 @@ def single_source(provenance: Mapping[str, Any], path: str | Path) -> dict[str, 
         merged["episode_sha256"] = digests
     else:
         merged.pop("episode_sha256", None)
+    indices: dict[str, int] = {}
+    for p in leaves:  # LeRobot imports that restored names: name -> episode_index
+        indices.update(p.get("episode_index") or {})
+    if indices:
+        merged["episode_index"] = indices
     return merged
+
+
+def recorded_env_args(provenance: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The robomimic ``env_args`` the demonstrations' sources recorded, if they agree on one.
+
+    Found in a robomimic import's provenance, or in that of a LeRobot import whose folder an
+    elicit-jax export wrote from robomimic demonstrations (it keeps them in ``artifact.json``).
+    """
+    import json
+
+    found = {
+        json.dumps(p["env_args"], sort_keys=True): p["env_args"]
+        for p in provenance_leaves(provenance)
+        if isinstance(p.get("env_args"), dict)
+    }
+    return next(iter(found.values())) if len(found) == 1 else None
