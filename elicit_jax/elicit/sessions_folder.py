@@ -8,6 +8,7 @@ subdirectory without an ``artifact.json`` is not a session either.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -81,10 +82,12 @@ def merge_accepted(root: str | Path, out: str | Path, names: Sequence[str] | Non
     for p, d in zip(paths, parts, strict=True):
         if d.task != parts[0].task or [f.name for f in d.obs_fields] != fields:
             raise ElicitError(f"holds {d.task} with other observation fields than {paths[0]}", p)
+    merged = [p.parent.name for p in paths]
+    provenance = {"source": "elicit-jax merged sessions", "sessions": merged, "root": str(root)}
     return write_demos(
         out,
-        concat_demos(parts, renumber=True),
-        config={"merged_sessions": [p.parent.name for p in paths]},
+        dataclasses.replace(concat_demos(parts, renumber=True), provenance=provenance),
+        config={"merged_sessions": merged},
         inputs={p.parent.name: p for p in paths},
     )
 
