@@ -138,7 +138,10 @@ def _act(request: Any) -> Any:
     if name not in hub.names():
         return _json({"error": f"no operator {name!r}"}, 404)
     if action == "remove":
-        dest = hub.remove(name)
+        try:
+            dest = hub.remove(name)
+        except ElicitError as e:
+            return _json({"error": str(e)}, 409)
         return _json({"name": name, "moved_to": None if dest is None else str(dest)})
     if action not in ACTIONS:
         return _json({"error": f"unknown action {action[:20]!r}"}, 404)

@@ -22,8 +22,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 from elicit_jax.elicit.config import SessionConfig
+from elicit_jax.errors import ElicitError
 from elicit_jax.web import operator as browser_operator
-from elicit_jax.web.driver import DONE, ERROR, READY, OperatorDriver
+from elicit_jax.web.driver import BUSY, DONE, ERROR, READY, OperatorDriver
 from elicit_jax.web.keys import ACTIVE, ENDED, PAUSED, OperatorKeys
 from elicit_jax.web.protocol import (
     CLOSE_ENDED,
@@ -170,12 +171,19 @@ class OperatorHub:
 
     def remove(self, name: str) -> Path | None:
         """Take ``name`` out of the study: close their page, stop their driver, and move their
-        session and key to ``SESSIONS/.removed/`` (nothing is deleted). Returns where to."""
+        session and key to ``SESSIONS/.removed/`` (nothing is deleted). Returns where to.
+
+        Raises:
+          ElicitError: they are retraining (their policy files are being written).
+        """
         with self._lock:
-            d = self.drivers.pop(name, None)
+            d = self.drivers.get(name)
+            if d is not None and d.state == BUSY:  # its files are being written
+                raise ElicitError(f"operator {name} is retraining: remove them when it is over")
+            self.drivers.pop(name, None)
         if d is not None:
             d.close_page(CLOSE_REMOVED, "the experimenter removed you from this study")
-            d.stop()
+            d.stop(timeout=30.0)
         with self._lock:
             src = self.root / name
             n = 1

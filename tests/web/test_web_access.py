@@ -239,6 +239,17 @@ def test_dashboard_links_pause_end_and_remove(served, tmp_path):
     assert not (tmp_path / "sessions" / "dee").exists()
     assert [r["name"] for r in client.get("/admin/api/state").json()["operators"]] == ["cy"]
 
+    # `elicit-jax info SESSIONS/`: one row per operator, the removed one counted apart
+    from typer.testing import CliRunner
+
+    from elicit_jax.cli import app
+
+    info = CliRunner().invoke(app, ["info", str(tmp_path / "sessions")], env={"COLUMNS": "200"})
+    assert info.exit_code == 0, info.output
+    assert "1 operator(s), 0 accepted demonstration(s) in all" in info.output
+    assert "removed from the study (not counted): 1" in info.output
+    assert any(ln.startswith("│ cy ") and "0/1" in ln for ln in info.output.splitlines())
+
 
 def test_websocket_refused_without_the_token_off_loopback(served):
     client, _ = served(token="operator-token")

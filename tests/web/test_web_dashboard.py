@@ -7,13 +7,15 @@ ben opens the link the experimenter issued him. The dashboard (a third page, ope
 admin token the server printed) shows both, live; ana demonstrates by keyboard and the
 dashboard's counts follow; the merged download is read by the demos reader and by
 `elicit-jax info`, and `elicit-jax info SESSIONS/` summarises both operators.
+ELICIT_JAX_SCREENSHOTS=DIR saves the dashboard's screenshot (docs/images/serve-admin.png).
 """
 
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
-from test_web_browser import Server, browser, drive, driven, screen  # noqa: F401 (fixture)
+from test_web_browser import SHOTS, Server, browser, drive, driven, screen  # noqa: F401
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
@@ -92,6 +94,9 @@ def test_the_dashboard_follows_two_operators_and_downloads_their_demos(browser, 
             screen(ana, "demonstrate", "ready")
         dash.wait_for_selector(row("ana", screen="done") + " td[data-accepted='1']")
         assert dash.inner_text(row("ben") + " td:nth-child(6)") == "0 of 1"
+        if SHOTS:
+            Path(SHOTS).mkdir(parents=True, exist_ok=True)
+            dash.screenshot(path=str(Path(SHOTS) / "serve-admin.png"))
 
         with dash.expect_download() as dl:
             dash.click("#download-merged")

@@ -62,7 +62,8 @@ function row(op) {
   cell(tr, op.status);
   cell(tr, op.page ? 'here' : 'away').dataset.page = String(op.page);
   cell(tr, op.screen + (op.state === 'running' ? ' (recording)' : ''));
-  cell(tr, op.episode >= 0 ? `${op.episode + 1}${op.kind ? ` ${op.kind}` : ''}${op.step ? `, step ${op.step}` : ''}` : '–', 'num');
+  const where = [op.episode + 1, op.kind, op.step ? `step ${op.step}` : ''].filter(Boolean);
+  cell(tr, op.episode >= 0 ? where.join(' · ') : '–');
   cell(tr, c ? `${c.accepted} of ${c.wanted}` : '–', 'num').dataset.accepted = c ? c.accepted : 0;
   cell(tr, c ? c.rejected : '–', 'num');
   cell(tr, c ? c.failed : '–', 'num');
@@ -90,7 +91,7 @@ async function poll() {
     const r = await fetch('/admin/api/state', { cache: 'no-store' });
     if (!r.ok) throw new Error(`the server answered ${r.status}`);
     const st = await r.json();
-    $('about').textContent = `${st.task} · ${st.mode} · ${st.wanted} demonstrations wanted per operator · ${st.sessions}`;
+    $('about').textContent = `${st.task} · ${st.mode} · ${st.wanted} demonstration${st.wanted === 1 ? '' : 's'} wanted per operator · ${st.sessions}`;
     const body = document.createElement('tbody');
     for (const op of st.operators) body.appendChild(row(op));
     $('operators').replaceChild(body, $('operators').tBodies[0]);
