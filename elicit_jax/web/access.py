@@ -204,10 +204,11 @@ class AccessGuard:
         start = "http.response.start"
         if scope["type"] == "websocket":
             await receive()  # the handshake's websocket.connect, answered with a refusal
-            if "websocket.http.response" not in scope.get("extensions", {}):
+            if status == 403 or "websocket.http.response" not in scope.get("extensions", {}):
+                # a close before accepting: the server answers 403
                 await send({"type": "websocket.close", "code": 1008, "reason": "not allowed"})
                 return
-            start = "websocket.http.response.start"
+            start = "websocket.http.response.start"  # an HTTP 400 (denial response)
         headers = [(b"content-type", b"text/plain"), (b"content-length", b"%d" % len(body))]
         await send({"type": start, "status": status, "headers": headers})
         await send({"type": start.replace(".start", ".body"), "body": body})

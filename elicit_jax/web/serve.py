@@ -12,6 +12,7 @@ gives one. Requests naming the server by any other ``Host`` than the bound names
 from __future__ import annotations
 
 import dataclasses
+import logging
 import re
 import socket
 import tempfile
@@ -127,6 +128,15 @@ def summary_table(hub: OperatorHub) -> Any:
     return table
 
 
+class _DenialNoise(logging.Filter):
+    """Drops uvicorn's spurious error after a WebSocket denial response (the 400 of the Host
+    check): its websockets-sansio protocol never marks such a handshake complete (uvicorn
+    pull request 3138); the client gets the 400 all the same."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "ASGI callable returned without completing handshake."
+
+
 def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any = None) -> None:
     """Serve operators until interrupted (see the module docstring)."""
     import uvicorn
@@ -163,9 +173,12 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
     server = uvicorn.Server(
         uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False, lifespan="on")
     )
+    noise = _DenialNoise()
+    logging.getLogger("uvicorn.error").addFilter(noise)
     try:
         server.run(sockets=[sock])
     finally:
+        logging.getLogger("uvicorn.error").removeFilter(noise)
         sock.close()
         hub.shutdown()
         if hub.drivers:
