@@ -74,6 +74,8 @@ def operator_row(hub: Any, name: str) -> dict[str, Any]:
         s = session_summary(hub.root / name)
     except ElicitError:
         return row | {"screen": "not started", "counts": None, "last_verdict": ""}
+    if s["phase"].startswith("done"):
+        row["screen"] = "done"
     return row | {"counts": _counts(s["counts"]), "last_verdict": s["last_verdict"]}
 
 
