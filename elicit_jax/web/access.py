@@ -156,6 +156,7 @@ def same_origin(scope: dict[str, Any]) -> bool:
 
 
 def is_admin_path(path: str) -> bool:
+    """Is ``path`` the dashboard or under it (``/admin``, ``/admin/...``)?"""
     return path == ADMIN_PREFIX or path.startswith(ADMIN_PREFIX + "/")
 
 

@@ -206,6 +206,7 @@ class OperatorHub:
         return sorted(live | set(session_names(self.root)) | set(self.keys.names()))
 
     def status_of(self, name: str) -> str:
+        """``active``, ``paused`` or ``ended`` (``active`` without a key record)."""
         rec = self.keys.read(name)
         return ACTIVE if rec is None else rec.status
 

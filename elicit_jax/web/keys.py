@@ -66,6 +66,7 @@ class OperatorKeys:
         self.dir = Path(root) / KEYS_DIR
 
     def path(self, name: str) -> Path:
+        """Where ``name``'s record is kept."""
         return self.dir / f"{name}.json"
 
     def read(self, name: str) -> KeyRecord | None:
@@ -89,6 +90,7 @@ class OperatorKeys:
         return rec
 
     def write(self, rec: KeyRecord) -> None:
+        """Store ``rec`` (atomically; the key itself is never written)."""
         self.dir.mkdir(parents=True, exist_ok=True)
         body = {"kind": KIND, "schema_version": SCHEMA_VERSION, **dataclasses.asdict(rec)}
         write_json(self.path(rec.name), body)
