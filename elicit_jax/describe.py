@@ -71,13 +71,18 @@ def describe(path: str | Path) -> None:
 
     Known kinds use their describer (:data:`DESCRIBERS`); raw robomimic files and LeRobot
     folders get a summary of what an import would see; any other artifact lists its header
-    fields.
+    fields; a folder of operators' sessions gets one row per operator.
     """
     from rich.console import Console
     from rich.table import Table
 
     path = Path(path)
     if _describe_raw_source(path):
+        return
+    from elicit_jax.elicit.sessions_folder import describe_sessions_folder, is_sessions_folder
+
+    if is_sessions_folder(path):
+        describe_sessions_folder(path)
         return
     header = read_header(path)
     fn = describer(str(header.get("kind", "")))

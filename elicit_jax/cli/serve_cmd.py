@@ -33,6 +33,12 @@ def serve_cmd(
     token: str = typer.Option(
         None, "--token", help="Access token (made up off loopback when not given)."
     ),
+    admin_token: str = typer.Option(
+        None, "--admin-token", help="Token of the /admin dashboard (made up when not given)."
+    ),
+    allow_host: list[str] = typer.Option(
+        [], "--allow-host", help="Another name operators use to reach the server (repeatable)."
+    ),
     max_operators: int = typer.Option(16, "--max-operators", help="Most operators at once."),
     task: str = so.TASK,
     policy: Path = so.POLICY,
@@ -64,6 +70,7 @@ def serve_cmd(
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
     a name and goes through practice, prompt, demonstrations with the live indicator, and
     feedback; accepted demonstrations land in SESSIONS/<name>/ (a restart resumes them).
+    The experimenter watches and manages operators at the printed /admin URL.
 
     Example: elicit-jax serve --task square-nut --policy runs/base --base-demos base.parquet
     --thresholds thresholds.json --sessions sessions/
@@ -110,5 +117,7 @@ def serve_cmd(
         port=port,
         token=token,
         max_operators=max_operators,
+        admin_token=admin_token,
+        allow_hosts=tuple(allow_host),
     )
     serve(config, echo=typer.echo)

@@ -1,23 +1,48 @@
-"""Who may talk to the server: a token off loopback, same-origin WebSockets always.
+"""Who may talk to the server: the right ``Host``, a token off loopback, the admin token for
+the dashboard, same-origin WebSockets always.
 
-Bound to a loopback address (the default, 127.0.0.1) the server needs no token: only this
-machine reaches it. Bound anywhere else it requires one: every HTTP request and WebSocket
-handshake must carry it, as ``?token=...`` (the URL the server prints) or as the cookie the
-page sets on first load; anything else gets 403. WebSocket handshakes whose ``Origin`` is
-another site are refused everywhere, so a page on another site cannot drive an operator's
-robot through their browser.
+* **Host.** Every HTTP request and WebSocket handshake must name the server by one of the
+  names it was bound under (:func:`access_policy`: ``127.0.0.1``, ``localhost``, ``[::1]``,
+  the ``--host`` given and any ``--allow-host``, each with the bound port); anything else gets
+  400. A page on another name that resolves to 127.0.0.1 (DNS rebinding) is refused, and
+  ``Host`` is never copied into a response. Bound to every address (``0.0.0.0``/``::``) the
+  machine's host names and any IP-literal host with the bound port are accepted too (an IP
+  literal cannot be rebound).
+* **Token.** Bound to a loopback address (the default, 127.0.0.1) operators need no token:
+  only this machine reaches the server. Bound anywhere else every request must carry it, as
+  ``?token=...`` (the URL the server prints) or as the cookie the page sets on first load;
+  anything else gets 403.
+* **Admin.** ``/admin`` and everything under it need the admin token (``?token=...`` once,
+  then a cookie) even on loopback; it is distinct from the operators' token, so an operator's
+  link never opens the dashboard. The admin token also passes where the operators' does.
+* **Origin.** WebSocket handshakes and dashboard actions whose ``Origin`` is another site
+  are refused, so a page on another site cannot act through a browser that holds a cookie.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hmac
 import ipaddress
 import secrets
+import socket
+from collections.abc import Iterable
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 TOKEN_COOKIE = "elicit_jax_token"
+ADMIN_COOKIE = "elicit_jax_admin"
+ADMIN_PREFIX = "/admin"
+CSP = (
+    "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+    "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
+"""The pages' Content-Security-Policy ('self' covers the same host's ws:/wss:); no ``Host``
+is ever copied into it."""
+PAGE_HEADERS = {"Cache-Control": "no-store", "Content-Security-Policy": CSP}
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+WILDCARDS = ("0.0.0.0", "::", "")
 
 
 def is_loopback(host: str) -> bool:
@@ -31,25 +56,94 @@ def is_loopback(host: str) -> bool:
 
 
 def new_token() -> str:
+    """A fresh random token (144 bits, URL-safe)."""
     return secrets.token_urlsafe(18)
+
+
+def _bracket(name: str) -> str:
+    return f"[{name}]" if ":" in name and not name.startswith("[") else name
+
+
+@dataclasses.dataclass(frozen=True)
+class AccessPolicy:
+    """What the guard accepts.
+
+    Attributes:
+      hosts: exact ``Host`` header values accepted (lower case, ``name:port``).
+      port: the bound port.
+      any_ip: also accept any IP-literal host with ``port`` (bound to every address).
+      token: the operators' token, or None (loopback: none needed).
+      admin_token: the dashboard's token (always required under ``/admin``).
+    """
+
+    hosts: frozenset[str]
+    port: int
+    any_ip: bool = False
+    token: str | None = None
+    admin_token: str = ""
+
+    def host_allowed(self, header: str) -> bool:
+        """Is ``header`` (a request's ``Host``) one of this server's names?"""
+        value = header.strip().lower()
+        if value in self.hosts:
+            return True
+        if not self.any_ip:
+            return False
+        try:
+            parts = urlsplit("//" + value)
+            ipaddress.ip_address(parts.hostname or "")
+            return parts.port == self.port and not parts.username and not parts.path
+        except ValueError:
+            return False
+
+
+def access_policy(
+    host: str,
+    port: int,
+    token: str | None = None,
+    admin_token: str | None = None,
+    extra_hosts: Iterable[str] = (),
+) -> AccessPolicy:
+    """The policy of a server bound to ``host:port`` (see the module docstring).
+
+    Args:
+      host: the address bound (``--host``).
+      port: the port bound (the real one when ``--port 0``).
+      token: the operators' token, or None.
+      admin_token: the dashboard's token (made up when None).
+      extra_hosts: more names operators use to reach the server (``--allow-host``).
+    """
+    names = {*LOOPBACK_NAMES, _bracket(host), *(_bracket(h) for h in extra_hosts)}
+    wildcard = host in WILDCARDS
+    if wildcard:
+        names |= {socket.gethostname(), socket.getfqdn()}
+    names = {n.lower() for n in names if n and n not in WILDCARDS and n != "[::]"}
+    hosts = {f"{n}:{port}" for n in names} | (names if port == 80 else set())
+    return AccessPolicy(
+        frozenset(hosts), port, wildcard, token, admin_token if admin_token else new_token()
+    )
 
 
 def _headers(scope: dict[str, Any]) -> dict[str, str]:
     return {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", [])}
 
 
-def scope_token(scope: dict[str, Any]) -> str:
-    """The token a request carries (query parameter first, then the cookie), or ''."""
-    query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
-    if query.get("token"):
-        return query["token"][0]
+def _cookie(scope: dict[str, Any], name: str) -> str:
     cookie = SimpleCookie()
     try:
         cookie.load(_headers(scope).get("cookie", ""))
     except Exception:  # a malformed cookie header carries no token
         return ""
-    morsel = cookie.get(TOKEN_COOKIE)
+    morsel = cookie.get(name)
     return morsel.value if morsel else ""
+
+
+def scope_token(scope: dict[str, Any], cookie: str = TOKEN_COOKIE) -> str:
+    """The token a request carries (query parameter first, then ``cookie``), or ''."""
+    query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
+    if query.get("token"):
+        return query["token"][0]
+    return _cookie(scope, cookie)
 
 
 def same_origin(scope: dict[str, Any]) -> bool:
@@ -61,41 +155,61 @@ def same_origin(scope: dict[str, Any]) -> bool:
     return urlsplit(origin).netloc.lower() == headers.get("host", "").lower()
 
 
+def is_admin_path(path: str) -> bool:
+    """Is ``path`` the dashboard or under it (``/admin``, ``/admin/...``)?"""
+    return path == ADMIN_PREFIX or path.startswith(ADMIN_PREFIX + "/")
+
+
+def _equal(given: str, want: str | None) -> bool:
+    return bool(want) and hmac.compare_digest(given.encode(), str(want).encode())
+
+
 class AccessGuard:
     """ASGI middleware enforcing the rules of the module docstring.
 
     Args:
       app: the wrapped application.
-      token: required token, or None (loopback).
+      policy: what is accepted.
     """
 
-    def __init__(self, app: Any, token: str | None) -> None:
-        self.app, self.token = app, token
+    def __init__(self, app: Any, policy: AccessPolicy) -> None:
+        self.app, self.policy = app, policy
 
-    def allowed(self, scope: dict[str, Any]) -> bool:
+    def verdict(self, scope: dict[str, Any]) -> int:
+        """0 (allowed), 400 (unknown ``Host``) or 403 (no token, another origin)."""
+        p = self.policy
+        if not p.host_allowed(_headers(scope).get("host", "")):
+            return 400
+        admin = _equal(scope_token(scope, ADMIN_COOKIE), p.admin_token) or _equal(
+            _cookie(scope, ADMIN_COOKIE), p.admin_token
+        )
+        if is_admin_path(scope.get("path", "")):
+            unsafe = scope["type"] == "websocket" or scope.get("method") not in ("GET", "HEAD")
+            return 0 if admin and (same_origin(scope) or not unsafe) else 403
         if scope["type"] == "websocket" and not same_origin(scope):
-            return False
-        if self.token is None:
-            return True
-        return hmac.compare_digest(scope_token(scope).encode(), self.token.encode())
+            return 403
+        if p.token is None or admin:
+            return 0
+        return 0 if _equal(scope_token(scope), p.token) else 403
 
     async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
-        if scope["type"] not in ("http", "websocket") or self.allowed(scope):
+        status = self.verdict(scope) if scope["type"] in ("http", "websocket") else 0
+        if status == 0:
             await self.app(scope, receive, send)
             return
+        body = (
+            b"bad request: this server answers only to the names it was started with\n"
+            if status == 400
+            else b"forbidden: open the URL the server printed (it carries the access token)\n"
+        )
+        start = "http.response.start"
         if scope["type"] == "websocket":
             await receive()  # the handshake's websocket.connect, answered with a refusal
-            await send({"type": "websocket.close", "code": 1008, "reason": "not allowed"})
-            return
-        body = b"forbidden: open the URL the server printed (it carries the access token)\n"
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 403,
-                "headers": [
-                    (b"content-type", b"text/plain"),
-                    (b"content-length", b"%d" % len(body)),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+            if status == 403 or "websocket.http.response" not in scope.get("extensions", {}):
+                # a close before accepting: the server answers 403
+                await send({"type": "websocket.close", "code": 1008, "reason": "not allowed"})
+                return
+            start = "websocket.http.response.start"  # an HTTP 400 (denial response)
+        headers = [(b"content-type", b"text/plain"), (b"content-length", b"%d" % len(body))]
+        await send({"type": start, "status": status, "headers": headers})
+        await send({"type": start.replace(".start", ".body"), "body": body})

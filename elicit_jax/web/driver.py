@@ -142,6 +142,34 @@ class OperatorDriver:
                 self._go = False
                 self.state = READY
 
+    def close_page(self, code: int, reason: str) -> None:
+        """Close the attached page's connection with ``code`` and ``reason`` (if one is)."""
+        with self._lock:
+            page = self._outbox
+        close = getattr(page, "close", None)
+        if close is not None:
+            close(code, reason)
+
+    def status(self) -> dict[str, Any]:
+        """Where the operator stands, for the experimenter's dashboard."""
+        with self._lock:
+            s = self.session
+            rows = [] if s is None else s.progress.rows
+            return {
+                "state": self.state,
+                "message": self.message,
+                "attached": self.attached,
+                "phase": getattr(s, "phase", ""),
+                "episode": self._index,
+                "episode_kind": self._kind,
+                "step": self._step,
+                "prompt_pending": self._prompt_pending,
+                "review_pending": self._review_pending,
+                "counts": None if s is None else to_jsonable(s.progress.counts),
+                "last_verdict": str(rows[-1].get("verdict", "")) if rows else "",
+                "steps": self.steps,
+            }
+
     def handle(self, msg: Message) -> None:
         """Apply one checked message of the page (actions, control, start, give up)."""
         op = self.operator

@@ -7,7 +7,9 @@ object with a ``type``:
 type           fields                                 meaning
 =============  =====================================  ==========================================
 ``hello``      ``name`` (1-40 of ``A-Z a-z 0-9 _ -``)  first message: attach to that operator's
-                                                      session (created or resumed)
+               and ``key`` (optional: the operator's  session (created or resumed); a new name
+               secret, 16-64 of ``A-Z a-z 0-9 _ -``)  is answered with a ``key`` message, an
+                                                      existing one needs its key
 ``action``     ``a``: list of ``action_dim`` numbers   the operator's current command; the server
                in [-1, 1]                             applies the latest one at each control step
 ``control``    ``operator``: bool                     HG-DAgger: take over (true) / hand back
@@ -22,8 +24,8 @@ messages a second on average (bursts up to :data:`RATE_BURST`) — raises
 :class:`ProtocolError` with a WebSocket close code and a one-line reason; the server closes
 that connection only.
 
-**Server → browser**: JSON text messages (``welcome``, ``scene``, ``state``, ``event``,
-``prompt``, ``review``, ``error``, ``pong``) and binary pose messages, little-endian:
+**Server → browser**: JSON text messages (``key``, ``welcome``, ``scene``, ``state``,
+``event``, ``prompt``, ``review``, ``error``, ``pong``) and binary pose messages, little-endian:
 
 * frame (:func:`pack_frame`): ``u8 kind=1, u8 flags (bit 0: the operator controls the robot),
   u16 nbody, u32 episode, u32 step, f32 M (NaN: not scored or hidden)`` then
@@ -44,11 +46,13 @@ from typing import Any
 
 import numpy as np
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_MESSAGE_BYTES = 512
 RATE_PER_S = 120.0
 RATE_BURST = 240.0
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,39}$")
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,39}")
+"""Operator names; always used with ``fullmatch`` (``$`` would let a trailing newline in)."""
+KEY_RE = re.compile(r"[A-Za-z0-9_-]{16,64}")
 NAME_RULE = "1-40 letters, digits, '_' or '-', starting with a letter or digit"
 
 CLOSE_NORMAL = 1000
@@ -58,6 +62,12 @@ CLOSE_TOO_BIG = 1009
 CLOSE_REPLACED = 4000
 CLOSE_FULL = 4001
 CLOSE_SESSION = 4002
+CLOSE_KEY = 4003
+"""The name is taken and the key is missing or wrong (the page stops retrying)."""
+CLOSE_PAUSED = 4004
+"""The experimenter paused the operator (the page retries, and is let in once resumed)."""
+CLOSE_ENDED = 4005
+CLOSE_REMOVED = 4006
 
 FRAME = 1
 CLIP = 2
@@ -81,11 +91,13 @@ class Message:
 
     type: str
     name: str = ""
+    key: str = ""
     action: tuple[float, ...] = ()
     operator: bool = False
     t: float = 0.0
 
 
+_OPTIONAL = {"hello": {"key"}}
 _FIELDS = {
     "hello": {"name"},
     "action": {"a"},
@@ -94,6 +106,11 @@ _FIELDS = {
     "give-up": set(),
     "ping": {"t"},
 }
+
+
+def valid_name(name: object) -> bool:
+    """Is ``name`` an allowed operator name (the whole string, see :data:`NAME_RULE`)?"""
+    return isinstance(name, str) and NAME_RE.fullmatch(name) is not None
 
 
 def _reject_constant(token: str) -> Any:
@@ -127,7 +144,7 @@ def parse_message(raw: str | bytes | None, action_dim: int) -> Message:
     kind = data.get("type")
     if kind not in _FIELDS:
         raise ProtocolError(CLOSE_POLICY, f"unknown message type {str(kind)[:30]!r}")
-    extra = set(data) - _FIELDS[kind] - {"type"}
+    extra = set(data) - _FIELDS[kind] - _OPTIONAL.get(kind, set()) - {"type"}
     if extra:
         raise ProtocolError(CLOSE_POLICY, f"'{kind}' has unknown field(s) {sorted(extra)}")
     missing = _FIELDS[kind] - set(data)
@@ -135,9 +152,12 @@ def parse_message(raw: str | bytes | None, action_dim: int) -> Message:
         raise ProtocolError(CLOSE_POLICY, f"'{kind}' lacks field(s) {sorted(missing)}")
     if kind == "hello":
         name = data["name"]
-        if not isinstance(name, str) or not NAME_RE.match(name):
+        if not valid_name(name):
             raise ProtocolError(CLOSE_POLICY, f"operator name must be {NAME_RULE}")
-        return Message(kind, name=name)
+        key = data.get("key", "")
+        if not isinstance(key, str) or (key and not KEY_RE.fullmatch(key)):
+            raise ProtocolError(CLOSE_POLICY, "'key' must be 16-64 letters, digits, '_' or '-'")
+        return Message(kind, name=name, key=key)
     if kind == "action":
         a = data["a"]
         if not isinstance(a, list) or len(a) != action_dim:

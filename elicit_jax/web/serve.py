@@ -4,12 +4,16 @@ Before binding, :func:`preflight` opens a throwaway session with the server's se
 bad input fails at start with the session's own one-line error (not when the first operator
 arrives), and the scorers are compiled by then. The server binds 127.0.0.1 by default;
 binding any other address requires an access token (:mod:`elicit_jax.web.access`), made up
-and printed once in the URL unless ``--token`` gives one.
+and printed once in the URL unless ``--token`` gives one. The experimenter's dashboard
+(``/admin``) always needs the admin token, made up and printed once unless ``--admin-token``
+gives one. Requests naming the server by any other ``Host`` than the bound names are refused.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
+import re
 import socket
 import tempfile
 from collections.abc import Callable
@@ -18,8 +22,11 @@ from typing import Any
 
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.errors import ElicitError
-from elicit_jax.web.access import is_loopback, new_token
+from elicit_jax.web.access import access_policy, is_loopback, new_token
 from elicit_jax.web.hub import OperatorHub, session_names
+
+_TOKEN_RE = re.compile(r"[A-Za-z0-9_.~-]+")
+_HOST_RE = re.compile(r"[A-Za-z0-9.-]{1,253}|\[?[0-9A-Fa-f:.]{2,45}\]?")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,6 +41,8 @@ class ServeConfig:
       port: port to bind (0: any free one; the printed URL says which).
       token: the access token (off loopback: made up when not given).
       max_operators: most operators at once.
+      admin_token: the dashboard's token (made up when not given).
+      allow_hosts: more names operators reach the server by (a DNS name, a proxy's name).
     """
 
     session: SessionConfig
@@ -42,14 +51,22 @@ class ServeConfig:
     port: int = 8765
     token: str | None = None
     max_operators: int = 16
+    admin_token: str | None = None
+    allow_hosts: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not 0 <= self.port <= 65535:
             raise ElicitError(f"--port must be in 0..65535, got {self.port}")
         if self.max_operators < 1:
             raise ElicitError(f"--max-operators must be >= 1, got {self.max_operators}")
-        if self.token is not None and len(self.token) < 8:
-            raise ElicitError("--token must be at least 8 characters")
+        for flag, tok in (("--token", self.token), ("--admin-token", self.admin_token)):
+            if tok is not None and (len(tok) < 8 or not _TOKEN_RE.fullmatch(tok)):
+                raise ElicitError(f"{flag} must be at least 8 of A-Z a-z 0-9 _ - . ~")
+        if self.token is not None and self.token == self.admin_token:
+            raise ElicitError("--admin-token must differ from --token (operators hold --token)")
+        bad = [h for h in self.allow_hosts if not _HOST_RE.fullmatch(h)]
+        if bad:
+            raise ElicitError(f"--allow-host takes a host name or address, got {bad[0]!r}")
         if Path(self.sessions).exists() and not Path(self.sessions).is_dir():
             raise ElicitError("is a file, not a sessions directory", self.sessions)
 
@@ -86,11 +103,11 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def url_of(host: str, port: int, token: str | None) -> str:
-    """The URL operators open."""
+def url_of(host: str, port: int, token: str | None, path: str = "/") -> str:
+    """The URL operators open (``path``: another page of the server)."""
     shown = socket.gethostname() if host in ("0.0.0.0", "::") else host
     shown = f"[{shown}]" if ":" in shown else shown
-    return f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+    return f"http://{shown}:{port}{path}" + (f"?token={token}" if token else "")
 
 
 def summary_table(hub: OperatorHub) -> Any:
@@ -111,6 +128,15 @@ def summary_table(hub: OperatorHub) -> Any:
     return table
 
 
+class _DenialNoise(logging.Filter):
+    """Drops uvicorn's spurious error after a WebSocket denial response (the 400 of the Host
+    check): its websockets-sansio protocol never marks such a handshake complete (uvicorn
+    pull request 3138); the client gets the 400 all the same."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "ASGI callable returned without completing handshake."
+
+
 def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any = None) -> None:
     """Serve operators until interrupted (see the module docstring)."""
     import uvicorn
@@ -127,9 +153,10 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
     hub = OperatorHub(config.session, root, config.max_operators, log=echo)
     from elicit_jax.web.server import create_app
 
-    app = create_app(hub, token)
     sock = bind(config.host, config.port)
     port = sock.getsockname()[1]
+    access = access_policy(config.host, port, token, config.admin_token, config.allow_hosts)
+    app = create_app(hub, access, url_of(config.host, port, None))
     known = session_names(root)
     c = config.session
     echo(
@@ -139,13 +166,19 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
     )
     if token is not None:
         echo("access token required (it is in the URL below; share it only with operators)")
+    echo(
+        f"dashboard (experimenter only): {url_of(config.host, port, access.admin_token, '/admin')}"
+    )
     echo(f"open {url_of(config.host, port, token)}   (Ctrl-C stops)")
     server = uvicorn.Server(
         uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False, lifespan="on")
     )
+    noise = _DenialNoise()
+    logging.getLogger("uvicorn.error").addFilter(noise)
     try:
         server.run(sockets=[sock])
     finally:
+        logging.getLogger("uvicorn.error").removeFilter(noise)
         sock.close()
         hub.shutdown()
         if hub.drivers:

@@ -2,11 +2,15 @@
 
 ``GET /`` serves the page, ``/static/...`` its scripts (three.js included: nothing is fetched
 from elsewhere, and the page's Content-Security-Policy forbids it), and ``/ws`` is an
-operator's connection: the page's first message names the operator (``hello``), the hub
-attaches the connection to that operator's driver, and from then on every message is checked
-(:func:`~elicit_jax.web.protocol.parse_message`, a rate limit) and handed to the driver. A
+operator's connection: the page's first message names the operator (``hello``, with their
+key once they have one), the hub admits them (:meth:`~elicit_jax.web.hub.OperatorHub.admit`:
+a new name is sent its key) and attaches the connection to that operator's driver, and from
+then on every message is checked (:func:`~elicit_jax.web.protocol.parse_message`, a rate
+limit) and handed to the driver. A
 message that breaks the protocol closes that connection alone, with the reason; a second
-page of the same operator takes over and the first is closed.
+page of the same operator takes over and the first is closed. ``/admin`` is the
+experimenter's dashboard (:mod:`elicit_jax.web.admin`); :mod:`elicit_jax.web.access` guards
+everything (the ``Host`` header, tokens, origins).
 """
 
 from __future__ import annotations
@@ -16,7 +20,8 @@ import contextlib
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.web.hub import HubFull, OperatorHub
+from elicit_jax.web.access import PAGE_HEADERS, AccessPolicy
+from elicit_jax.web.hub import HubFull, OperatorHub, Refused
 from elicit_jax.web.messages import dump
 from elicit_jax.web.protocol import (
     CLOSE_FULL,
@@ -104,10 +109,14 @@ async def operator_socket(websocket: Any) -> None:
         if msg.type != "hello":
             raise ProtocolError(CLOSE_POLICY, "the first message must be 'hello'")
         try:
-            driver = hub.driver(msg.name)
+            driver, key = hub.admit(msg.name, msg.key)
         except HubFull as e:
             conn.send(dump("error", message=str(e)))
             raise ProtocolError(CLOSE_FULL, str(e)) from None
+        except Refused as e:
+            raise ProtocolError(e.code, e.reason) from None
+        if key is not None:
+            conn.send(dump("key", name=msg.name, key=key))
         old = driver.attach(conn)
         if old is not None:
             old.close(CLOSE_REPLACED, "this session was opened in another window")
@@ -136,30 +145,29 @@ def _index(request: Any) -> Any:
 
     from elicit_jax.web.access import TOKEN_COOKIE
 
-    host = request.headers.get("host", "")
-    csp = (
-        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
-        f"connect-src 'self' ws://{host} wss://{host}; base-uri 'none'; form-action 'none'; "
-        "frame-ancestors 'none'"
-    )
-    response = FileResponse(
-        STATIC / "index.html",
-        headers={"Cache-Control": "no-store", "Content-Security-Policy": csp},
-    )
+    response = FileResponse(STATIC / "index.html", headers=PAGE_HEADERS)
     token = request.query_params.get("token")
-    if token and request.app.state.token:
+    if token and request.app.state.access.token:
         response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
     return response
 
 
-def create_app(hub: OperatorHub, token: str | None = None) -> Any:
-    """The ASGI application serving ``hub``'s operators (``token``: required, or None)."""
+def create_app(hub: OperatorHub, access: AccessPolicy, base_url: str | None = None) -> Any:
+    """The ASGI application serving ``hub``'s operators and its dashboard under ``access``.
+
+    Args:
+      hub: the operators.
+      access: who may connect (:func:`~elicit_jax.web.access.access_policy`).
+      base_url: the URL operators open, for the links the dashboard issues
+        (``http://127.0.0.1:PORT/`` when None).
+    """
     from starlette.applications import Starlette
     from starlette.middleware import Middleware
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
 
     from elicit_jax.web.access import AccessGuard
+    from elicit_jax.web.admin import admin_routes
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Any) -> Any:
@@ -171,10 +179,12 @@ def create_app(hub: OperatorHub, token: str | None = None) -> Any:
             Route("/", _index),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
             WebSocketRoute("/ws", operator_socket),
+            *admin_routes(),
         ],
-        middleware=[Middleware(AccessGuard, token=token)],
+        middleware=[Middleware(AccessGuard, policy=access)],
         lifespan=lifespan,
     )
     app.state.hub = hub
-    app.state.token = token
+    app.state.access = access
+    app.state.base_url = base_url or f"http://127.0.0.1:{access.port}/"
     return app

@@ -12,10 +12,12 @@ import time
 
 import numpy as np
 import pytest
+from clients import client_for
 from pages import Page
 
 from elicit_jax.data.demos import read_demos
 from elicit_jax.elicit.store import SessionStore
+from elicit_jax.web.access import access_policy
 from elicit_jax.web.hub import OperatorHub
 from elicit_jax.web.protocol import (
     CLOSE_FULL,
@@ -30,20 +32,24 @@ from elicit_jax.web.protocol import (
 )
 from elicit_jax.web.server import create_app
 
+ADMIN = "admin-token-for-tests"
+
 
 @pytest.fixture
 def make_client(template, tmp_path):
-    """make(root=..., token=..., max_operators=...) -> TestClient of a fresh hub."""
-    from starlette.testclient import TestClient
-
+    """make(root=..., token=..., max_operators=...) -> TestClient of a fresh hub, reaching the
+    server as 127.0.0.1:8765. The operators' keys are kept across the test's clients."""
     made = []
+    keys: dict[str, str] = {}
 
     def make(root=None, token=None, max_operators=16, **settings):
         import dataclasses
 
         config = dataclasses.replace(template, **settings)
         hub = OperatorHub(config, root or tmp_path / "sessions", max_operators, log=lambda _: None)
-        client = TestClient(create_app(hub, token))
+        policy = access_policy("127.0.0.1", 8765, token, admin_token=ADMIN)
+        client = client_for(create_app(hub, policy))
+        client.keys = keys
         made.append(hub)
         return client
 
@@ -53,10 +59,15 @@ def make_client(template, tmp_path):
 
 
 def _join(client, name: str) -> Page:
+    """A page of operator ``name``: their key if they have one (kept when issued)."""
     ws = client.websocket_connect("/ws").__enter__()
     page = Page(ws)
-    page.send(type="hello", name=name)
+    key = client.keys.get(name)
+    page.send(type="hello", name=name, **({"key": key} if key else {}))
     page.until(lambda m: m["type"] == "state" and m["state"] not in ("opening",))
+    issued = [m["key"] for m in page.texts if m["type"] == "key"]
+    assert len(issued) == (0 if key else 1)  # a key for a new name, none on a resume
+    client.keys.setdefault(name, *issued[:1])
     return page
 
 

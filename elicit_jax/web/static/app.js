@@ -8,13 +8,27 @@ import { Teleop, MOTION_KEYS } from './teleop.js';
 const $ = (id) => document.getElementById(id);
 const NAME_KEY = 'elicit-jax-name';
 const NAME_RE = /^[A-Za-z0-9][A-Za-z0-9_-]{0,39}$/;
-const FATAL_CODES = [1003, 1008, 1009, 4001, 4002];
+const KEY_RE = /^[A-Za-z0-9_-]{16,64}$/;
+const FATAL_CODES = [1003, 1008, 1009, 4001, 4002, 4003, 4005, 4006];
+const PAUSED = 4004;  // the experimenter paused this operator: keep retrying quietly
 const GOALS = {
   'reach-pillar': 'Bring the gripper to the green ball on the far side of the pillar.',
   'square-nut': 'Pick up the square nut by its handle and drop it over the square peg.',
   'round-nut': 'Pick up the round nut by its handle and drop it over the round peg.',
   'hammer-drawer': 'Pick up the hammer and put it into the drawer.',
 };
+
+// The operator's secret key: issued by the server at the first visit (a 'key' message) or in
+// the experimenter's link (#op=NAME&key=KEY, read once and removed from the address bar).
+const keyKey = (name) => `elicit-jax-key:${name}`;
+{
+  const h = new URLSearchParams(location.hash.slice(1));
+  if (NAME_RE.test(h.get('op') || '') && KEY_RE.test(h.get('key') || '')) {
+    localStorage.setItem(NAME_KEY, h.get('op'));
+    localStorage.setItem(keyKey(h.get('op')), h.get('key'));
+    history.replaceState(null, '', location.pathname + location.search);
+  }
+}
 
 const S = {
   name: localStorage.getItem(NAME_KEY),
@@ -56,7 +70,8 @@ function connect() {
   ws.onopen = () => {
     S.retries = 0;
     setConn('open', 'connected');
-    ws.send(JSON.stringify({ type: 'hello', name: S.name }));
+    const key = localStorage.getItem(keyKey(S.name));
+    ws.send(JSON.stringify(key ? { type: 'hello', name: S.name, key } : { type: 'hello', name: S.name }));
   };
   ws.onmessage = (e) => {
     if (typeof e.data === 'string') onText(JSON.parse(e.data));
@@ -68,7 +83,7 @@ function connect() {
     if (e.code === 4000) return fail('This session was opened in another window or tab.');
     if (FATAL_CODES.includes(e.code)) return fail(e.reason || `connection refused (${e.code})`);
     if (!S.name) return;
-    setConn('lost', 'reconnecting…');
+    setConn('lost', e.code === PAUSED ? e.reason : 'reconnecting…');
     const delay = Math.min(5000, 500 * 2 ** S.retries++);
     setTimeout(connect, delay);
   };
@@ -139,6 +154,7 @@ function onText(msg) {
       document.body.dataset.state = msg.state;
       break;
     case 'error': S.error = msg.message; break;
+    case 'key': localStorage.setItem(keyKey(msg.name), msg.key); showLink(); break;
     default: return;
   }
   render();
@@ -450,6 +466,12 @@ function onEnter() {
   }
 }
 
+function showLink() {
+  const key = S.name && localStorage.getItem(keyKey(S.name));
+  $('my-link').hidden = !key;
+  if (key) $('my-link').href = `${location.pathname}${location.search}#op=${S.name}&key=${key}`;
+}
+
 function ackKey() { return `elicit-jax-acked:${S.name}`; }
 
 function reconnect() {
@@ -492,14 +514,17 @@ $('name-form').addEventListener('submit', (e) => {
   S.name = name;
   S.acked = Number(sessionStorage.getItem(ackKey()) ?? -1);
   localStorage.setItem(NAME_KEY, name);
+  showLink();
   connect();
   render();
 });
 $('name').addEventListener('input', () => $('name').setCustomValidity(''));
 $('change-name').addEventListener('click', (e) => {
   e.preventDefault();
+  if (S.name) localStorage.removeItem(keyKey(S.name));  // a shared machine: the next person
   localStorage.removeItem(NAME_KEY);
   S.name = null; S.state = null; S.welcome = null; S.fatal = '';
+  showLink();
   const ws = S.ws;
   S.ws = null;
   if (ws) ws.close();
@@ -519,5 +544,6 @@ $('replay-scrub').addEventListener('input', (e) => {
 });
 
 if (S.name) S.acked = Number(sessionStorage.getItem(ackKey()) ?? -1);
+showLink();
 render();
 connect();
