@@ -238,8 +238,9 @@ class Watcher:
             except ElicitError as e:
                 if (e.__cause__ is not None and _busy(e.__cause__)) or _busy(e):
                     continue  # still open for writing: try again on the next scan
-                self.echo(f"error: {e}")
-                self._log({"item": item.name, "error": str(e), "time": time.time()})
+                text = str(e) if str(item) in str(e) else f"{item}: {e}"
+                self.echo(f"error: {text}")
+                self._log({"item": item.name, "error": text, "time": time.time()})
             self.handled.add((item.name, repr(sig)))
         return judged
 
