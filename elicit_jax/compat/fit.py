@@ -214,7 +214,7 @@ def fit_scores_file(
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.training_data import gather
 
-    refuse_overwriting_inputs([out_path], [scores_path])
+    refuse_overwriting_inputs([out_path], [scores_path, *job.base])
     cols = [c for c in _needed(job) if c not in ("episode", "operator", "likelihood", "novelty")]
     scores_header, s = read_scores(
         scores_path,

@@ -78,15 +78,18 @@ class TrainingEvidence:
 
 
 def _recorded(rec: Mapping[str, Any], near: Path) -> tuple[Path | None, str]:
-    """The file an artifact records as an input, if still there and unchanged."""
+    """The file an artifact records as an input, if still there and unchanged: at its
+    recorded path, else (relative paths) next to ``near``, else under its name in ``near``
+    (an output directory renamed into place after writing)."""
     p = Path(rec["path"])
-    if not p.exists() and not p.is_absolute() and (near / p).exists():
-        p = near / p
-    if not p.exists():
+    tries = [p] + ([near / p] if not p.is_absolute() else []) + [near / p.name]
+    found = [t for t in tries if t.exists()]
+    if not found:
         return None, f"{rec['path']} is not there"
-    if rec.get("sha256") and file_sha256(p) != rec["sha256"]:
-        return None, f"{p} changed since it was recorded"
-    return p, ""
+    for t in found:
+        if not rec.get("sha256") or file_sha256(t) == rec["sha256"]:
+            return t, ""
+    return None, f"{found[0]} changed since it was recorded"
 
 
 def _checkpoint(header: Mapping[str, Any], near: Path) -> tuple[Path | None, dict, str]:

@@ -180,7 +180,7 @@ def training_warnings(
     last = [
         s
         for s, (_, val, best, _) in sorted(results.items())
-        if best == config.epochs and np.isfinite(np.asarray(val)).any()
+        if best == config.epochs and (val is None or np.isfinite(np.asarray(val, float)).any())
     ]
     if last and config.epochs > 1:
         out.append(
