@@ -77,13 +77,13 @@ class TrainingEvidence:
         return int((n_inc > accept_fraction * np.bincount(index)).sum())
 
 
-def _recorded(rec: Mapping[str, Any], near: Path) -> tuple[Path | None, str]:
+def _recorded(rec: Mapping[str, Any], *near: Path) -> tuple[Path | None, str]:
     """The file an artifact records as an input, if still there and unchanged: at its
-    recorded path, else (relative paths) next to ``near``, else under its name in ``near``
+    recorded path, else (relative paths) under each of ``near``, else under its name there
     (an output directory renamed into place after writing)."""
     p = Path(rec["path"])
-    tries = [p] + ([near / p] if not p.is_absolute() else []) + [near / p.name]
-    found = [t for t in tries if t.exists()]
+    tries = [p] + [n / p for n in near if not p.is_absolute()] + [n / p.name for n in near]
+    found = [t for t in dict.fromkeys(tries) if t.exists()]
     if not found:
         return None, f"{rec['path']} is not there"
     for t in found:
@@ -102,7 +102,10 @@ def _checkpoint(header: Mapping[str, Any], near: Path) -> tuple[Path | None, dic
     path, why = _recorded(rec, near)
     if path is None:
         return None, {}, f"the policy the scores were computed with: {why}"
-    dirs = seed_dirs(path)
+    try:
+        dirs = seed_dirs(path)
+    except ElicitError as e:
+        return None, {}, f"the policy the scores were computed with: {e}"
     seed = (header.get("policy") or {}).get("seed")
     seed_dir = dirs.get(int(seed)) if seed is not None else next(iter(dirs.values()))
     if seed_dir is None:
@@ -129,7 +132,7 @@ def _read_all(paths: Sequence[str | Path]) -> Demos:
 
 
 def _training_demos(
-    ckpt: Mapping[str, Any], seed_dir: Path, base: Sequence[str | Path]
+    ckpt: Mapping[str, Any], seed_dir: Path, base: Sequence[str | Path], near: Path
 ) -> tuple[Demos | None, str]:
     """The training demonstrations: ``base`` (checked against the checkpoint) or the files
     the checkpoint records."""
@@ -147,7 +150,7 @@ def _training_demos(
         return None, f"{seed_dir} records no training data file"
     paths = []
     for name in sorted(recorded):
-        path, why = _recorded(recorded[name], seed_dir)
+        path, why = _recorded(recorded[name], near, seed_dir)
         if path is None:
             return None, f"the training data {why}"
         paths.append(path)
@@ -210,7 +213,7 @@ def gather(
         if base:
             raise ElicitError(f"cannot check --base against the policy: {why}", base[0])
         return TrainingEvidence(scored=scored, notes=(f"the training-data checks ({why})",))
-    demos, demos_why = _training_demos(ckpt, seed_dir, base)
+    demos, demos_why = _training_demos(ckpt, seed_dir, base, near)
     training = ckpt.get("episode_sha256")
     if training is None and demos is not None:
         training = episode_digests(demos)
