@@ -95,6 +95,19 @@ def test_watch_errors_name_the_item(run, tmp_path):
     )
     Watcher(config, echo=lines.append).scan(now=1e9)
     assert lines == [f"error: {item}: --obs-keys does not apply to .npz files (one 'obs' array)"]
+    # a reader's own error (text actions in a robomimic file) names the item, and the
+    # watcher goes on
+    import h5py
+
+    bad = inbox / "text.hdf5"
+    with h5py.File(bad, "w") as f:
+        f.create_dataset("data/demo_0/actions", data=np.array([b"a", b"b"]))
+    lines.clear()
+    Watcher(config, echo=lines.append).scan(now=1e9)  # judges both items again
+    assert sorted(lines) == [
+        f"error: {item}: --obs-keys does not apply to .npz files (one 'obs' array)",
+        f"error: {bad}: ValueError: could not convert string to float: np.bytes_(b'a')",
+    ]
 
 
 def test_operator_lists_are_plain_names(run, tmp_path):
