@@ -240,6 +240,15 @@ def read_json(path: str | Path) -> Any:
         raise ElicitError("file not found", path) from e
     except json.JSONDecodeError as e:
         raise ElicitError(f"malformed JSON ({e.msg} at line {e.lineno})", path) from e
+    except UnicodeDecodeError as e:
+        what = "a Parquet file" if _starts_with(path, b"PAR1") else "binary, not text"
+        text = f"not a JSON file: it is {what} (byte {e.start} is not UTF-8)"
+        raise ElicitError(text, path) from e
+
+
+def _starts_with(path: str | Path, magic: bytes) -> bool:
+    with open(path, "rb") as f:
+        return f.read(len(magic)) == magic
 
 
 def write_parquet(path: str | Path, table: Any, header: Mapping[str, Any]) -> None:

@@ -103,7 +103,7 @@ def test_errors_name_the_file(tmp_path, edit, message):
 
 def test_not_an_archive(tmp_path):
     (tmp_path / "x.npz").write_text("no zip here")
-    with pytest.raises(ElicitError, match=r"not a readable \.npz archive"):
+    with pytest.raises(ElicitError, match=r"not a \.npz archive: a \.npz is a zip file"):
         import_npz(tmp_path / "x.npz")
 
 

@@ -99,6 +99,11 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     rep = t["report"]
     assert rep["balanced_accuracy"] == 1.0
     assert rep["trust"]["trustworthy"], rep["trust"]["problems"]
+    # the walk gets the training-data checks by default: the 9 demos runs/base was trained on
+    # are found, by content, among the scored ones; nothing is left unchecked
+    assert rep["trust"]["unchecked"] == []
+    assert rep["training_check"] == {"demos": 9, "rejected": 0, "source": "9 scored in this file"}
+    assert "base policy's training demos" in walk["fit"]
     assert rep["per_operator"]["op_base"]["rejected_episodes"] == 0
     assert rep["per_operator"]["op_alt"]["rejected_episodes"] == 6
     kept = read_demos(d / "filtered.parquet")

@@ -25,15 +25,13 @@ def _resolve(
         raise ElicitError("--lambda and --eta go together")
     if thresholds is not None:
         from elicit_jax.compat.thresholds import read_thresholds
+        from elicit_jax.compat.trust import thresholds_verdict
 
         lam_, eta_, header = read_thresholds(thresholds)
-        trust = header.get("report", {}).get("trust") or {}
-        if trust.get("trustworthy") is False:
-            typer.echo(
-                f"warning: {thresholds}: these thresholds were judged not trustworthy when "
-                f"fitted: {'; '.join(trust.get('problems', []))}",
-                err=True,
-            )
+        verdict = thresholds_verdict(header)
+        if not verdict.clean:
+            what = "warning" if verdict.problems else "note"
+            typer.echo(f"{what}: {thresholds}: judged when fitted: {verdict.summary()}", err=True)
         return lam_, eta_
     if lam is not None and eta is not None:
         from elicit_jax.compat.measures import check_thresholds
@@ -173,14 +171,22 @@ def fit_thresholds_cmd(
     force: bool = typer.Option(
         False, "--force", help="Write a fit judged meaningless anyway (marked untrustworthy)."
     ),
+    base: Path | None = typer.Option(
+        None,
+        "--base",
+        help="The base policy's training demos, to check the thresholds accept them (default: "
+        "those in the scores, and the file the checkpoint records).",
+    ),
 ) -> None:
     """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
 
     Maximises balanced accuracy over a quantile grid, ties broken by the widest margin
     (docs/thresholds.md). Reports balanced accuracy, margin, leave-one-out accuracy, the
     rejections per operator and whether the fit can be trusted; a meaningless fit (held-out
-    decisions at chance, or rejecting most of the compatible operators' own demos) is refused
-    without --force.
+    decisions at chance, rejecting most of the compatible operators' own demos, or more than
+    10% of the base policy's training demos) is refused without --force. The training demos
+    are found by content in the scores, else read from --base or the file the policy's
+    checkpoint records, and scored under that policy.
 
     Example: elicit-jax fit-thresholds --scores scores.parquet --compatible operator:base
     --incompatible operator:op4 -o thresholds.json
@@ -198,6 +204,7 @@ def fit_thresholds_cmd(
         lambda_=lambda_,
         eta=eta,
         force=force,
+        base=() if base is None else (str(base),),
     )
     fit_scores_file(scores, out, job)
 

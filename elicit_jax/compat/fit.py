@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,8 +24,19 @@ from elicit_jax.compat.thresholds import (
     operator_rejections,
     write_thresholds,
 )
-from elicit_jax.compat.trust import assess_fit, operator_decisions
+from elicit_jax.compat.trust import (
+    Verdict,
+    assess_fit,
+    held_out_in_sample,
+    one_operator,
+    operator_decisions,
+    training_overlap,
+    training_rejections,
+)
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.training_data import TrainingEvidence
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +53,9 @@ class FitJob:
       eta: manual η.
       force: write a fit judged meaningless (:mod:`elicit_jax.compat.trust`) anyway, marked
         untrustworthy, instead of refusing.
+      base: the base policy's training demonstrations (``--base``), to check the thresholds
+        against; default: those the scores file holds and the files the checkpoint records
+        (:mod:`elicit_jax.compat.training_data`).
     """
 
     compatible: str | None = None
@@ -50,6 +64,7 @@ class FitJob:
     lambda_: float | None = None
     eta: float | None = None
     force: bool = False
+    base: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.lambda_ is None) != (self.eta is None):
@@ -120,6 +135,8 @@ def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) 
         if names is not None:
             row["source_episode"] = str(names[first[int(e)]])
         contrast.append(row)
+    if method == "fit":
+        extra["in_sample_accuracy"] = held_out_in_sample(contrast)
     report = {
         "balanced_accuracy": ba,
         **extra,
@@ -130,24 +147,47 @@ def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) 
     return {"lambda": lam, "eta": eta, "method": method, "report": report}
 
 
-def _trust(
-    s: dict[str, np.ndarray], labels: dict[int, bool], out: dict[str, Any], f: float
-) -> dict[str, Any]:
-    """Trust assessment of a fit (see :mod:`elicit_jax.compat.trust`)."""
-    ell, nu, ep, ops = s["likelihood"], s["novelty"], s["episode"], s["operator"]
+def _rejected_episodes(s: dict[str, np.ndarray], out: dict[str, Any], f: float) -> np.ndarray:
+    ell, nu, ep = s["likelihood"], s["novelty"], s["episode"]
     inc = is_incompatible(ell, nu, out["lambda"], out["eta"])
     ids, index = np.unique(ep, return_inverse=True)
     n_inc = np.bincount(index, weights=inc, minlength=len(ids))
-    rejected = ids[n_inc > f * np.bincount(index, minlength=len(ids))]
+    return ids[n_inc > f * np.bincount(index, minlength=len(ids))]
+
+
+def _contrast_verdict(
+    s: dict[str, np.ndarray], labels: dict[int, bool], out: dict[str, Any], f: float
+) -> Verdict:
+    """The contrast checks of :mod:`elicit_jax.compat.trust` (sets given only)."""
+    if not labels:
+        return Verdict(unchecked=("contrast sets: none given, so no accuracy or margin",))
+    ep, ops = s["episode"], np.asarray(s["operator"]).astype(str)
     comp = [e for e, c in labels.items() if c]
     bad = [e for e, c in labels.items() if not c]
-    comp_ops = set(np.asarray(ops)[np.isin(ep, comp)].astype(str).tolist())
+    comp_ops = set(ops[np.isin(ep, comp)].tolist())
+    rejected = _rejected_episodes(s, out, f)
     return assess_fit(
         out["report"],
         compatible_operators=comp_ops,
         operator_decisions=operator_decisions(ep, ops, rejected.tolist(), bad),
         pairs_per_set=(int(np.isin(ep, comp).sum()), int(np.isin(ep, bad).sum())),
-    )
+    ) + one_operator(comp_ops, set(ops[np.isin(ep, bad)].tolist()))
+
+
+def _training_verdict(
+    ev: TrainingEvidence, labels: dict[int, bool], out: dict[str, Any], f: float
+) -> tuple[Verdict, dict[str, Any]]:
+    """Checks (a) and (c) against the base policy's training demos, and their report."""
+    rejected = ev.rejected(out["lambda"], out["eta"], f)
+    verdict = Verdict(unchecked=ev.notes) + training_rejections(rejected, ev.n_demos, ev.source)
+    if labels and ev.training is not None and ev.scored is not None:
+        sets = {
+            "compatible": [e for e, c in labels.items() if c],
+            "incompatible": [e for e, c in labels.items() if not c],
+        }
+        verdict += training_overlap(sets, ev.scored, ev.training)
+    check = {"demos": ev.n_demos, "rejected": rejected, "source": ev.source}
+    return verdict, check
 
 
 def fit_scores_file(
@@ -172,25 +212,31 @@ def fit_scores_file(
     """
     from elicit_jax.artifact import refuse_overwriting_inputs
     from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.training_data import gather
 
-    refuse_overwriting_inputs([out_path], [scores_path])
+    refuse_overwriting_inputs([out_path], [scores_path, *job.base])
     cols = [c for c in _needed(job) if c not in ("episode", "operator", "likelihood", "novelty")]
-    _, s = read_scores(
+    scores_header, s = read_scores(
         scores_path,
         columns=["episode", "operator", "likelihood", "novelty", *cols],
         optional=["source_episode"],
     )
-    labels = (
-        contrast_labels(s, job.compatible, job.incompatible)
-        if job.compatible is not None and job.incompatible is not None
-        else {}
-    )
+    try:
+        labels = (
+            contrast_labels(s, job.compatible, job.incompatible)
+            if job.compatible is not None and job.incompatible is not None
+            else {}
+        )
+    except ElicitError as e:  # a selection's error names the scores file it was made in
+        raise (e if e.path else ElicitError(str(e), scores_path)) from e
     f = job.fit.accept_fraction
+    evidence = gather(scores_path, scores_header, s, job.base)
     out = _fit_report(s, labels, job)
     report = out["report"]
-    if labels:
-        report["trust"] = _trust(s, labels, out, f)
-        report["trust"]["forced"] = bool(job.force and report["trust"]["meaningless"])
+    verdict, report["training_check"] = _training_verdict(evidence, labels, out, f)
+    verdict = _contrast_verdict(s, labels, out, f) + verdict
+    verdict = dataclasses.replace(verdict, forced=job.force and verdict.meaningless)
+    report["trust"] = verdict.to_dict()
     report["per_operator"] = operator_rejections(
         s["likelihood"], s["novelty"], s["episode"], s["operator"], out["lambda"], out["eta"], f
     )
@@ -198,15 +244,15 @@ def fit_scores_file(
         "compatible": job.compatible,
         "incompatible": job.incompatible,
         "force": job.force,
+        "base": list(job.base),
         **dataclasses.asdict(job.fit),
     }
-    trust = report.get("trust", {})
     header = {"lambda": out["lambda"], "eta": out["eta"], "method": out["method"]}
-    if trust.get("meaningless") and out["method"] == "fit" and not job.force:
+    if verdict.meaningless and out["method"] == "fit" and not job.force:
         if show:
             print_report({**header, "report": report})
         raise ElicitError(
-            "the threshold fit is meaningless (" + "; ".join(trust["severe"]) + "); nothing "
+            "the threshold fit is meaningless (" + "; ".join(verdict.severe) + "); nothing "
             "written — use other contrast sets, or pass --force to write it marked untrustworthy",
             scores_path,
         )
@@ -262,6 +308,14 @@ def print_report(header: dict[str, Any]) -> None:
             "leave-one-out accuracy",
             "n/a (one demo per set)" if loo is None else f"{loo:.3f} ({rep['n_loo']} held out)",
         )
+    if rep.get("in_sample_accuracy") is not None:
+        t.add_row("in-sample accuracy of those demos", f"{rep['in_sample_accuracy']:.3f}")
+    check = rep.get("training_check") or {}
+    if check.get("demos"):
+        t.add_row(
+            "base policy's training demos rejected",
+            f"{check['rejected']} / {check['demos']} ({check['source']})",
+        )
     if "n_compatible" in rep:
         t.add_row(
             "contrast demos (compatible / incompatible)",
@@ -304,13 +358,20 @@ def print_trust(report: dict[str, Any], console: Any) -> None:
                 ("rejected" if c["rejected"] else "accepted") + ("" if ok else " (wrong)"),
             )
         console.print(t)
-    trust = report.get("trust")
-    if not trust:
+    if not report.get("trust"):
         return
-    if trust["trustworthy"]:
-        console.print("[green]trust: no problems found[/] (margin, held-out check, pair counts)")
+    verdict = Verdict.from_dict(report["trust"])
+    unchecked = "\n".join(f"• not checked: {u}" for u in verdict.unchecked)
+    if verdict.trustworthy:
+        console.print(
+            "[green]trust: no problems found[/] (margin, held-out check, pair counts, operators, "
+            "the base policy's training demos)" + ("" if verdict.clean else ", but:")
+        )
+        if unchecked:
+            console.print(f"[yellow]{unchecked}[/]")
         return
-    verdict = "MEANINGLESS" if trust["meaningless"] else "NOT TRUSTWORTHY"
-    forced = " (written because of --force)" if trust.get("forced") else ""
-    body = "\n".join(f"• {p}" for p in trust["problems"])
-    console.print(Panel(body, title=f"[bold]this fit is {verdict}{forced}", border_style="red"))
+    forced = " (written because of --force)" if verdict.forced else ""
+    body = "\n".join([*(f"• {p}" for p in verdict.problems), unchecked]).strip()
+    console.print(
+        Panel(body, title=f"[bold]this fit is {verdict.headline()}{forced}", border_style="red")
+    )

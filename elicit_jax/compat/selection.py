@@ -86,5 +86,8 @@ def select_episodes(sel: Selection, columns: Mapping[str, np.ndarray]) -> np.nda
         all_hit = np.bincount(index, weights=~hit, minlength=len(ids_all)) == 0
         ids = ids_all[all_hit]
     if not len(ids):
-        raise ElicitError(f"selection '{sel.text}' matches no episode in the scores")
+        ops = sorted({str(o) for o in np.asarray(columns["operator"]).tolist()})
+        raise ElicitError(
+            f"selection '{sel.text}' matches no episode in the scores (operators: {', '.join(ops)})"
+        )
     return ids

@@ -345,8 +345,22 @@ def write_thresholds(
 
 
 def read_thresholds(path: str | Path) -> tuple[float, float, dict[str, Any]]:
-    """``(lambda, eta, header)`` of a thresholds artifact."""
-    data = read_json(path)
+    """``(lambda, eta, header)`` of a thresholds artifact (the JSON ``fit-thresholds`` writes).
+
+    Raises:
+      ElicitError: a missing file, a file that is not JSON (a Parquet scores file given by
+        mistake, ...), an artifact of another kind, or λ, η that are not finite and > 0.
+    """
+    try:
+        data = read_json(path)
+    except ElicitError as e:
+        if "Parquet" not in str(e):
+            raise
+        raise ElicitError(
+            "is a Parquet file, not a thresholds .json: give the thresholds.json that "
+            "fit-thresholds writes",
+            path,
+        ) from e
     if not isinstance(data, dict) or data.get("kind") != THRESHOLDS_KIND:
         kind = data.get("kind") if isinstance(data, dict) else type(data).__name__
         raise ElicitError(f"is a '{kind}' artifact, expected thresholds", path)

@@ -1,8 +1,9 @@
-"""When a threshold fit can be trusted, and when it is noise presented as a result.
+"""When thresholds can be trusted, and when they are noise presented as a result.
 
 A grid search over (λ, η) always finds *some* thresholds that separate a few contrast
 demonstrations in sample — even two sets of the same operator's demos. So a fit is judged by
-checks that do not reuse the demos it was fitted on:
+checks that do not reuse the demos it was fitted on, and by the one set of demonstrations the
+thresholds must accept: the base policy's own training data.
 
 Problems (the fit is written, marked ``trustworthy: false``, and the output says why):
   * **no margin** — the chosen thresholds sit on the edge of the best region (0 grid steps): a
@@ -12,22 +13,34 @@ Problems (the fit is written, marked ``trustworthy: false``, and the output says
     thresholds fit these demos, not a difference between the sets;
   * **no held-out check** — one demonstration per set, so leave-one-out is impossible;
   * **few pairs** — a set with fewer than :data:`MIN_PAIRS` state-action pairs;
-  * **weak separation** — in-sample balanced accuracy below :data:`WEAK_ACCURACY`.
+  * **weak separation** — in-sample balanced accuracy below :data:`WEAK_ACCURACY`;
+  * **one operator** — both contrast sets come from the same operator: the fit separates
+    demonstrations of one person, not styles;
+  * **contrast set inside the training data** — a contrast demonstration is one the base
+    policy was trained on (same observations and actions): the policy has fitted it, so it
+    looks more compatible than any new demonstration would.
 
 Severe problems (the fit is *meaningless*: ``fit-thresholds`` refuses to write it without
 ``--force``):
   * **held-out decisions at chance** — leave-one-out accuracy at most :data:`CHANCE_ACCURACY`;
   * **rejects the compatible operators' own demos** — more than half of the demonstrations of
-    the operators in the compatible set (outside the incompatible set; e.g. the base
-    operator's training demos) are rejected by the 5% rule under the fitted thresholds.
+    the operators in the compatible set (outside the incompatible set) are rejected by the 5%
+    rule under the fitted thresholds;
+  * **rejects the base policy's training demos** — more than :data:`TRAINING_SHARE` (10%) of
+    the demonstrations the base policy was trained on are rejected by the 5% rule.
+
+A check that could not be run (no record of the training data, its file gone) is listed under
+``unchecked``: the verdict is then not *clean*, and every command that loads the thresholds
+says so.
 
 Example:
-    >>> trust = assess_fit(report, compatible_operators={"base"}, decisions=per_episode)
-    >>> trust["trustworthy"], trust["problems"]
+    >>> verdict = assess_fit(report, compatible_operators={"base"}, ...)
+    >>> verdict.trustworthy, verdict.problems
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Collection, Mapping
 from typing import Any
 
@@ -38,10 +51,107 @@ LOO_GAP = 0.15
 CHANCE_ACCURACY = 0.6
 WEAK_ACCURACY = 0.75
 MOST = 0.5
+TRAINING_SHARE = 0.10
+_OLD = (
+    "the checks against the base policy's training data were not run (written by an older "
+    "elicit-jax): refit to run them"
+)
 
 
-def _held_out_in_sample(contrast: list[Mapping[str, Any]]) -> float | None:
-    """In-sample accuracy over the demonstrations leave-one-out holds out (sets of size > 1)."""
+@dataclasses.dataclass(frozen=True)
+class Verdict:
+    """Whether thresholds can be trusted: the problems found and the checks not run.
+
+    Attributes:
+      problems: every problem found (severe ones included).
+      severe: the problems that make a fit meaningless.
+      unchecked: checks that could not be run, each with the reason.
+      forced: a meaningless fit written anyway (``--force``).
+    """
+
+    problems: tuple[str, ...] = ()
+    severe: tuple[str, ...] = ()
+    unchecked: tuple[str, ...] = ()
+    forced: bool = False
+
+    @property
+    def trustworthy(self) -> bool:
+        """No problem found."""
+        return not self.problems
+
+    @property
+    def meaningless(self) -> bool:
+        """A severe problem found."""
+        return bool(self.severe)
+
+    @property
+    def clean(self) -> bool:
+        """No problem found and every check run."""
+        return not self.problems and not self.unchecked
+
+    def __add__(self, other: Verdict) -> Verdict:
+        return Verdict(
+            self.problems + other.problems,
+            self.severe + other.severe,
+            self.unchecked + other.unchecked,
+            self.forced or other.forced,
+        )
+
+    def headline(self) -> str:
+        """``MEANINGLESS``, ``NOT TRUSTWORTHY``, ``NOT FULLY CHECKED`` or ``no problems found``."""
+        if self.meaningless:
+            return "MEANINGLESS"
+        if self.problems:
+            return "NOT TRUSTWORTHY"
+        return "NOT FULLY CHECKED" if self.unchecked else "no problems found"
+
+    def summary(self) -> str:
+        """One line: the headline, the problems, then what was not checked."""
+        parts = list(self.problems) + [f"not checked: {u}" for u in self.unchecked]
+        forced = " (written with --force)" if self.forced else ""
+        return self.headline() + forced + (": " + "; ".join(parts) if parts else "")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form stored under ``report.trust`` of a thresholds artifact."""
+        return {
+            "trustworthy": self.trustworthy,
+            "meaningless": self.meaningless,
+            "problems": list(self.problems),
+            "severe": list(self.severe),
+            "unchecked": list(self.unchecked),
+            "forced": self.forced,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Verdict:
+        """Inverse of :meth:`to_dict`; a verdict written before ``unchecked`` existed says the
+        training-data checks were not run."""
+        unchecked = d.get("unchecked", [_OLD])
+        return cls(
+            tuple(map(str, d.get("problems", []))),
+            tuple(map(str, d.get("severe", []))),
+            tuple(map(str, unchecked)),
+            bool(d.get("forced", False)),
+        )
+
+
+def thresholds_verdict(header: Mapping[str, Any]) -> Verdict:
+    """The verdict recorded in a thresholds artifact's header (``report.trust``)."""
+    trust = (header.get("report") or {}).get("trust")
+    if not trust:
+        return Verdict(
+            unchecked=(
+                "no trust verdict recorded (hand-set without contrast sets, or written by an "
+                "older elicit-jax): record them again with fit-thresholds to check them",
+            )
+        )
+    return Verdict.from_dict(trust)
+
+
+def held_out_in_sample(contrast: list[Mapping[str, Any]]) -> float | None:
+    """In-sample accuracy over the demonstrations leave-one-out holds out (sets of size > 1):
+    the fraction decided right by the fitted thresholds, the number leave-one-out is compared
+    with (and the one the report shows next to it)."""
     labels = [bool(c["compatible"]) for c in contrast]
     held = [c for c in contrast if labels.count(bool(c["compatible"])) > 1]
     if not held:
@@ -55,41 +165,41 @@ def assess_fit(
     compatible_operators: Collection[str],
     operator_decisions: Mapping[str, tuple[int, int]],
     pairs_per_set: tuple[int, int],
-) -> dict[str, Any]:
+) -> Verdict:
     """Judge a threshold fit (or hand-set thresholds evaluated on contrast sets).
 
     Args:
       report: the fit report: ``balanced_accuracy``, ``contrast`` (per demo ``compatible``,
-        ``rejected``) and, for a fit, ``margin_steps`` and ``loo_accuracy``.
+        ``rejected``) and, for a fit, ``margin_steps``, ``loo_accuracy`` and
+        ``in_sample_accuracy`` (:func:`held_out_in_sample`).
       compatible_operators: operators whose demos make up the compatible set.
       operator_decisions: operator -> (demos rejected, demos) over the scored demos that are
         NOT in the incompatible set.
       pairs_per_set: state-action pairs in the (compatible, incompatible) sets.
 
     Returns:
-      ``{"trustworthy": bool, "meaningless": bool, "problems": [...], "severe": [...]}``;
-      ``problems`` lists every problem, ``severe`` the ones that make the fit meaningless.
+      The :class:`Verdict` of the contrast checks.
     """
     problems: list[str] = []
     severe: list[str] = []
-    contrast = list(report.get("contrast", []))
     if report.get("margin_steps") == 0:
         problems.append(
             "no margin: the thresholds sit on the edge of the best region (0 grid steps), so "
             "a slightly different demonstration would flip a decision"
         )
     loo = report.get("loo_accuracy")
-    in_sample = _held_out_in_sample(contrast)
+    in_sample = report.get("in_sample_accuracy")
     if "loo_accuracy" in report and loo is None:
         problems.append("one demonstration per set: no held-out (leave-one-out) check possible")
     if loo is not None and loo <= CHANCE_ACCURACY:
         severe.append(
-            f"leave-one-out accuracy {loo:.2f} is at chance: the sets are not separable under "
+            f"leave-one-out accuracy {loo:.3f} is at chance: the sets are not separable under "
             "this policy"
         )
     elif loo is not None and in_sample is not None and loo < in_sample - LOO_GAP:
         problems.append(
-            f"leave-one-out accuracy {loo:.2f} is well below the in-sample {in_sample:.2f}: the "
+            f"leave-one-out accuracy {loo:.3f} is well below the in-sample accuracy "
+            f"{in_sample:.3f} of the same {report.get('n_loo')} demonstrations: the "
             "thresholds fit these particular demonstrations"
         )
     for name, n in zip(("compatible", "incompatible"), pairs_per_set, strict=True):
@@ -97,7 +207,7 @@ def assess_fit(
             problems.append(f"only {n} state-action pairs in the {name} set (< {MIN_PAIRS})")
     ba = report.get("balanced_accuracy")
     if ba is not None and ba < WEAK_ACCURACY:
-        problems.append(f"weak separation: balanced accuracy {ba:.2f} on the contrast sets")
+        problems.append(f"weak separation: balanced accuracy {ba:.3f} on the contrast sets")
     for op in sorted(compatible_operators):
         rejected, total = operator_decisions.get(op, (0, 0))
         if total >= 2 and rejected > MOST * total:
@@ -105,13 +215,75 @@ def assess_fit(
                 f"the thresholds reject {rejected} of {total} demonstrations of operator "
                 f"'{op}', whose demonstrations form the compatible set"
             )
-    problems += severe
-    return {
-        "trustworthy": not problems,
-        "meaningless": bool(severe),
-        "problems": problems,
-        "severe": severe,
-    }
+    return Verdict(tuple(problems + severe), tuple(severe))
+
+
+def training_rejections(rejected: int, total: int, source: str) -> Verdict:
+    """Check (a): thresholds must accept the base policy's own training demonstrations.
+
+    Args:
+      rejected: training demos the 5% rule rejects under the thresholds.
+      total: training demos checked (0: the check could not be run).
+      source: where their scores came from (said in the message).
+    """
+    if total == 0:
+        return Verdict()
+    if rejected > TRAINING_SHARE * total:
+        msg = (
+            f"the thresholds reject {rejected} of the base policy's {total} own training "
+            f"demonstrations ({100 * rejected / total:.0f}% > {100 * TRAINING_SHARE:.0f}%; "
+            f"{source}): they would reject the very data the policy learned from"
+        )
+        return Verdict((msg,), (msg,))
+    return Verdict()
+
+
+def one_operator(compatible_ops: Collection[str], incompatible_ops: Collection[str]) -> Verdict:
+    """Check (b): contrast sets drawn from one operator separate demos, not styles."""
+    ops = set(compatible_ops) | set(incompatible_ops)
+    if len(ops) != 1:
+        return Verdict()
+    (op,) = ops
+    if op in ("", "unknown"):
+        return Verdict(
+            unchecked=(
+                "whether the contrast sets come from different operators (every demo is "
+                f"labelled '{op or 'unknown'}')",
+            )
+        )
+    return Verdict(
+        (
+            f"both contrast sets are demonstrations of operator '{op}': the fit separates "
+            "demonstrations of one person, not a compatible style from an incompatible one",
+        )
+    )
+
+
+def training_overlap(
+    sets: Mapping[str, Collection[int]],
+    digests: Mapping[int, str],
+    training: Collection[str],
+) -> Verdict:
+    """Check (c): no contrast demonstration may be one the base policy was trained on.
+
+    Args:
+      sets: set name (``compatible``/``incompatible``) -> episode ids in the scores.
+      digests: episode id -> content hash of the scored demonstrations.
+      training: content hashes of the base policy's training demonstrations.
+    """
+    problems = []
+    train = set(training)
+    for name, ids in sets.items():
+        inside = sorted(e for e in ids if digests.get(int(e)) in train)
+        if inside:
+            more = f" and {len(inside) - 5} more" if len(inside) > 5 else ""
+            problems.append(
+                f"{len(inside)} of the {len(ids)} demonstrations of the {name} set "
+                f"(episode {', '.join(map(str, inside[:5]))}{more}) are in the base policy's "
+                "training data: the policy has fitted them, so their scores say nothing "
+                "about new demonstrations"
+            )
+    return Verdict(tuple(problems))
 
 
 def operator_decisions(

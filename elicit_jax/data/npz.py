@@ -26,18 +26,44 @@ from elicit_jax.data.demos import (
 )
 from elicit_jax.errors import ElicitError
 
+ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip's end
 
-def _load(path: str | Path) -> dict[str, np.ndarray]:
+
+def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
+    """Every array of a ``.npz`` archive, with one-line errors naming the file.
+
+    A file that is not a zip archive is refused as such (``numpy.load`` would call it
+    "pickled data"); object arrays are refused, never unpickled.
+
+    Raises:
+      ElicitError: a folder, a missing file, not a .npz archive, an object array, a damaged
+        archive.
+    """
     path = Path(path)
     if path.is_dir():
         raise ElicitError("is a folder, not a .npz file", path)
     if not path.is_file():
         raise ElicitError("file not found", path)
+    with open(path, "rb") as f:
+        if f.read(4) not in ZIP_MAGIC:
+            raise ElicitError(
+                "not a .npz archive: a .npz is a zip file of .npy arrays, and this file is "
+                "not a zip file",
+                path,
+            )
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
+    except ValueError as e:
+        if "allow_pickle" in str(e):
+            raise ElicitError(
+                "holds an object (pickled) array, which is never loaded: save plain numeric "
+                "or string arrays",
+                path,
+            ) from e
         raise ElicitError(f"not a readable .npz archive ({e})", path) from e
+    except (OSError, zipfile.BadZipFile, EOFError, KeyError) as e:
+        raise ElicitError(f"damaged .npz archive ({type(e).__name__}: {e})", path) from e
 
 
 def _boundaries(arrays: dict[str, np.ndarray], n: int, path: Path) -> list[tuple[int, int, Any]]:
@@ -104,7 +130,7 @@ def import_npz(
     """Read a ``.npz`` of demonstrations (see the module docstring for its keys); with
     ``finite=False`` non-finite values are left for the caller to skip."""
     path = Path(path)
-    arrays = _load(path)
+    arrays = load_arrays(path)
     if "obs" not in arrays:
         raise ElicitError(f"has no 'obs' array (keys: {', '.join(sorted(arrays))})", path)
     act_key = "act" if "act" in arrays else "action" if "action" in arrays else None

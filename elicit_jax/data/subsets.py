@@ -91,7 +91,8 @@ def select(demos: Demos, spec: SubsetSpec, source: str = "<demos>") -> Demos:
         ops = np.array([r["operator"] for r in table])
         unknown = sorted(set(_names(spec.operators)) - set(ops.tolist()))
         if unknown:
-            raise ElicitError(f"has no operator '{unknown[0]}' (has {sorted(set(ops))})", source)
+            have = ", ".join(sorted({str(o) for o in ops.tolist()}))
+            raise ElicitError(f"has no operator '{unknown[0]}' (operators: {have})", source)
         keep &= np.isin(ops, _names(spec.operators))
     if spec.source_episodes is not None:
         if SOURCE_EPISODE not in demos.extra:

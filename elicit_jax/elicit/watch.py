@@ -235,11 +235,15 @@ class Watcher:
                 continue
             try:
                 judged += self.judge_item(item)
-            except ElicitError as e:
+            except (ElicitError, OSError, ValueError) as e:
                 if (e.__cause__ is not None and _busy(e.__cause__)) or _busy(e):
                     continue  # still open for writing: try again on the next scan
-                self.echo(f"error: {e}")
-                self._log({"item": item.name, "error": str(e), "time": time.time()})
+                # every line names the item; a reader's own error (not an ElicitError) too,
+                # and the watch goes on with the next item
+                text = str(e) if isinstance(e, ElicitError) else f"{type(e).__name__}: {e}"
+                text = text if str(item) in text else f"{item}: {text}"
+                self.echo(f"error: {text}")
+                self._log({"item": item.name, "error": text, "time": time.time()})
             self.handled.add((item.name, repr(sig)))
         return judged
 

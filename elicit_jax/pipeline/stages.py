@@ -291,6 +291,7 @@ def score_stage(ctx: StageContext) -> None:
             tmp / SCORES_FILE,
             config_from_dict(cfg["score"]),
             policy_path=ctx.inputs["policy"],
+            policy_info={"which": which, "seed": cfg["policy_seed"]},
             thresholds_source=(
                 "provisional: the [score] settings' λ and η; the pipeline fits (λ, η) after "
                 "scoring, and its filters and maps use the fitted values"

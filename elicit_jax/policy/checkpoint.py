@@ -17,7 +17,6 @@ last epoch's file.
 from __future__ import annotations
 
 import re
-import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -89,13 +88,15 @@ def load_params(path: Path) -> dict[str, Any]:
     Raises:
       ElicitError: a missing, corrupt or truncated file, or non-finite (NaN/inf) values.
     """
+    from elicit_jax.data.npz import load_arrays
+
     if not path.is_file():
         raise ElicitError("checkpoint parameters not found", path)
     try:
-        with np.load(path, allow_pickle=False) as data:
-            flat = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
-        raise ElicitError(f"unreadable parameter file ({type(e).__name__}: {e})", path) from e
+        flat = load_arrays(path)
+    except ElicitError as e:
+        text = str(e).removeprefix(f"{path}: ")
+        raise ElicitError(f"unreadable parameter file: {text}", path) from e
     for name, value in flat.items():
         if value.dtype.kind == "f" and not np.isfinite(value).all():
             bad = int((~np.isfinite(value)).sum())

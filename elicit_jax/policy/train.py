@@ -29,7 +29,13 @@ from elicit_jax.data.demos import Demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
-from elicit_jax.policy.dataset import TrainData, action_stats, demos_sha256, prepare
+from elicit_jax.policy.dataset import (
+    TrainData,
+    action_stats,
+    demos_sha256,
+    episode_digests,
+    prepare,
+)
 
 
 def chunk_epochs(config: TrainConfig) -> int:
@@ -162,14 +168,20 @@ def training_warnings(
     config: TrainConfig, action: np.ndarray, results: Mapping[int, tuple[Any, Any, int, float]]
 ) -> list[str]:
     """What the user should know about a finished run: an ensemble of one (ν ≡ 0), seeds whose
-    best epoch is the last (still improving), action dims that distort ℓ."""
+    best epoch is the last (still improving; said only when there is a validation set: without
+    one the best epoch is picked by training loss, which almost always falls to the end),
+    action dims that distort ℓ."""
     out = []
     if config.ensemble_size == 1 and config.model != "mdn":
         out.append(
             "one ensemble member: novelty is 0 for every state, so every state counts as "
             "familiar and compatibility rests on the likelihood error alone (the paper uses 5)"
         )
-    last = [s for s, (_, _, best, _) in sorted(results.items()) if best == config.epochs]
+    last = [
+        s
+        for s, (_, val, best, _) in sorted(results.items())
+        if best == config.epochs and (val is None or np.isfinite(np.asarray(val, float)).any())
+    ]
     if last and config.epochs > 1:
         out.append(
             f"seed(s) {', '.join(map(str, last))}: the best validation loss is at the last "
@@ -241,6 +253,7 @@ def train_policy(
     data_hash = demos_sha256(demos)
     check_destination(out_dir, config, data_hash, overwrite)
     data = prepare(demos, config.val_fraction, config.seq_len if config.model == "lstm" else 1)
+    digests = {str(e): d for e, d in episode_digests(demos).items()}
     template = _template(config, demos, data, params=None)
     groups = [config.seeds] if config.vmap_seeds else [(s,) for s in config.seeds]
     with atomic_path(out_dir) as tmp, TrainProgress(config, data.n_train, quiet) as progress:
@@ -280,6 +293,7 @@ def train_policy(
                 val,
                 best_epoch,
                 seconds,
+                digests,
             )
         notes = training_warnings(config, demos.action, results)
         write_json(
@@ -315,8 +329,11 @@ def _write_seed(
     val: np.ndarray,
     best_epoch: int,
     seconds: float,
+    digests: Mapping[str, str],
 ) -> None:
-    """Write one seed's normalisation stats, loss curve and header."""
+    """Write one seed's normalisation stats, loss curve and header (``episode_sha256``: the
+    content hash of every training demonstration, by episode id, so thresholds can be checked
+    against the training data later, whatever file it is found in)."""
     act_mean, act_std = action_stats(data)
     with open(seed_dir / "normalization.npz", "wb") as f:
         np.savez(
@@ -331,6 +348,7 @@ def _write_seed(
         "obs_dim": template.obs_dim,
         "action_dim": template.action_dim,
         "data_sha256": data_hash,
+        "episode_sha256": dict(digests),
         "epochs_saved": sorted(
             e
             for e in range(1, config.epochs + 1)
