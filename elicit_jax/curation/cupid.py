@@ -54,6 +54,8 @@ class CupidConfig:
       policy_seed: training seed of a multi-seed run (None: its first).
       action_noise: pipeline only: exploration noise of the rollouts it records.
       rollouts: pipeline only: rollouts it records.
+      rollout_seed: pipeline only: the evaluation seed of their initial states (far from the
+        evaluation's own, 0 and 1, and Demo-SCORE's, 50 and up).
     """
 
     proj_dim: int = 512
@@ -65,6 +67,7 @@ class CupidConfig:
     policy_seed: int | None = None
     action_noise: float = 0.1
     rollouts: int = 50
+    rollout_seed: int = 40
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "checkpoint", str(self.checkpoint))
