@@ -134,3 +134,37 @@ def quality_cmd(
     for i in [int(i) for i in q.flagged.nonzero()[0][:20]]:
         console.print(f"episode {q.episode[i]} ({q.operator[i]}): {q.reason[i]}")
     console.print(f"wrote {out}")
+
+
+@app.command("review", rich_help_panel=COMPAT)
+def review_cmd(
+    demos: Path = typer.Argument(..., help="A demos artifact to review."),
+    scores: Path | None = typer.Option(None, "--scores", help="Compatibility scores of DEMOS."),
+    quality: Path | None = typer.Option(None, "--quality", help="elicit-jax quality of DEMOS."),
+    out: Path | None = typer.Option(
+        None, "-o", "--out", help="Review folder (flags, exports); default DEMOS.review/."
+    ),
+    port: int = typer.Option(0, "--port", help="Port on 127.0.0.1 (0: any free one)."),
+) -> None:
+    """Review episodes in the browser: sort by M, quality flags or operator, replay one with
+    its M strip, flag/unflag episodes with a reason, and write the kept ones as a demos
+    artifact (OUT/kept.parquet) and a robomimic mask or LeRobot episode list.
+
+    The page is served on 127.0.0.1 with an access token (in the printed URL). The flags are
+    kept in OUT/review.json, so a review can be resumed.
+
+    Example: elicit-jax review demos.parquet --scores scores.parquet --quality quality.parquet
+    """
+    from elicit_jax.artifact import refuse_overwriting_inputs
+    from elicit_jax.curation.review import Review, ReviewConfig
+    from elicit_jax.web.review import serve_review
+
+    folder = out or demos.with_name(demos.name.removesuffix(".parquet") + ".review")
+    refuse_overwriting_inputs([folder], [demos, scores, quality])
+    config = ReviewConfig(
+        demos=str(demos),
+        out=str(folder),
+        scores=None if scores is None else str(scores),
+        quality=None if quality is None else str(quality),
+    )
+    serve_review(Review(config), port, echo=typer.echo)
