@@ -43,7 +43,30 @@ def imported(tmp_path_factory):
     src = write_robomimic(d / "teleop.hdf5", demos)
     _ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
     _ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
+    _m_scores(d / "scores.parquet")
     return d
+
+
+def _m_scores(path):
+    """Compatibility scores by hand: episode e's 12 steps have M = 1 - e / 10, except that
+    episode 4's last 6 steps are incompatible (M = 0), so its mean M (0.3) is the lowest."""
+    import pyarrow as pa
+
+    from elicit_jax.artifact import make_header, write_parquet
+
+    ep = np.repeat(np.arange(6), 12)
+    m = 1 - ep / 10
+    m[4 * 12 + 6 : 5 * 12] = 0.0
+    table = pa.table(
+        {
+            "episode": pa.array(ep.astype(np.int64)),
+            "operator": pa.array(["unknown"] * len(ep)),
+            "step": pa.array(np.tile(np.arange(12), 6).astype(np.int32)),
+            "compatibility": pa.array(m.astype(np.float32)),
+            "incompatible": pa.array(m == 0),
+        }
+    )
+    write_parquet(path, table, make_header("scores", 1))
 
 
 class ReviewServer:
@@ -100,7 +123,10 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
     imported,
 ):
     d = imported
-    server = ReviewServer(d / "demos.parquet", "--quality", d / "quality.parquet", "-o", d / "rv")
+    server = ReviewServer(
+        d / "demos.parquet", "--scores", d / "scores.parquet", "--quality", d / "quality.parquet",
+        "-o", d / "rv",
+    )  # fmt: skip
     try:
         url = server.url()
         base = url.split("?")[0]
@@ -109,11 +135,17 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         assert _status(url, host=f"evil.example:{port}") == 403  # DNS rebinding
         assert _status(url) == 200
         page = browser.new_page()
+        page.set_default_timeout(60_000)
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(url)
         page.wait_for_selector("body[data-ready='true']", timeout=60_000)
         assert page.locator("#episodes tbody tr").count() == 6
+        # sort by mean M, lowest first: episode 4 (half its steps incompatible)
+        page.click("th[data-key='m_mean']")
+        first = page.locator("#episodes tbody tr").first
+        assert first.get_attribute("data-episode") == "4"
+        assert "0.30" in first.inner_text() and "\t6\t" in first.inner_text()
         # sort by the quality flag, worst first: the jumpy episode 3 leads
         page.click("th[data-key='quality_flagged']")
         page.click("th[data-key='quality_flagged']")
@@ -131,7 +163,8 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         page.wait_for_selector("body[data-episode='0']")
         page.fill("#flag-reason", "")
         page.click("#flag-btn")
-        page.wait_for_function("document.getElementById('flag-error').textContent.length > 0")
+        page.wait_for_selector("#flag-error:not(:empty)")
+        assert "reason" in page.locator("#flag-error").inner_text()
         page.fill("#flag-reason", "by mistake")
         page.click("#flag-btn")
         page.wait_for_selector("tr[data-episode='0'][data-flagged='true']")

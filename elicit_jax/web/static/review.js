@@ -51,7 +51,9 @@ function renderTable() {
     cells.forEach((text, i) => {
       const td = document.createElement('td');
       td.textContent = String(text);
-      if (i === 5 && r.quality_flagged) { td.className = 'q-bad'; td.title = r.quality_reason; }
+      if (i === 3 || i === 4) td.className = 'm-col';
+      if (i === 5) td.className = r.quality_flagged ? 'q-col q-bad' : 'q-col';
+      if (i === 5 && r.quality_flagged) td.title = r.quality_reason;
       if (i === 6) td.className = 'flag';
       tr.appendChild(td);
     });
