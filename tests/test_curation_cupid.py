@@ -112,6 +112,11 @@ def test_cli_evaluate_trajectories_then_filter_cupid(trained, tmp_path):
     assert r.exit_code != 0 and "--trajectories" in str(r.exception)
     r = run("filter", "--method", "cupid", "--demos", tmp_path / "new.parquet",
             "--policy", d / "run", "--trajectories", tmp_path / "a.parquet",
+            "-o", tmp_path / "kept.parquet")  # fmt: skip
+    assert r.exit_code != 0 and "it has seed 0 checkpoint final" in str(r.exception)
+    assert not (tmp_path / "kept.parquet").exists()
+    r = run("filter", "--method", "cupid", "--demos", tmp_path / "new.parquet",
+            "--policy", d / "run", "--trajectories", tmp_path / "a.parquet",
             "--checkpoint", "final", "-o", tmp_path / "kept.parquet")  # fmt: skip
     assert r.exit_code == 0, (r.output, r.exception)
     scores = read_episode_scores(tmp_path / "kept.episode-scores.parquet")

@@ -115,3 +115,29 @@ def test_quality_cli_on_imported_robomimic(tmp_path):
     r = CliRunner().invoke(app, ["quality", str(tmp_path / "all.parquet"), "-o",
                                  str(tmp_path / "all.parquet")])  # fmt: skip
     assert r.exit_code != 0 and "refusing" in str(r.exception)
+
+
+def test_quality_cli_on_imported_lerobot(tmp_path):
+    """LeRobot data in degree-like units: a 60° glitch in one episode is its only spike."""
+    from fixtures_data import lerobot_episode, write_lerobot_v30
+
+    rng = np.random.default_rng(0)
+    eps = []
+    for i in range(6):
+        ep = lerobot_episode(rng, i, 20)
+        ep["action"] = np.cumsum(rng.normal(0, 2.0, (20, 6)), axis=0)  # smooth-ish, degrees
+        if i == 2:
+            ep["action"][9, 1] += 60.0
+        eps.append(ep)
+    root = write_lerobot_v30(tmp_path / "ds", eps, ["wipe"])
+    r = CliRunner().invoke(app, ["import", str(root), "-o", str(tmp_path / "d.parquet")])
+    assert r.exit_code == 0, (r.output, r.exception)
+    r = CliRunner().invoke(
+        app,
+        ["quality", str(tmp_path / "d.parquet"), "-o", str(tmp_path / "q.parquet"),
+         "--no-gripper", "--spike-jump", "30", "--idle-eps", "0.5"],
+    )  # fmt: skip
+    assert r.exit_code == 0, (r.output, r.exception)
+    table = read_quality(tmp_path / "q.parquet")
+    assert table["spikes"].tolist() == [0, 0, 2, 0, 0, 0]
+    assert table.loc[2, "spikes_flag"] and "spikes 2" in table.loc[2, "reason"]

@@ -104,12 +104,19 @@ def quality_cmd(
     z_threshold: float = typer.Option(3.5, "--z", help="Robust z-score that flags an outlier."),
     gripper_dim: int = typer.Option(-1, "--gripper-dim", help="Gripper action dim (-1: last)."),
     no_gripper: bool = typer.Option(False, "--no-gripper", help="The actions have no gripper."),
+    spike_jump: float = typer.Option(
+        0.5, "--spike-jump", help="Step-to-step jump that is a spike (action units)."
+    ),
+    idle_eps: float = typer.Option(
+        0.02, "--idle-eps", help="Max-norm below which a motion action is idle (action units)."
+    ),
 ) -> None:
     """Per-episode quality metrics with outlier flags: duration, jerk, idle fraction, action
     spikes, gripper chatter, action variance and state distance (docs/curation.md).
 
     Each metric gets a robust (MAD-based) z-score over the file's episodes; an episode at or
     above --z is flagged, with a one-line reason. `filter --method quality` drops flagged ones.
+    --spike-jump and --idle-eps are in the actions' own units (defaults for actions in [-1, 1]).
 
     Example: elicit-jax quality demos.parquet -o quality.parquet
     """
@@ -121,7 +128,12 @@ def quality_cmd(
     from elicit_jax.curation.quality import METRICS, QualityConfig, quality_file
 
     refuse_overwriting_inputs([out], [demos])
-    config = QualityConfig(z_threshold=z_threshold, gripper_dim=None if no_gripper else gripper_dim)
+    config = QualityConfig(
+        z_threshold=z_threshold,
+        gripper_dim=None if no_gripper else gripper_dim,
+        spike_jump=spike_jump,
+        idle_eps=idle_eps,
+    )
     q = quality_file(demos, out, config)
     console = Console()
     table = Table(title=f"{demos}: {len(q.episode)} episodes, {int(q.flagged.sum())} flagged")

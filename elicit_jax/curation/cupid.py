@@ -118,7 +118,6 @@ def _member_fns(policy: Any) -> tuple[Any, Any, int]:
 
     module = policy.module
     one = jax.tree.map(lambda leaf: leaf[0], policy.params)
-    _, unravel = ravel_pytree(one)
     dim = int(ravel_pytree(one)[0].size)
 
     def member_loss(p: Any, x: Any, a: Any) -> Any:
@@ -137,7 +136,6 @@ def _member_fns(policy: Any) -> tuple[Any, Any, int]:
         g = jax.grad(weighted_mean_loss)(params, x, a, w)
         return jax.vmap(lambda gk: ravel_pytree(gk)[0])(g)
 
-    del unravel
     return jax.jit(train_grads), jax.jit(test_grad), dim
 
 

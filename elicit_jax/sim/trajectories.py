@@ -135,6 +135,7 @@ def read_trajectories(
         )
     df = pq.read_table(path).to_pandas()
     labels = sorted(set(df["policy"]))
+    have = sorted({(int(s), str(c)) for s, c in zip(df["seed"], df["checkpoint"], strict=True)})
     if policy is not None:
         df = df[df["policy"] == policy]
     elif len(labels) > 1:
@@ -145,7 +146,8 @@ def read_trajectories(
         df = df[df["checkpoint"].astype(str) == str(checkpoint)]
     if df.empty:
         which = f"policy={policy}, seed={seed}, checkpoint={checkpoint}"
-        raise ElicitError(f"no rollout steps of {which}", path)
+        listed = ", ".join(f"seed {s} checkpoint {c}" for s, c in have)
+        raise ElicitError(f"no rollout steps of {which} (it has {listed})", path)
     key = list(zip(df["seed"], df["checkpoint"], df["rollout"], strict=True))
     uniq = {k: i for i, k in enumerate(dict.fromkeys(key))}
     rollout = np.asarray([uniq[k] for k in key], np.int64)
