@@ -244,7 +244,7 @@ def curate_file(
     progress: Callable[[int, float], None] | None = None,
     trajectories_path: str | Path | None = None,
 ) -> tuple[CurateResult, EpisodeScores]:
-    """Score D_new with DemInf or Demo-SCORE, cut, and write the kept demonstrations, the drop
+    """Score D_new with a curation method, cut, and write the kept demonstrations, the drop
     log and the per-demonstration scores (``<out>.episode-scores.parquet``).
 
     Args:
