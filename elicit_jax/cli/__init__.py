@@ -2,6 +2,7 @@
 
 from elicit_jax.cli import (
     compat_cmds,  # noqa: F401
+    curation_cmds,  # noqa: F401
     data_cmds,  # noqa: F401
     demos_cmds,  # noqa: F401
     elicit_cmds,  # noqa: F401

@@ -221,7 +221,8 @@ def filter_cmd(
     method: str = typer.Option(
         "m",
         "--method",
-        help="m | random | shortest | longest | likelihood | novelty | deminf | demo-score.",
+        help="m | random | shortest | longest | likelihood | novelty | deminf | demo-score | "
+        "cupid | quality.",
     ),
     pair_mode: str = typer.Option(
         "renumber", "--pair-mode", help="After dropping pairs: renumber steps or split episodes."
@@ -256,6 +257,13 @@ def filter_cmd(
     policy_seed: int | None = typer.Option(
         None, "--policy-seed", help="demo-score: training seed of --policy (default: its first)."
     ),
+    trajectories: Path | None = typer.Option(
+        None, "--trajectories", help="cupid: evaluate --trajectories of --policy (noisy)."
+    ),
+    checkpoint: str = typer.Option(
+        "best", "--checkpoint", help="cupid: the checkpoint of --policy that was rolled out."
+    ),
+    proj_dim: int = typer.Option(512, "--proj-dim", help="cupid: gradient projection dim."),
 ) -> None:
     """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.
 
@@ -266,7 +274,9 @@ def filter_cmd(
     own cut (--rate own: deminf the lowest --drop-fraction, demo-score below its classifier's
     threshold), or as many pairs (--level pair) / demos (--level episode) as the M-filter
     would (--rate m, needs --scores and thresholds). Per-demo scores go to
-    OUT.episode-scores.parquet.
+    OUT.episode-scores.parquet. cupid (influence on expected return from --policy's noisy
+    rollouts --trajectories) drops demos of negative influence; quality drops the demos its
+    outlier flags mark (elicit-jax quality).
 
     With --export robomimic (or lerobot) the kept episodes are also written as a new mask key
     in a copy of the original robomimic file (or a LeRobot dataset / episode list).
@@ -282,15 +292,21 @@ def filter_cmd(
 
     Example: elicit-jax filter --method demo-score --policy runs/naive --demos new.parquet
     -o kept.parquet --rate m --scores scores.parquet --thresholds thresholds.json
+
+    Example: elicit-jax filter --method cupid --policy runs/naive --trajectories steps.parquet
+    --demos new.parquet --base base.parquet -o kept.parquet
     """
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
 
     resolved = _resolve(thresholds, lambda_, eta)
-    if method in ("deminf", "demo-score"):
+    if method in ("deminf", "demo-score", "cupid", "quality"):
+        from elicit_jax.cli.curation_cmds import CurateArgs, curate
+
         if export is not None:
             raise ElicitError("--export works with the M-filter and its baselines only")
-        _curate(method, demos, out, base, level, scores, resolved, rate, drop_fraction,
-                policy, task, rollouts, policy_seed)  # fmt: skip
+        curate(CurateArgs(method, demos, out, base, level, scores, resolved, rate, drop_fraction,
+                          policy, task, rollouts, policy_seed, trajectories, checkpoint,
+                          proj_dim))  # fmt: skip
         return
     if scores is None:
         raise ElicitError(f"--method {method} filters by compatibility scores: give --scores")
@@ -319,67 +335,6 @@ def filter_cmd(
     )
     if r.export is not None:
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
-
-
-def _curate(
-    method: str,
-    demos: Path,
-    out: Path,
-    base: Path | None,
-    level: str,
-    scores: Path | None,
-    thresholds: tuple[float, float] | None,
-    rate: str,
-    drop_fraction: float,
-    policy: Path | None,
-    task: str | None,
-    rollouts: int,
-    policy_seed: int | None,
-) -> None:
-    """``filter --method deminf|demo-score``: build the config, make ONE library call, print."""
-    from elicit_jax.artifact import read_header
-    from elicit_jax.curation.deminf import DemInfConfig
-    from elicit_jax.curation.demo_score import DemoScoreConfig, at_chance
-    from elicit_jax.curation.select import CurateConfig, curate_file, scores_path_for
-
-    if level not in ("pair", "episode"):
-        raise ElicitError(f"unknown level '{level}' (choose pair or episode)")
-    deminf = DemInfConfig(drop_fraction=drop_fraction)
-    demo_score = DemoScoreConfig(
-        task=task or str(read_header(demos).get("task", "")),
-        rollouts=rollouts,
-        policy_seed=policy_seed,
-    )
-    lam, eta = thresholds if thresholds else (None, None)
-    result, per_demo = curate_file(
-        CurateConfig(method=method, deminf=deminf, demo_score=demo_score),
-        demos,
-        out,
-        rate=rate,  # type: ignore[arg-type]
-        level=level,  # type: ignore[arg-type]
-        scores_path=scores,
-        lambda_=lam,
-        eta=eta,
-        base_path=base,
-        policy_path=policy,
-        progress=lambda epoch, rate_: typer.echo(
-            f"demo-score: checkpoint {epoch}: {100 * rate_:.0f}% of rollouts succeeded"
-        ),
-    )
-    if not per_demo.trusted:
-        typer.echo(f"warning: {method} had no signal: {per_demo.report.get('why')}", err=True)
-    elif method == "demo-score" and at_chance(per_demo.report):
-        acc = per_demo.report["validation_balanced_accuracy"]
-        typer.echo(
-            f"warning: demo-score's classifier is no better than chance on held-out rollouts "
-            f"(balanced accuracy {acc:.2f}): its ranking of the demos carries no signal",
-            err=True,
-        )
-    typer.echo(
-        f"{out}: dropped {result.pairs_dropped}/{result.pairs_in} pairs of D_new "
-        f"({result.episodes_in} -> {result.episodes_out} episodes; {result.reason}); "
-        f"log: {result.log_path}; per-demo scores: {scores_path_for(out)}"
-    )
 
 
 @app.command("map", rich_help_panel=COMPAT)

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
+from elicit_jax.errors import ElicitError
 
 
 @app.command(rich_help_panel=INSPECT)
@@ -89,11 +90,24 @@ def evaluate(
     horizon: int = typer.Option(0, "--horizon", help="Control steps (0: the task's)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
     out: Path | None = typer.Option(None, "-o", "--out", help="Per-rollout Parquet to write."),
+    trajectories: Path | None = typer.Option(
+        None, "--trajectories", help="Also record every step (state, action) to this Parquet."
+    ),
+    action_noise: float = typer.Option(
+        0.0, "--action-noise", help="With --trajectories: std of Gaussian exploration noise."
+    ),
 ) -> None:
     """Evaluate policies with rollouts from the same seeded initial states.
 
+    With --trajectories every state each policy acted in, the action it took and its
+    rollout's outcome are recorded (C MuJoCo); --action-noise adds seeded Gaussian
+    exploration noise to the actions (CUPID's rollouts need it: docs/curation.md).
+
     Example: elicit-jax evaluate --policy runs/base --task square-nut --rollouts 50
     --checkpoint all --select best -o evals.parquet
+
+    Example: elicit-jax evaluate --policy runs/naive --task square-nut --rollouts 50
+    --backend mujoco --trajectories steps.parquet --action-noise 0.1
     """
     import time
 
@@ -117,6 +131,13 @@ def evaluate(
         select=select,
         threads=threads,
     )
+    traj = None
+    if trajectories is not None:
+        from elicit_jax.sim.trajectories import TrajectoryConfig
+
+        traj = TrajectoryConfig(out=str(trajectories), action_noise=action_noise)
+    elif action_noise:
+        raise ElicitError("--action-noise only applies with --trajectories")
     console = Console()
     chosen = resolve_backend(backend)
     reason = " (auto: JAX runs on CPU)" if backend == "auto" and chosen == "mujoco" else ""
@@ -126,7 +147,7 @@ def evaluate(
     with Progress(transient=True) as bar:
         tid = bar.add_task(f"{task}: {n} policies x {rollouts} rollouts", total=n)
         _, summary = evaluate_policies(
-            policy, config, out, progress=lambda _ref, _rate: bar.advance(tid)
+            policy, config, out, progress=lambda _ref, _rate: bar.advance(tid), trajectories=traj
         )
     print_summary(console, summary)
     console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")

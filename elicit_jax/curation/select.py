@@ -1,5 +1,6 @@
-"""Curate D_new with DemInf or Demo-SCORE: score its demonstrations, drop the lowest, write the
-kept ones (``elicit-jax filter --method deminf|demo-score``).
+"""Curate D_new with DemInf, Demo-SCORE, CUPID or the quality flags: score its demonstrations,
+drop the lowest, write the kept ones (``elicit-jax filter --method deminf|demo-score|cupid|
+quality``).
 
 :func:`curation_scores` computes one score per demonstration with the chosen method;
 :func:`curate_demos` cuts them by the method's own rule or by the M-filter's budget
@@ -22,6 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from elicit_jax.curation.cupid import CupidConfig
 from elicit_jax.curation.deminf import DemInfConfig, deminf_scores
 from elicit_jax.curation.demo_score import DemoScoreConfig, demo_score_scores
 from elicit_jax.curation.episodes import (
@@ -31,9 +33,10 @@ from elicit_jax.curation.episodes import (
     select_drop,
     write_episode_scores,
 )
+from elicit_jax.curation.quality import QualityConfig
 from elicit_jax.errors import ElicitError
 
-METHODS = ("deminf", "demo-score")
+METHODS = ("deminf", "demo-score", "cupid", "quality")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,14 +44,18 @@ class CurateConfig:
     """Which curation method and its settings.
 
     Attributes:
-      method: ``deminf`` or ``demo-score``.
+      method: ``deminf``, ``demo-score``, ``cupid`` or ``quality``.
       deminf: DemInf estimator settings.
       demo_score: Demo-SCORE rollout and classifier settings.
+      cupid: CUPID influence estimator settings.
+      quality: per-episode quality metrics and their outlier rule.
     """
 
     method: str = "deminf"
     deminf: DemInfConfig = dataclasses.field(default_factory=DemInfConfig)
     demo_score: DemoScoreConfig = dataclasses.field(default_factory=DemoScoreConfig)
+    cupid: CupidConfig = dataclasses.field(default_factory=CupidConfig)
+    quality: QualityConfig = dataclasses.field(default_factory=QualityConfig)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -57,9 +64,8 @@ class CurateConfig:
 
 def method_config(config: CurateConfig) -> dict[str, Any]:
     """The settings of the chosen method only, for artifact headers."""
-    if config.method == "deminf":
-        return {"deminf": dataclasses.asdict(config.deminf)}
-    return {"demo_score": dataclasses.asdict(config.demo_score)}
+    key = config.method.replace("-", "_")
+    return {key: dataclasses.asdict(getattr(config, key))}
 
 
 def curation_scores(
@@ -68,22 +74,38 @@ def curation_scores(
     base_path: str | Path | None = None,
     policy_path: str | Path | None = None,
     progress: Callable[[int, float], None] | None = None,
+    trajectories_path: str | Path | None = None,
 ) -> EpisodeScores:
     """One score per demonstration of ``demos_path`` (higher = keep).
 
     Args:
       config: method and settings.
       demos_path: D_new.
-      base_path: D_base; DemInf estimates over D_base ∪ D_new.
-      policy_path: Demo-SCORE: the training run to roll out (trained on the data to curate).
+      base_path: D_base; DemInf estimates over D_base ∪ D_new, CUPID's training set is it.
+      policy_path: Demo-SCORE: the training run to roll out (trained on the data to curate);
+        CUPID: the training run whose rollouts ``trajectories_path`` holds.
       progress: Demo-SCORE: called with ``(epoch, success rate)`` per rolled-out checkpoint.
+      trajectories_path: CUPID: ``evaluate --trajectories`` of that policy.
     """
     from elicit_jax.data.demos import read_demos
 
     new = read_demos(demos_path)
+    base = None if base_path is None else read_demos(base_path)
     if config.method == "deminf":
-        base = None if base_path is None else read_demos(base_path)
         return deminf_scores(new, base, config.deminf)
+    if config.method == "quality":
+        from elicit_jax.curation.quality import quality_episode_scores
+
+        return quality_episode_scores(new, config.quality)
+    if config.method == "cupid":
+        from elicit_jax.curation.cupid import cupid_file_scores
+
+        if policy_path is None or trajectories_path is None:
+            raise ElicitError(
+                "cupid needs the policy (--policy) and its recorded rollouts (--trajectories, "
+                "from elicit-jax evaluate --trajectories --action-noise)"
+            )
+        return cupid_file_scores(policy_path, trajectories_path, new, base, config.cupid)
     if policy_path is None:
         raise ElicitError("demo-score rolls out a policy: give --policy (a training run)")
     return demo_score_scores(policy_path, new, config.demo_score, progress)
@@ -220,8 +242,9 @@ def curate_file(
     base_path: str | Path | None = None,
     policy_path: str | Path | None = None,
     progress: Callable[[int, float], None] | None = None,
+    trajectories_path: str | Path | None = None,
 ) -> tuple[CurateResult, EpisodeScores]:
-    """Score D_new with DemInf or Demo-SCORE, cut, and write the kept demonstrations, the drop
+    """Score D_new with a curation method, cut, and write the kept demonstrations, the drop
     log and the per-demonstration scores (``<out>.episode-scores.parquet``).
 
     Args:
@@ -238,6 +261,7 @@ def curate_file(
       base_path: D_base: in DemInf's estimate, kept whole and placed first in the output.
       policy_path: Demo-SCORE: the training run to roll out.
       progress: Demo-SCORE: ``(epoch, success rate)`` after each checkpoint's rollouts.
+      trajectories_path: CUPID: the recorded rollouts of ``policy_path``.
     """
     if rate not in ("own", "m"):
         raise ElicitError(f"unknown rate '{rate}' (own or m)")
@@ -246,11 +270,15 @@ def curate_file(
     rule: OwnRule | MatchedRule = OwnRule(config.deminf.drop_fraction)
     if rate == "m":
         rule = matched_rule(scores_path, level, lambda_, eta)  # type: ignore[arg-type]
-    scores = curation_scores(config, demos_path, base_path, policy_path, progress)
+    scores = curation_scores(
+        config, demos_path, base_path, policy_path, progress, trajectories_path
+    )
     record = {"method": config.method, "rate": rate, "level": level, **method_config(config)}
     inputs: dict[str, str | Path] = {} if scores_path is None else {"scores": scores_path}
-    if policy_path is not None and config.method == "demo-score":
+    if policy_path is not None and config.method in ("demo-score", "cupid"):
         inputs["policy"] = Path(policy_path) / "artifact.json"
+    if trajectories_path is not None and config.method == "cupid":
+        inputs["trajectories"] = trajectories_path
     result = curate_demos(
         scores, demos_path, out_path, rule, base_path, config=record, inputs=inputs
     )

@@ -257,7 +257,7 @@ def gather(run_dir: str | Path) -> ReportData:
             thresholds.append(_valley_row(stage, path))
         elif kind in ("filter", "curate"):
             filters.append(_filter_row(stage, path))
-        elif kind in ("deminf", "demo-score"):
+        elif kind in ("deminf", "demo-score", "cupid", "quality"):
             curation.append(_curation_row(stage, path))
         elif kind == "lambda-point":
             points.append(_lambda_point(stage, path))

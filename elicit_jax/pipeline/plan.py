@@ -23,6 +23,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.curation_stages import cupid_plan, per_demo_source, quality_plan
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
 
@@ -104,6 +105,7 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     for task in spec.tasks:
         stages += _collect_stages(spec, task, resolve, needs_scores)
         stages += _deminf_stages(spec, task, resolve)
+        stages += quality_plan(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, needs_scores, resolve)
     report_kinds = (
@@ -115,6 +117,8 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
         "curate",
         "deminf",
         "demo-score",
+        "cupid",
+        "quality",
         "lambda-point",
         "lambda-valley",
     )
@@ -332,12 +336,17 @@ def _cell_stages(
         if any(m.startswith("demo-score") for m in spec.methods):
             demo_score = _demo_score_stage(c, op, naive[op])
             stages.append(demo_score)
+        cupid = None
+        if any(m.startswith("cupid") for m in spec.methods):
+            cupid = cupid_plan(spec, task, model, op, naive[op], resolve)
+            stages.append(cupid)
         for method in (m for m in FILTER_METHODS if m in spec.methods):
             if method == "filtered-valley":
                 continue  # needs every operator's scores: below
             if method in CURATION_METHODS:
-                per_demo = f"deminf/{c.t}/{op}" if method.startswith("deminf") else demo_score
-                filt = c.curate(method, op, getattr(per_demo, "id", per_demo), score, fit)
+                sources = {"demo-score": demo_score, "cupid": cupid}
+                per_demo = per_demo_source(method, c.t, op, sources)
+                filt = c.curate(method, op, per_demo, score, fit)
             else:
                 filt = c.filter(method, op, score, fit.id)
             trained = c.train(method, op, {"demos1": filt.id})

@@ -6,7 +6,7 @@ compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.
     [pipeline]                      # name, description, profile, seeds, models, methods
     [[task]]                        # one table per task: operators and demo counts
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # stage overrides
-    [deminf] [demo_score]           # settings of the two curation baselines
+    [deminf] [demo_score] [cupid] [quality]   # settings of the curation baselines
     [sensitivity]                   # optional: outcome vs λ across the fitted margin
     [profiles.cpu.train]            # overrides applied only under that profile
     [profiles.cpu.pipeline]         # seeds, models, methods under that profile
@@ -39,6 +39,8 @@ SECTIONS = (
     "report",
     "deminf",
     "demo_score",
+    "cupid",
+    "quality",
 )
 METHODS = (
     "base",
@@ -55,8 +57,21 @@ METHODS = (
     "deminf-matched",
     "demo-score",
     "demo-score-matched",
+    "cupid",
+    "cupid-matched",
+    "quality",
+    "quality-matched",
 )
-CURATION_METHODS = ("deminf", "deminf-matched", "demo-score", "demo-score-matched")
+CURATION_METHODS = (
+    "deminf",
+    "deminf-matched",
+    "demo-score",
+    "demo-score-matched",
+    "cupid",
+    "cupid-matched",
+    "quality",
+    "quality-matched",
+)
 _PROFILE_PIPELINE_KEYS = {"seeds", "models", "methods", "collect_seed"}
 _SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators", "tasks"}
 _TOP_KEYS = {"pipeline", "task", "profiles", "sensitivity", *SECTIONS}
@@ -265,11 +280,12 @@ def parse_spec(
             raise ElicitError(f"unknown method '{m}' (choose from {', '.join(METHODS)})", source)
     if "base" not in methods:
         raise ElicitError("methods must include 'base' (every comparison is against it)", source)
-    if any(m.startswith("demo-score") for m in methods) and "naive" not in methods:
-        raise ElicitError(
-            "demo-score rolls out the policy trained on D_base ∪ D_new: add 'naive' to methods",
-            source,
-        )
+    for rolled in ("demo-score", "cupid"):
+        if any(m.startswith(rolled) for m in methods) and "naive" not in methods:
+            raise ElicitError(
+                f"{rolled} rolls out the policy trained on D_base ∪ D_new: add 'naive' to methods",
+                source,
+            )
     seeds = tuple(int(s) for s in head.get("seeds", (0,)))
     models = tuple(str(m) for m in head.get("models", ("mlp",)))
     if not seeds or not models:

@@ -19,6 +19,12 @@ from typing import Any
 
 from elicit_jax.artifact import atomic_path, dumps, make_header, write_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.curation_stages import (
+    cupid_stage,
+    quality_stage,
+    resolve_cupid,
+    resolve_quality,
+)
 from elicit_jax.pipeline.runner import StageContext, StageFn
 
 FILTER_METHODS = {
@@ -177,6 +183,8 @@ _RESOLVERS = {
     "deminf": _resolve_deminf,
     "demo-score": _resolve_demo_score,
     "curate": _resolve_curate,
+    "cupid": resolve_cupid,
+    "quality": resolve_quality,
 }
 
 
@@ -584,6 +592,8 @@ def real_registry() -> dict[str, StageFn]:
         "filter": filter_stage,
         "deminf": deminf_stage,
         "demo-score": demo_score_stage,
+        "cupid": cupid_stage,
+        "quality": quality_stage,
         "curate": curate_stage,
         "lambda-point": lambda_point_stage,
         "lambda-valley": lambda_valley_stage,

@@ -32,6 +32,10 @@ METHOD_LABELS = {
     "deminf-matched": "DemInf (M's amount)",
     "demo-score": "Demo-SCORE",
     "demo-score-matched": "Demo-SCORE (M's amount)",
+    "cupid": "CUPID",
+    "cupid-matched": "CUPID (M's amount)",
+    "quality": "Quality flags",
+    "quality-matched": "Quality flags (M's amount)",
 }
 INTERVAL_NOTE = (
     "95% interval of the difference, paired by training seed and initial states (every policy "
@@ -316,6 +320,14 @@ def curation_table(data: ReportData) -> Table:
                 f"I(S;A) ≈ {rep.get('mi_estimate', math.nan):.3g} nats over "
                 f"{rep.get('n_pairs', '?')} pairs; D_base demos' mean score "
                 f"{base.get('mean', math.nan):.3g}"
+            )
+        elif c.method in ("cupid", "quality"):
+            cut = "–" if c.threshold is None else f"score <= {c.threshold:.3g}"
+            diag = (
+                f"{rep.get('rollouts')} noisy rollouts ({rep.get('rollout_successes')} "
+                f"successes); {rep.get('negative_demos')} demos of negative influence"
+                if c.method == "cupid"
+                else f"{rep.get('flagged')} demos flagged ({rep.get('flags')})"
             )
         else:
             cut = "–" if c.threshold is None else f"score <= {c.threshold:.3g}"

@@ -83,6 +83,7 @@ def rollout_mujoco_policy(
     horizon: int,
     threads: int = 0,
     record_states: bool = False,
+    action_noise: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Roll out ``policy`` on C MuJoCo: one batched policy call per control step.
 
@@ -96,7 +97,7 @@ def rollout_mujoco_policy(
     from elicit_jax.sim.rollout_mujoco import rollout_policy
 
     return rollout_policy(
-        task, _jitted_act(), policy, seeds, horizon, threads or None, record_states
+        task, _jitted_act(), policy, seeds, horizon, threads or None, record_states, action_noise
     )
 
 
@@ -153,8 +154,13 @@ def evaluate_refs(
     refs: Sequence[PolicyRef],
     config: EvalConfig,
     progress: Callable[[PolicyRef, float], None] | None = None,
+    trajectories: Any = None,
 ) -> Any:
-    """Roll out every policy reference; returns the per-rollout ``pandas.DataFrame``."""
+    """Roll out every policy reference; returns the per-rollout ``pandas.DataFrame``.
+
+    With ``trajectories`` (a :class:`~elicit_jax.sim.trajectories.TrajectoryConfig`) the
+    rollouts run on C MuJoCo with its exploration noise and every step is recorded there.
+    """
     import pandas as pd
 
     from elicit_jax.policy.checkpoint import load_policy
@@ -164,8 +170,13 @@ def evaluate_refs(
     task = make_task(config.task)
     horizon = config.horizon or task.config.horizon
     backend = resolve_backend(config.backend)
+    if trajectories is not None:
+        from elicit_jax.sim.trajectories import steps_frame, write_trajectories
+
+        if backend == "mjx":
+            raise ElicitError("--trajectories records on C MuJoCo: use --backend mujoco")
     seeds = eval_seeds(config)
-    frames = []
+    frames, steps = [], []
     for ref in refs:
         which: str | int = int(ref.checkpoint) if ref.checkpoint.isdigit() else ref.checkpoint
         policy = load_policy(ref.path, which)
@@ -178,10 +189,17 @@ def evaluate_refs(
         if backend == "mjx":
             out = rollout_mjx(task, policy, seeds, horizon)
         else:
-            out = rollout_mujoco_policy(task, policy, seeds, horizon, config.threads)
+            noise = 0.0 if trajectories is None else trajectories.action_noise
+            record = trajectories is not None
+            out = rollout_mujoco_policy(task, policy, seeds, horizon, config.threads, record, noise)
+            if record:
+                steps.append(steps_frame(ref, seeds, out))
         frames.append(rollout_frame(ref, seeds, out, horizon))
         if progress is not None:
             progress(ref, float(np.mean(out["success"])))
+    if trajectories is not None:
+        header = {"config": dataclasses.asdict(config), "task": config.task, "seed": config.seed}
+        write_trajectories(steps, trajectories, header)
     return pd.concat(frames, ignore_index=True)
 
 
@@ -260,6 +278,7 @@ def evaluate_policies(
     config: EvalConfig,
     out: str | Path | None = None,
     progress: Callable[[PolicyRef, float], None] | None = None,
+    trajectories: Any = None,
 ) -> tuple[Any, Any]:
     """Evaluate policies (``PATH`` or ``LABEL=PATH`` of training runs) on ``config.task``.
 
@@ -268,12 +287,14 @@ def evaluate_policies(
       config: the evaluation settings.
       out: optional path of the per-rollout Parquet artifact.
       progress: optional callable ``progress(ref, success_rate)`` after each policy.
+      trajectories: optional :class:`~elicit_jax.sim.trajectories.TrajectoryConfig`: also
+        record every step (state, action taken, outcome), with its exploration noise.
 
     Returns:
       ``(rollouts, summary)`` data frames.
     """
     refs = expand_policies(policies, config.checkpoints)
-    rollouts = evaluate_refs(refs, config, progress)
+    rollouts = evaluate_refs(refs, config, progress, trajectories)
     summary = summarize(rollouts, config.select)
     if out is not None:
         write_rollouts(out, rollouts, summary, config, refs)

@@ -204,6 +204,7 @@ def rollout_policy(
     horizon: int,
     threads: int | None = None,
     record_states: bool = False,
+    action_noise: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Roll a policy out on C MuJoCo from seeded initial states: one batched policy call per
     control step for every environment still running, then the physics in the thread pool.
@@ -217,19 +218,25 @@ def rollout_policy(
       act: jitted ``act(policy, carry, obs (B, 23)) -> (carry, action (B, 7))``.
       seeds: (B,) initial-state seeds.
       horizon: control steps.
-      record_states: also return the states the policy acted in.
+      record_states: also return the states the policy acted in and the actions taken.
+      action_noise: std of Gaussian exploration noise added to every action (0: none),
+        drawn from a generator seeded by the rollout's own initial-state seed, so a rollout
+        is the same whatever batch it runs in.
 
     Returns:
       dict of ``success (B,)``, ``steps_to_success (B,)`` (horizon when never), ``ret (B,)``,
       ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success);
       with ``record_states`` also ``states (B, horizon, 23)`` float32 and ``state_mask
       (B, horizon)``, true where the rollout was still running (not yet successful, not
-      diverged) and the policy acted in that state.
+      diverged) and the policy acted in that state, and ``actions (B, horizon, 7)`` float32,
+      the actions taken there (noise included).
     """
     seeds = np.asarray(seeds)
     b = len(seeds)
+    rngs = [np.random.default_rng(int(s)) for s in seeds] if action_noise > 0 else []
     if record_states:
         states = np.zeros((b, horizon, OBS_DIM), np.float32)
+        actions = np.zeros((b, horizon, 7), np.float32)
         state_mask = np.zeros((b, horizon), bool)
     with BatchSim(task, b, threads) as sim:
         obs = sim.reset_seeds(seeds)
@@ -243,7 +250,12 @@ def rollout_policy(
                 states[:, t] = obs
                 state_mask[:, t] = ~done & ~sim.unstable
             carry, action = act(policy, carry, obs.astype(np.float32))
-            obs = sim.step(np.asarray(action, np.float64), active=~done)
+            action = np.asarray(action, np.float64)
+            if rngs:
+                action = action + action_noise * np.stack([r.normal(size=7) for r in rngs])
+            if record_states:
+                actions[:, t] = action
+            obs = sim.step(action, active=~done)
             newly = sim.success & ~done
             steps[newly] = t + 1
             done |= sim.success
@@ -255,5 +267,5 @@ def rollout_policy(
             "unstable": sim.unstable.copy(),
         }
     if record_states:
-        out |= {"states": states, "state_mask": state_mask}
+        out |= {"states": states, "state_mask": state_mask, "actions": actions}
     return out

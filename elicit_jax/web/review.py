@@ -1,0 +1,197 @@
+"""The review page's server: ``elicit-jax review`` (transport only; the review itself is
+:class:`elicit_jax.curation.review.Review`).
+
+Routes: ``GET /`` the page (``static/review.html``), ``/static/...`` its scripts (the same
+three.js view as ``serve``), ``GET /api/episodes`` the episode table, ``GET /api/scene`` the
+task's 3-D scene (or why there is none), ``GET /api/episode/{id}`` an episode's body poses and
+per-step M, ``POST /api/flag`` flag/unflag an episode with a reason, ``POST /api/export`` write
+the selection. The server binds 127.0.0.1 only, answers only requests whose ``Host`` is that
+address (or ``localhost``) at its port (a DNS-rebinding page cannot reach it), and requires the
+access token it prints (``?token=`` on first load, then a same-site cookie) on every request.
+"""
+
+from __future__ import annotations
+
+import base64
+from typing import Any
+
+import numpy as np
+
+from elicit_jax.errors import ElicitError
+
+HOST = "127.0.0.1"
+
+
+class HostGuard:
+    """ASGI middleware: 403 unless the ``Host`` header is one of ``allowed``."""
+
+    def __init__(self, app: Any, allowed: frozenset[str]) -> None:
+        self.app, self.allowed = app, allowed
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] in ("http", "websocket"):
+            headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
+            if headers.get("host", "").lower() not in self.allowed:
+                body = b"forbidden: unexpected Host header\n"
+                start = {"type": "http.response.start", "status": 403,
+                         "headers": [(b"content-type", b"text/plain")]}  # fmt: skip
+                await send(start)
+                await send({"type": "http.response.body", "body": body})
+                return
+        await self.app(scope, receive, send)
+
+
+def allowed_hosts(port: int) -> frozenset[str]:
+    """``Host`` values the review server answers at ``port``."""
+    return frozenset({f"{HOST}:{port}", f"localhost:{port}"})
+
+
+class Clips:
+    """The task's scene and episode pose clips, or why there is no 3-D view."""
+
+    def __init__(self, demos: Any) -> None:
+        self.task, self.maker, self.why = None, None, ""
+        name = str(demos.task)
+        try:
+            from elicit_jax.sim.env import OBS_DIM, make_task
+
+            task = make_task(name)
+        except ElicitError as e:
+            self.why = f"no 3-D view: {e}"
+            return
+        if demos.obs_dim != OBS_DIM:
+            self.why = f"no 3-D view: the demos' observations are not {name}'s ({OBS_DIM}-D)"
+            return
+        from elicit_jax.web.clips import ClipMaker
+
+        self.task, self.maker = task, ClipMaker(task, demos)
+
+    def scene(self) -> dict[str, Any]:
+        from elicit_jax.web.scene import scene_description
+
+        if self.task is None:
+            return {"scene": None, "why": self.why}
+        return {"scene": scene_description(self.task.mj_model, self.task.name), "why": ""}
+
+    def poses(self, episode: int) -> np.ndarray | None:
+        return None if self.maker is None else self.maker.base_episode(episode)
+
+
+def create_review_app(review: Any, token: str, port: int) -> Any:
+    """The Starlette application of one review (see the module docstring)."""
+    from starlette.applications import Starlette
+    from starlette.middleware import Middleware
+    from starlette.requests import Request
+    from starlette.responses import FileResponse, JSONResponse
+    from starlette.routing import Mount, Route
+    from starlette.staticfiles import StaticFiles
+
+    from elicit_jax.web.access import TOKEN_COOKIE, AccessGuard
+    from elicit_jax.web.server import STATIC
+
+    clips = Clips(review.demos)
+
+    def index(request: Request) -> Any:
+        csp = (
+            "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+            "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+        )
+        response = FileResponse(
+            STATIC / "review.html",
+            headers={"Cache-Control": "no-store", "Content-Security-Policy": csp},
+        )
+        if request.query_params.get("token"):
+            response.set_cookie(
+                TOKEN_COOKIE, request.query_params["token"], httponly=True, samesite="strict"
+            )
+        return response
+
+    def bad(e: ElicitError) -> Any:
+        return JSONResponse({"error": str(e)}, status_code=400)
+
+    def episodes(request: Request) -> Any:
+        return JSONResponse(
+            {
+                "demos": str(review.config.demos),
+                "task": clips.task.name if clips.task else "",
+                "has_m": bool(review.m),
+                "has_quality": bool(review.quality),
+                "episodes": review.episodes(),
+            }
+        )
+
+    def episode(request: Request) -> Any:
+        try:
+            e = int(request.path_params["episode"])
+            data = review.episode(e)
+        except (ValueError, ElicitError) as err:
+            return bad(ElicitError(str(err)))
+        poses = clips.poses(e)
+        return JSONResponse(
+            {
+                "episode": e,
+                "steps": len(data["obs"]),
+                "m": None if data["m"] is None else [round(float(v), 4) for v in data["m"]],
+                "poses": None
+                if poses is None
+                else base64.b64encode(np.ascontiguousarray(poses, "<f4").tobytes()).decode(),
+                "nbody": 0 if poses is None else int(poses.shape[1]),
+            }
+        )
+
+    async def flag(request: Request) -> Any:
+        try:
+            body = await request.json()
+            review.flag(int(body["episode"]), bool(body["flagged"]), str(body.get("reason", "")))
+        except (ValueError, KeyError, TypeError) as err:
+            return bad(ElicitError(f"malformed flag request ({err})"))
+        except ElicitError as err:
+            return bad(err)
+        return JSONResponse({"ok": True, "flagged": len(review.flags)})
+
+    async def export(request: Request) -> Any:
+        try:
+            body = await request.json()
+            fmt = body.get("format") or None
+            result = review.export(fmt, str(body.get("mask_key") or "reviewed"))
+        except (ValueError, AttributeError) as err:
+            return bad(ElicitError(f"malformed export request ({err})"))
+        except ElicitError as err:
+            return bad(err)
+        return JSONResponse(result)
+
+    return Starlette(
+        routes=[
+            Route("/", index),
+            Route("/api/episodes", episodes),
+            Route("/api/scene", lambda request: JSONResponse(clips.scene())),
+            Route("/api/episode/{episode}", episode),
+            Route("/api/flag", flag, methods=["POST"]),
+            Route("/api/export", export, methods=["POST"]),
+            Mount("/static", StaticFiles(directory=STATIC), name="static"),
+        ],
+        middleware=[
+            Middleware(HostGuard, allowed=allowed_hosts(port)),
+            Middleware(AccessGuard, token=token),
+        ],
+    )
+
+
+def serve_review(review: Any, port: int = 0, echo: Any = print) -> None:
+    """Serve ``review`` on 127.0.0.1 until interrupted; prints the URL (with its token)."""
+    import uvicorn
+
+    from elicit_jax.web.access import new_token
+    from elicit_jax.web.serve import bind, url_of
+
+    token = new_token()
+    sock = bind(HOST, port)
+    port = sock.getsockname()[1]
+    app = create_review_app(review, token, port)
+    echo(f"reviewing {review.config.demos}: {len(review.bounds)} episodes; state in {review.out}")
+    echo(f"open {url_of(HOST, port, token)}   (Ctrl-C stops)")
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off"))
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()

@@ -1,0 +1,207 @@
+"""The review page (`elicit-jax review`) in real headless Chromium: sort, replay, flag two
+episodes with reasons, write the selection as a robomimic mask, and re-import without them;
+and the server's Host check and token."""
+
+from __future__ import annotations
+
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+from fixtures_data import robomimic_demo, write_robomimic
+from test_web_browser import browser  # noqa: F401  (the Chromium fixture)
+from typer.testing import CliRunner
+
+from elicit_jax.cli import app
+
+
+def _ok(*args):
+    r = CliRunner().invoke(app, [str(a) for a in args])
+    assert r.exit_code == 0, (r.output, r.exception)
+    return r.output
+
+
+@pytest.fixture(scope="module")
+def imported(tmp_path_factory):
+    """Six robomimic demos (episode 3 with jumpy actions), imported as square-nut data, with
+    their quality flags."""
+    d = tmp_path_factory.mktemp("review")
+    rng = np.random.default_rng(0)
+    demos = {}
+    for i in range(6):
+        demo = robomimic_demo(rng, 12)
+        smooth = np.linspace(-0.2, 0.2, 12)[:, None] * np.ones((1, 7))
+        demo["actions"] = np.where(i == 3, demo["actions"], smooth)
+        demos[f"demo_{i}"] = demo
+    src = write_robomimic(d / "teleop.hdf5", demos)
+    _ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
+    _ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
+    _m_scores(d / "scores.parquet")
+    return d
+
+
+def _m_scores(path):
+    """Compatibility scores by hand: episode e's 12 steps have M = 1 - e / 10, except that
+    episode 4's last 6 steps are incompatible (M = 0), so its mean M (0.3) is the lowest."""
+    import pyarrow as pa
+
+    from elicit_jax.artifact import make_header, write_parquet
+
+    ep = np.repeat(np.arange(6), 12)
+    m = 1 - ep / 10
+    m[4 * 12 + 6 : 5 * 12] = 0.0
+    table = pa.table(
+        {
+            "episode": pa.array(ep.astype(np.int64)),
+            "operator": pa.array(["unknown"] * len(ep)),
+            "step": pa.array(np.tile(np.arange(12), 6).astype(np.int32)),
+            "compatibility": pa.array(m.astype(np.float32)),
+            "incompatible": pa.array(m == 0),
+        }
+    )
+    write_parquet(path, table, make_header("scores", 1))
+
+
+class ReviewServer:
+    """`elicit-jax review` in a subprocess; its printed URL is read from its output."""
+
+    def __init__(self, *args) -> None:
+        code = "from elicit_jax.cli import main; main()"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", code, "review", *map(str, args)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.output: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.output.append(line)
+            self.lines.put(line)
+
+    def url(self) -> str:
+        while True:
+            try:
+                line = self.lines.get(timeout=120)
+            except queue.Empty:
+                raise AssertionError("no URL:\n" + "".join(self.output)) from None
+            found = re.search(r"open (http://\S+)", line)
+            if found:
+                return found.group(1)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def _status(url: str, host: str | None = None) -> int:
+    req = urllib.request.Request(url, headers={"Host": host} if host else {})
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status
+    except urllib.error.HTTPError as e:
+        return e.code
+
+
+def test_review_flags_two_episodes_and_the_export_reimports_without_them(
+    browser,  # noqa: F811
+    imported,
+):
+    d = imported
+    server = ReviewServer(
+        d / "demos.parquet", "--scores", d / "scores.parquet", "--quality", d / "quality.parquet",
+        "-o", d / "rv",
+    )  # fmt: skip
+    try:
+        url = server.url()
+        base = url.split("?")[0]
+        port = base.rstrip("/").rsplit(":", 1)[1]
+        assert _status(base) == 403  # no token
+        assert _status(url, host=f"evil.example:{port}") == 403  # DNS rebinding
+        assert _status(url) == 200
+        page = browser.new_page()
+        page.set_default_timeout(60_000)
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url)
+        page.wait_for_selector("body[data-ready='true']", timeout=60_000)
+        assert page.locator("#episodes tbody tr").count() == 6
+        # sort by mean M, lowest first: episode 4 (half its steps incompatible)
+        page.click("th[data-key='m_mean']")
+        first = page.locator("#episodes tbody tr").first
+        assert first.get_attribute("data-episode") == "4"
+        assert "0.30" in first.inner_text() and "\t6\t" in first.inner_text()
+        # sort by the quality flag, worst first: the jumpy episode 3 leads
+        page.click("th[data-key='quality_flagged']")
+        page.click("th[data-key='quality_flagged']")
+        assert page.locator("#episodes tbody tr").first.get_attribute("data-episode") == "3"
+        assert "outlier" in page.locator("#episodes tbody tr").first.inner_text()
+        for episode, reason in ((3, "jumpy actions"), (1, "operator hesitated")):
+            page.click(f"tr[data-episode='{episode}']")
+            page.wait_for_selector(f"body[data-episode='{episode}']")
+            assert page.locator("#step").inner_text().startswith("step 1 / 12")
+            page.fill("#flag-reason", reason)
+            page.click("#flag-btn")
+            page.wait_for_selector(f"tr[data-episode='{episode}'][data-flagged='true']")
+        # a flag needs a reason; unflagging takes one back
+        page.click("tr[data-episode='0']")
+        page.wait_for_selector("body[data-episode='0']")
+        page.fill("#flag-reason", "")
+        page.click("#flag-btn")
+        page.wait_for_selector("#flag-error:not(:empty)")
+        assert "reason" in page.locator("#flag-error").inner_text()
+        page.fill("#flag-reason", "by mistake")
+        page.click("#flag-btn")
+        page.wait_for_selector("tr[data-episode='0'][data-flagged='true']")
+        page.click("#unflag-btn")
+        page.wait_for_selector("tr[data-episode='0'][data-flagged='false']")
+        assert page.locator("#counts").get_attribute("data-flagged") == "2"
+        page.select_option("#export-format", "robomimic")
+        page.click("#export-btn")
+        page.wait_for_selector("#export-result[data-done='true']", timeout=60_000)
+        assert "kept 4, dropped 2" in page.locator("#export-result").inner_text()
+        assert errors == []
+    finally:
+        server.stop()
+    _ok("import", d / "rv" / "reviewed.hdf5", "--filter-key", "reviewed", "-o", d / "back.parquet")
+    from elicit_jax.data.demos import read_demos
+
+    back = read_demos(d / "back.parquet")
+    names = sorted({str(n) for n in back.extra["source_episode"]})
+    assert names == ["demo_0", "demo_2", "demo_4", "demo_5"]
+    kept = read_demos(d / "rv" / "kept.parquet")
+    assert kept.n_episodes == 4
+
+
+def test_review_state_persists_and_validates(imported, tmp_path):
+    from elicit_jax.curation.review import Review, ReviewConfig
+    from elicit_jax.errors import ElicitError
+
+    cfg = ReviewConfig(demos=str(imported / "demos.parquet"), out=str(tmp_path / "rv"))
+    r = Review(cfg)
+    with pytest.raises(ElicitError, match="reason"):
+        r.flag(2, True, "   ")
+    with pytest.raises(ElicitError, match="no episode 9"):
+        r.flag(9, True, "x")
+    r.flag(2, True, "camera\nglitch")
+    again = Review(cfg)  # resumes from OUT/review.json
+    assert again.flags == {2: "camera glitch"}
+    rows = {row["episode"]: row for row in again.episodes()}
+    assert rows[2]["flagged"] and not rows[1]["flagged"] and rows[2]["m_mean"] is None
+    result = again.export()
+    assert (result["kept"], result["dropped"], result["export"]) == (5, 1, None)
