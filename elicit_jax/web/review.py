@@ -6,7 +6,8 @@ three.js view as ``serve``), ``GET /api/episodes`` the episode table, ``GET /api
 task's 3-D scene (or why there is none), ``GET /api/episode/{id}`` an episode's body poses and
 per-step M, ``POST /api/flag`` flag/unflag an episode with a reason, ``POST /api/export`` write
 the selection. The server binds 127.0.0.1 only, answers only requests whose ``Host`` is that
-address (or ``localhost``) at its port (a DNS-rebinding page cannot reach it), and requires the
+address (or ``localhost``) at its port (a DNS-rebinding page cannot reach it; the same
+guard as ``serve``'s, :mod:`elicit_jax.web.access`), and requires the
 access token it prints (``?token=`` on first load, then a same-site cookie) on every request.
 """
 
@@ -20,30 +21,6 @@ import numpy as np
 from elicit_jax.errors import ElicitError
 
 HOST = "127.0.0.1"
-
-
-class HostGuard:
-    """ASGI middleware: 403 unless the ``Host`` header is one of ``allowed``."""
-
-    def __init__(self, app: Any, allowed: frozenset[str]) -> None:
-        self.app, self.allowed = app, allowed
-
-    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
-        if scope["type"] in ("http", "websocket"):
-            headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
-            if headers.get("host", "").lower() not in self.allowed:
-                body = b"forbidden: unexpected Host header\n"
-                start = {"type": "http.response.start", "status": 403,
-                         "headers": [(b"content-type", b"text/plain")]}  # fmt: skip
-                await send(start)
-                await send({"type": "http.response.body", "body": body})
-                return
-        await self.app(scope, receive, send)
-
-
-def allowed_hosts(port: int) -> frozenset[str]:
-    """``Host`` values the review server answers at ``port``."""
-    return frozenset({f"{HOST}:{port}", f"localhost:{port}"})
 
 
 class Clips:
@@ -86,7 +63,7 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
 
-    from elicit_jax.web.access import TOKEN_COOKIE, AccessGuard
+    from elicit_jax.web.access import TOKEN_COOKIE, AccessGuard, access_policy
     from elicit_jax.web.server import STATIC
 
     clips = Clips(review.demos)
@@ -171,8 +148,7 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ],
         middleware=[
-            Middleware(HostGuard, allowed=allowed_hosts(port)),
-            Middleware(AccessGuard, token=token),
+            Middleware(AccessGuard, policy=access_policy(HOST, port, token)),
         ],
     )
 

@@ -132,7 +132,7 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         base = url.split("?")[0]
         port = base.rstrip("/").rsplit(":", 1)[1]
         assert _status(base) == 403  # no token
-        assert _status(url, host=f"evil.example:{port}") == 403  # DNS rebinding
+        assert _status(url, host=f"evil.example:{port}") == 400  # DNS rebinding
         assert _status(url) == 200
         page = browser.new_page()
         page.set_default_timeout(60_000)
