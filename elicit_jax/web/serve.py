@@ -1,7 +1,8 @@
 """``elicit-jax serve``: check the inputs, bind, print the URL, serve until Ctrl-C, summarise.
 
 Without ``--horizon``, episodes last :func:`~elicit_jax.elicit.config.person_horizon` steps
-(4 × the base demonstrations' 95th-percentile length: time a person at a keyboard can meet).
+(4 × the base demonstrations' 95th-percentile length: time a person at a keyboard can meet;
+:func:`with_person_horizon`, called by the CLI; ``--horizon 0`` keeps the task's).
 Before binding, :func:`preflight` opens a throwaway session with the server's settings, so a
 bad input fails at start with the session's own one-line error (not when the first operator
 arrives), and the scorers are compiled by then. The server binds 127.0.0.1 by default;
@@ -74,8 +75,9 @@ def preflight(template: SessionConfig) -> None:
 
 
 def with_person_horizon(session: SessionConfig) -> SessionConfig:
-    """``session`` with its horizon set for people at a keyboard when none is given
-    (:func:`~elicit_jax.elicit.config.person_horizon` of the base demonstrations' lengths)."""
+    """``session`` with its horizon (0: the task's) set for people at a keyboard
+    (:func:`~elicit_jax.elicit.config.person_horizon` of the base demonstrations' lengths);
+    ``serve`` uses it when ``--horizon`` is not given."""
     if session.horizon:
         return session
     from elicit_jax.data.demos import read_demos
@@ -138,7 +140,6 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
     if token is None and not is_loopback(config.host):
         token = new_token()
     echo(f"checking the inputs and compiling the scorer for {config.session.task} ...")
-    config = dataclasses.replace(config, session=with_person_horizon(config.session))
     preflight(config.session)
     root.mkdir(parents=True, exist_ok=True)
     hub = OperatorHub(config.session, root, config.max_operators, log=echo)
