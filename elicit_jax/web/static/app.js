@@ -98,7 +98,7 @@ function onBinary(buf) {
     S.frameInfo = info;
     const glide = S.welcome ? 1000 / S.welcome.control_hz : 50;
     if (S.viewKey === `live:${info.episode}` || S.viewKey === `end:${info.episode}`) view.pose(poses, 0, glide);
-    updateHud();
+    soon(updateHud);
   } else if (kind === 2) {
     const role = dv.getUint8(1), id = dv.getUint32(4, true), T = dv.getUint32(8, true);
     const data = new Float32Array(buf, 16, T * nbody * 7);
@@ -159,7 +159,7 @@ function onEvent(ev) {
     case 'indicator':
       S.indicators.push([ev.step, ev.compatibility, ev.incompatible ? 1 : 0]);
       S.lastIndicator = ev;
-      updateIndicator();
+      soon(updateIndicator, 100);
       return;
     case 'episode-end':
       S.lastEnd = ev;
@@ -195,6 +195,16 @@ function announce(text) {
   const el = $('announce');
   if (el.textContent === text) el.textContent = '';
   el.textContent = text;
+}
+
+// Text and the strip change with every step (20 a second); they are redrawn at most 5 (the
+// indicator 10) times a second: each redraw of the page costs CPU that a software-rendered
+// view needs more.
+const pending = new Set();
+function soon(fn, ms = 200) {
+  if (pending.has(fn)) return;
+  pending.add(fn);
+  setTimeout(() => { pending.delete(fn); fn(); }, ms);
 }
 
 function plural(n, word) { return `${n} ${word}${n === 1 ? '' : 's'}`; }
@@ -457,7 +467,7 @@ function updateHud() {
     const left = Math.max(0, (w.horizon - step) / w.control_hz);
     const sec = Math.ceil(left);
     $('countdown-text').textContent = running ? `${sec} s left` : `${sec} s once you start`;
-    $('countdown-bar').style.width = `${(100 * (w.horizon - step)) / w.horizon}%`;
+    $('countdown-bar').style.transform = `scaleX(${(w.horizon - step) / w.horizon})`;
     cd.dataset.low = String(running && left <= 3);
     if (running && sec !== S.spokenSecond && (sec === 5 || sec === 0)) { S.spokenSecond = sec; announce(`${sec} seconds left`); }
   }

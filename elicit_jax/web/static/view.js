@@ -10,6 +10,9 @@ import * as THREE from './three/three.module.js';
 import { OrbitControls } from './three/OrbitControls.js';
 
 const SOFTWARE_PIXELS = 160000;
+const SOFTWARE_MIN_PIXELS = 40000;
+const SLOW_MS = 60;  // a moving view drawn less often than this (17 frames/s) draws fewer pixels
+const FAST_MS = 40;  // and more often than this (25 frames/s) more
 const SOFTWARE_FPS = 30;
 const HOME = { position: new THREE.Vector3(-0.5, -0.2, 0.5), target: new THREE.Vector3(0.03, 0.0, 0.03) };
 
@@ -121,7 +124,7 @@ export function blendPoses(a, b, t, out) {
 export class View {
   constructor(container) {
     this.container = container;
-    // Software WebGL (no GPU): no multisampling, and at most SOFTWARE_PIXELS pixels drawn per
+    // Software WebGL (no GPU): no multisampling, and at most this.budget pixels drawn per
     // frame, or drawing stalls the page (setFullQuality(true) lifts the cap, e.g. for a
     // screenshot).
     this.software = softwareRenderer();
@@ -152,11 +155,19 @@ export class View {
     // Software WebGL costs ~30 ms of CPU a frame whatever the scene: at most SOFTWARE_FPS
     // frames a second there, leaving the rest of the CPU to the page and the server.
     this.minGap = this.software ? 1000 / SOFTWARE_FPS - 2 : 0;
-    let lastDraw = 0;
+    let lastDraw = 0, wasMoving = false;
+    this.budget = SOFTWARE_PIXELS;
+    this.gaps = [];
     const loop = (now) => {
       if (now - lastDraw >= this.minGap) {
+        const moving = this.instances.some((inst) => inst.from);
         this.glide(now);
-        if (this._dirty) { this.render(); lastDraw = now; }
+        if (this._dirty) {
+          this.render();
+          if (moving && wasMoving && this.software) this.adapt(now - lastDraw);
+          wasMoving = moving;
+          lastDraw = now;
+        }
       }
       requestAnimationFrame(loop);
     };
@@ -183,6 +194,19 @@ export class View {
   }
 
   dirty() { this._dirty = true; }
+
+  // Software WebGL: the pixel budget follows how often a moving view gets drawn (each frame
+  // costs CPU in proportion to its pixels, on top of a fixed part), between
+  // SOFTWARE_MIN_PIXELS and SOFTWARE_PIXELS, so a busy machine still shows motion smoothly.
+  adapt(gap) {
+    this.gaps.push(gap);
+    if (this.gaps.length < 15) return;
+    const median = this.gaps.sort((a, b) => a - b)[7];
+    this.gaps = [];
+    const budget = median > SLOW_MS ? this.budget * 0.7 : median < FAST_MS ? this.budget * 1.25 : this.budget;
+    const next = Math.round(Math.max(SOFTWARE_MIN_PIXELS, Math.min(SOFTWARE_PIXELS, budget)));
+    if (next !== this.budget) { this.budget = next; this.size = ''; }
+  }
 
   // Full quality lifts the software limits (pixels, shadows, materials), e.g. for a screenshot.
   setFullQuality(on) {
@@ -277,7 +301,7 @@ export class View {
     if (this.size !== `${w}x${h}`) {
       this.size = `${w}x${h}`;
       const ratio = this.software && !this.fullQuality
-        ? Math.min(1, Math.sqrt(SOFTWARE_PIXELS / (w * h)))
+        ? Math.min(1, Math.sqrt(this.budget / (w * h)))
         : Math.min(window.devicePixelRatio || 1, 2);
       r.setPixelRatio(ratio);
       r.setSize(w, h, false);
