@@ -78,7 +78,7 @@ def serve_cmd(
     Example: elicit-jax serve --demo   (reach-pillar, nothing else needed)
     """
     from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.web.serve import ServeConfig, serve
+    from elicit_jax.web.serve import ServeConfig, serve, with_person_horizon
 
     given = so.given(ctx.params)
     resolved = _resolve(thresholds, lambda_, eta, preset)
@@ -110,8 +110,10 @@ def serve_cmd(
         raise ElicitError(f"missing {', '.join(missing)} (or use --demo)")
     given |= {"lambda": resolved[0], "eta": resolved[1], "operator": "browser:_"}
     given["thresholds_file"] = None if thresholds is None else str(thresholds)
+    session = SessionConfig.from_dict(given)
     config = ServeConfig(
-        session=SessionConfig.from_dict(given),
+        # a person at a keyboard needs longer than the task's horizon, unless told otherwise
+        session=session if "horizon" in given else with_person_horizon(session),
         sessions=str(sessions),
         host=host,
         port=port,

@@ -10,6 +10,10 @@
   subsequence dynamic time warping — the cheapest monotone alignment of the whole window to
   any base segment, cost per window step.
 
+  Each window gets its own segment: a base segment overlapping one already retrieved for a
+  worse window is passed over for the next best, so two windows never replay the same base
+  motion (``distinct=False``: the nearest segment for each, shared or not).
+
 :func:`episode_feedback` combines both for one demonstration against a base ``Demos``.
 
 Example:
@@ -84,6 +88,26 @@ def normalizer(base_obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x.mean(axis=0), np.where(std < STD_FLOOR, 1.0, std)
 
 
+def l2_candidates(query: np.ndarray, episode: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every segment of ``episode`` (T, O) as long as ``query`` (W, O), with its mean
+    Euclidean distance to the query.
+
+    Returns:
+      ``(costs, starts, stops)``, one entry per segment start (when T < W: one entry, the
+      whole episode against the best-matching T steps of the query).
+    """
+    q, e = np.asarray(query, np.float64), np.asarray(episode, np.float64)
+    w = min(len(q), len(e))
+    if len(e) >= len(q):
+        idx = np.arange(len(e) - w + 1)[:, None] + np.arange(w)[None, :]  # (S, w)
+        d = np.linalg.norm(e[idx] - q[None, :w], axis=-1).mean(axis=1)
+        starts = np.arange(len(d))
+        return d, starts, starts + w
+    idx = np.arange(len(q) - w + 1)[:, None] + np.arange(w)[None, :]
+    d = np.linalg.norm(q[idx] - e[None, :], axis=-1).mean(axis=1)
+    return np.array([d.min()]), np.array([0]), np.array([len(e)])
+
+
 def l2_distance(query: np.ndarray, episode: np.ndarray) -> tuple[float, int, int]:
     """Best aligned segment by mean Euclidean distance.
 
@@ -95,29 +119,23 @@ def l2_distance(query: np.ndarray, episode: np.ndarray) -> tuple[float, int, int
       ``(distance, start, stop)`` of the best segment of ``episode`` (when T < W, the
       episode is compared with the best-matching T steps of the query).
     """
-    q, e = np.asarray(query, np.float64), np.asarray(episode, np.float64)
-    w = min(len(q), len(e))
-    if len(e) >= len(q):
-        idx = np.arange(len(e) - w + 1)[:, None] + np.arange(w)[None, :]  # (S, w)
-        d = np.linalg.norm(e[idx] - q[None, :w], axis=-1).mean(axis=1)
-        s = int(np.argmin(d))
-        return float(d[s]), s, s + w
-    idx = np.arange(len(q) - w + 1)[:, None] + np.arange(w)[None, :]
-    d = np.linalg.norm(q[idx] - e[None, :], axis=-1).mean(axis=1)
-    return float(d.min()), 0, len(e)
+    d, starts, stops = l2_candidates(query, episode)
+    s = int(np.argmin(d))
+    return float(d[s]), int(starts[s]), int(stops[s])
 
 
-def dtw_distance(query: np.ndarray, episode: np.ndarray) -> tuple[float, int, int]:
-    """Subsequence DTW of ``query`` (W, O) against ``episode`` (T, O).
+def dtw_candidates(query: np.ndarray, episode: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Subsequence DTW of ``query`` (W, O) against ``episode`` (T, O), for every end step.
 
     ``D[i, j] = c(i, j) + min(D[i−1, j], D[i, j−1], D[i−1, j−1])`` with a free start
-    (``D[−1, j] = 0``) and a free end (the minimum over ``j`` of ``D[W−1, j]``), where
-    ``c`` is the Euclidean distance of states. Each row is solved in closed form —
-    ``D[i, j] = S_j + min_{k ≤ j}(a_k − S_{k−1})`` with ``S`` the running sum of the row's
-    costs and ``a_k = min(D[i−1, k], D[i−1, k−1])`` — so the work is O(W·T) numpy.
+    (``D[−1, j] = 0``), where ``c`` is the Euclidean distance of states. Each row is solved
+    in closed form — ``D[i, j] = S_j + min_{k ≤ j}(a_k − S_{k−1})`` with ``S`` the running
+    sum of the row's costs and ``a_k = min(D[i−1, k], D[i−1, k−1])`` — so the work is
+    O(W·T) numpy.
 
     Returns:
-      ``(cost / W, start, stop)`` of the aligned base segment.
+      ``(costs, starts, stops)``: per end step ``j``, the cheapest alignment's cost per
+      window step, its first base step and ``j + 1``.
     """
     q, e = np.asarray(query, np.float64), np.asarray(episode, np.float64)
     cost = np.linalg.norm(q[:, None, :] - e[None, :, :], axis=-1)  # (W, T)
@@ -140,8 +158,32 @@ def dtw_distance(query: np.ndarray, episode: np.ndarray) -> tuple[float, int, in
         run = np.minimum.accumulate(v)
         arg = np.maximum.accumulate(np.where(v <= run, cols, 0))
         prev, prev_start = s + run, a_start[arg]
-    j = int(np.argmin(prev))
-    return float(prev[j] / cost.shape[0]), int(prev_start[j]), j + 1
+    return prev / cost.shape[0], prev_start, cols + 1
+
+
+def dtw_distance(query: np.ndarray, episode: np.ndarray) -> tuple[float, int, int]:
+    """Subsequence DTW (:func:`dtw_candidates`) with a free end: the cheapest end step.
+
+    Returns:
+      ``(cost / W, start, stop)`` of the aligned base segment.
+    """
+    d, starts, stops = dtw_candidates(query, episode)
+    j = int(np.argmin(d))
+    return float(d[j]), int(starts[j]), int(stops[j])
+
+
+def _best_free(
+    cands: tuple[np.ndarray, ...], taken: Sequence[tuple[int, int]]
+) -> tuple[float, int, int] | None:
+    """The cheapest candidate segment overlapping none of ``taken`` (None when all do)."""
+    d, starts, stops = cands
+    free = np.ones(len(d), bool)
+    for a, b in taken:
+        free &= ~((starts < b) & (a < stops))
+    if not free.any():
+        return None
+    j = int(np.argmin(np.where(free, d, np.inf)))
+    return float(d[j]), int(starts[j]), int(stops[j])
 
 
 def retrieve(
@@ -149,18 +191,22 @@ def retrieve(
     base_episodes: Sequence[np.ndarray],
     method: Literal["l2", "dtw"] = "l2",
     stats: tuple[np.ndarray, np.ndarray] | None = None,
+    distinct: bool = True,
 ) -> list[Match]:
     """The nearest base episode and segment for each window of states.
 
     Args:
-      windows: each (W, O) raw states of a flagged window.
+      windows: each (W, O) raw states of a flagged window, worst first.
       base_episodes: each (T, O) raw states of a base demonstration.
       method: ``l2`` or ``dtw``.
       stats: normalisation (mean, std); default: from the concatenated base states.
+      distinct: each window gets its own segment: in window order, a base segment that
+        overlaps one chosen for an earlier window is passed over for the next best (so two
+        windows never replay the same base motion), unless every segment overlaps one.
 
     Returns:
       One :class:`Match` per window (``episode`` indexes ``base_episodes``; ties go to the
-      earliest episode).
+      earliest episode, then the earliest segment).
     """
     if method not in ("l2", "dtw"):
         raise ElicitError(f"unknown retrieval method '{method}' (choose l2 or dtw)")
@@ -168,15 +214,24 @@ def retrieve(
         raise ElicitError("no base demonstrations to retrieve from")
     mean, std = stats if stats is not None else normalizer(np.concatenate(base_episodes))
     base = [(np.asarray(b, np.float64) - mean) / std for b in base_episodes]
-    dist = l2_distance if method == "l2" else dtw_distance
+    candidates = l2_candidates if method == "l2" else dtw_candidates
+    taken: dict[int, list[tuple[int, int]]] = {}
     out = []
     for w in windows:
         q = np.asarray(w, np.float64)
         if q.ndim != 2 or q.shape[1] != base[0].shape[1] or not len(q):
             raise ElicitError(f"window of shape {np.shape(w)} does not match base states")
         q = (q - mean) / std
-        best = min(((dist(q, b), n) for n, b in enumerate(base)), key=lambda r: (r[0][0], r[1]))
-        (d, s, e), n = best
+        cands = [candidates(q, b) for b in base]
+        found = [
+            (r, n)
+            for n, c in enumerate(cands)
+            if (r := _best_free(c, taken.get(n, []) if distinct else [])) is not None
+        ]
+        if not found:  # every segment already shown: the nearest one again
+            found = [(_best_free(c, []), n) for n, c in enumerate(cands)]
+        (d, s, e), n = min(found, key=lambda r: (r[0][0], r[1]))
+        taken.setdefault(n, []).append((s, e))
         out.append(Match(n, s, e, d))
     return out
 

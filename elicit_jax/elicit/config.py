@@ -8,9 +8,12 @@ L2 retrieval, retraining after each batch scored against the new policy.
 from __future__ import annotations
 
 import dataclasses
+import math
 import zlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
+
+import numpy as np
 
 from elicit_jax.compat.measures import check_thresholds
 from elicit_jax.errors import ElicitError
@@ -178,3 +181,32 @@ class SessionConfig:
         a, b = self.to_dict(), other.to_dict()
         skip = (*PATH_FIELDS, *EXTENDABLE)
         return sorted(k for k in a if k not in skip and a[k] != b.get(k))
+
+
+PERSON_MARGIN = 4.0
+"""A person's episodes may last this many times the base demonstrations' 95th-percentile length."""
+PERSON_ROUND = 20
+
+
+def person_horizon(task_horizon: int, base_lengths: Sequence[int]) -> int:
+    """Control steps a person at a keyboard gets per episode, from the base demonstrations.
+
+    The base operator is proficient (and scripted, in the shipped tasks): it moves every axis
+    at once at full speed. A person presses one or two keys at a time, overshoots and slows
+    down near the goal (Shift), so the horizon is ``PERSON_MARGIN`` (4) × the 95th percentile
+    of the base lengths, rounded up to a multiple of 20 steps (whole seconds at 20 Hz), and
+    never shorter than the task's own horizon. On reach-pillar (base lengths 38–45 steps)
+    that is 180 steps (9 s) instead of 100 (5 s).
+
+    Args:
+      task_horizon: the task's horizon (steps).
+      base_lengths: lengths of the base demonstrations (steps).
+
+    Returns:
+      The horizon in control steps.
+    """
+    lengths = np.asarray(base_lengths, np.float64)
+    if lengths.size == 0:
+        return int(task_horizon)
+    want = PERSON_MARGIN * float(np.percentile(lengths, 95))
+    return max(int(task_horizon), int(math.ceil(want / PERSON_ROUND) * PERSON_ROUND))

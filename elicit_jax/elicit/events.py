@@ -186,6 +186,7 @@ class EpisodeEndEvent:
       operator_steps: steps the operator controlled (all of them outside DAgger).
       counted: the episode was accepted into the session's demonstrations.
       counts: session progress after this episode.
+      gave_up: the operator ended it before the horizon (give up), unsolved.
     """
 
     kind: ClassVar[str] = "episode-end"
@@ -196,6 +197,7 @@ class EpisodeEndEvent:
     operator_steps: int
     counted: bool
     counts: Counts
+    gave_up: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,6 +239,8 @@ class WindowFeedback:
       motion: ``still`` (you hold still where the base moves), ``moving`` (you move where the
         base holds still) or empty.
       text: one line saying all of the above.
+      plain: what differs in plain words, from the geometry of the states
+        (:mod:`elicit_jax.elicit.plain`), most specific first; what the operator reads.
     """
 
     start: int
@@ -252,6 +256,7 @@ class WindowFeedback:
     base_motion: float
     motion: str
     text: str
+    plain: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,7 +21,9 @@ an even grid) and compared:
 :func:`explain_episode` returns one :class:`~elicit_jax.elicit.events.WindowFeedback` per
 window, with a structured part (for a browser or a simulated person) and one line of text,
 e.g. ``steps 0–9 (1−M 1.00): robot0_eef_quat differs by ~3.1 rad; action dyaw differs by
-~0.9; you hold still where the base moves — compare base demo 3, steps 2–11``.
+~0.9; you hold still where the base moves — compare base demo 3, steps 2–11``; where
+:mod:`elicit_jax.elicit.plain` finds words for the difference (``you went right of the
+pillar; the base goes left of it``) they lead and the numbers follow in brackets.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import numpy as np
 
 from elicit_jax.compat.feedback import episode_feedback, normalizer
 from elicit_jax.elicit.events import FieldDifference, WindowFeedback
+from elicit_jax.elicit.plain import plain_words
 
 STILL_RATIO = 0.25
 MOTION_FLOOR = 0.01
@@ -121,7 +124,8 @@ def _fmt(d: FieldDifference) -> str:
 
 
 def window_text(fb: WindowFeedback, top: int = 2) -> str:
-    """The one-line explanation of a window."""
+    """The one-line explanation of a window: its plain words first when it has any (the
+    numbers follow in brackets), else the numbers."""
     parts = []
     fields = [d for d in fb.fields[:top] if d.normalized > 0]
     if fields:
@@ -137,10 +141,13 @@ def window_text(fb: WindowFeedback, top: int = 2) -> str:
     elif fb.motion == "moving":
         parts.append("you move where the base holds still")
     body = "; ".join(parts) or "close to the base demonstration"
-    return (
-        f"steps {fb.start}–{fb.stop - 1} (1−M {fb.incompatibility:.2f}): {body} — compare base "
-        f"demo {fb.base_episode}, steps {fb.base_start}–{fb.base_stop - 1}"
-    )
+    compare = f"compare base demo {fb.base_episode}, steps {fb.base_start}–{fb.base_stop - 1}"
+    if fb.plain:
+        return (
+            f"steps {fb.start}–{fb.stop - 1}: {'; '.join(fb.plain)} — {compare} "
+            f"(1−M {fb.incompatibility:.2f}; {body})"
+        )
+    return f"steps {fb.start}–{fb.stop - 1} (1−M {fb.incompatibility:.2f}): {body} — {compare}"
 
 
 def explain_episode(
@@ -174,15 +181,18 @@ def explain_episode(
     obs, action = np.asarray(obs, np.float64), np.asarray(action, np.float64)
     _, std = stats if stats is not None else normalizer(base.obs)
     rows = {e: (s, t) for e, s, t in base.episode_bounds()}
+    task = str(getattr(base, "task", ""))
     out = []
     for f in episode_feedback(compatibility, obs, base, window=window, k=k, method=method):
         w = f.window
-        s0, _ = rows[f.base_episode]
+        s0, s1 = rows[f.base_episode]
         b_obs = np.asarray(base.obs[s0 + f.base_start : s0 + f.base_stop], np.float64)
         b_act = np.asarray(base.action[s0 + f.base_start : s0 + f.base_stop], np.float64)
         o_obs, o_act = obs[w.start : w.stop], action[w.start : w.stop]
         n = len(o_obs)
         op_motion, base_motion = motion(o_obs, std), motion(b_obs, std)
+        kind = _motion_kind(op_motion, base_motion)
+        b_aligned = _align(b_obs, n)
         fb = WindowFeedback(
             start=w.start,
             stop=w.stop,
@@ -191,12 +201,13 @@ def explain_episode(
             base_start=int(f.base_start),
             base_stop=int(f.base_stop),
             distance=float(f.distance),
-            fields=tuple(field_differences(o_obs, _align(b_obs, n), base.obs_fields, std)),
+            fields=tuple(field_differences(o_obs, b_aligned, base.obs_fields, std)),
             actions=tuple(action_differences(o_act, _align(b_act, n), action_names)),
             operator_motion=op_motion,
             base_motion=base_motion,
-            motion=_motion_kind(op_motion, base_motion),
+            motion=kind,
             text="",
+            plain=plain_words(task, base.obs_fields, o_obs, b_aligned, obs, base.obs[s0:s1], kind),
         )
         out.append(_with_text(fb))
     return out

@@ -157,7 +157,7 @@ class Session:
     def end_episode(self) -> None:
         """End the current episode now (the operator gives up); it counts as not solved."""
         self._require_running()
-        self._finish(success=False)
+        self._finish(success=False, gave_up=True)
 
     @property
     def sim_data(self) -> Any:
@@ -286,8 +286,8 @@ class Session:
         if self._sim.success[0]:  # solved at reset: nothing to demonstrate
             self._finish(success=True)
 
-    def _finish(self, success: bool) -> None:
-        rec = self.setup.judge(self._record(success), self.progress)
+    def _finish(self, success: bool, gave_up: bool = False) -> None:
+        rec = self.setup.judge(self._record(success, gave_up), self.progress)
         self.setup.store.write_episode(rec, {"config": self.config.to_dict()})
         self.progress = self.progress.add(rec)
         if rec.verdict == "accepted":
@@ -302,6 +302,7 @@ class Session:
                 operator_steps=int(np.sum(rec.operator)),
                 counted=rec.verdict == "accepted",
                 counts=counts,
+                gave_up=gave_up,
             )
         )
         if rec.feedback_shown:
@@ -330,7 +331,7 @@ class Session:
         self._set_phase("retrain", f"training on the first {self.progress.counts.accepted} demos")
         self.setup.catch_up_policies(self.progress, self._emit)
 
-    def _record(self, success: bool) -> EpisodeRecord:
+    def _record(self, success: bool, gave_up: bool = False) -> EpisodeRecord:
         buf = self._buf
         n, dim_o, dim_a = len(buf["obs"]), self.setup.obs_dim, self.setup.action_dim
         score = np.array(buf["score"], np.float64).reshape(n, 5)
@@ -363,6 +364,7 @@ class Session:
                 "started": self._started,
                 "seconds": time.perf_counter() - self._t0,
                 "unstable": bool(self._sim.unstable[0]),
+                "gave_up": gave_up,
                 "lambda": self.config.lambda_,
                 "eta": self.config.eta,
             },

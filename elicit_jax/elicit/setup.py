@@ -95,7 +95,9 @@ class SessionSetup:
                     stats=self.stats,
                 )
             )
-        if verdict == "failed":
+        if verdict == "failed" and rec.meta.get("gave_up"):
+            text = f"failed: gave up after {rec.length} steps"
+        elif verdict == "failed":
             text = f"failed: the task was not completed in {rec.length} steps"
         elif verdict == "unused":
             text = "the robot finished without an intervention: nothing to record"

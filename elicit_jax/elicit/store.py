@@ -131,6 +131,7 @@ def feedback_from_dict(d: dict[str, Any]) -> WindowFeedback:
     d = dict(d)
     d["fields"] = tuple(FieldDifference(**x) for x in d.get("fields", ()))
     d["actions"] = tuple(FieldDifference(**x) for x in d.get("actions", ()))
+    d["plain"] = tuple(d.get("plain", ()))
     return WindowFeedback(**d)
 
 

@@ -314,7 +314,11 @@ class OperatorDriver:
                 self._sendall(self._prompt)
             elif isinstance(event, ReviewEvent):
                 record = self.setup.store.read_episode(event.episode)
-                review = [messages.review(event, record), *self._clips.review_clips(event, record)]
+                allowed = self.setup.rule.allowed(event.scored)
+                review = [
+                    messages.review(event, record, allowed),
+                    *self._clips.review_clips(event, record),
+                ]
                 self._review += review
                 self._sendall(review)
             elif isinstance(event, PhaseEvent):

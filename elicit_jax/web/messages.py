@@ -85,9 +85,10 @@ def prompt(e: PromptEvent) -> str:
     return dump("prompt", message=e.message, episodes=episodes)
 
 
-def review(e: ReviewEvent, record: Any) -> str:
+def review(e: ReviewEvent, record: Any, allowed: float | None = None) -> str:
     """The verdict and feedback; each window carries M over its steps (clips follow), and
-    ``indicators`` holds ``[step, M, incompatible]`` of every scored step of the episode."""
+    ``indicators`` holds ``[step, M, incompatible]`` of every scored step of the episode;
+    ``allowed_steps``: the most incompatible steps the rule allows at this length."""
     steps = np.flatnonzero(record.scored)
     windows = []
     for i, w in enumerate(e.feedback):
@@ -107,6 +108,7 @@ def review(e: ReviewEvent, record: Any) -> str:
         incompatible=e.incompatible,
         scored=e.scored,
         fraction=e.fraction,
+        allowed_steps=allowed,
         rule=e.rule,
         text=e.text,
         windows=windows,

@@ -1,5 +1,8 @@
 """``elicit-jax serve``: check the inputs, bind, print the URL, serve until Ctrl-C, summarise.
 
+Without ``--horizon``, episodes last :func:`~elicit_jax.elicit.config.person_horizon` steps
+(4 × the base demonstrations' 95th-percentile length: time a person at a keyboard can meet;
+:func:`with_person_horizon`, called by the CLI; ``--horizon 0`` keeps the task's).
 Before binding, :func:`preflight` opens a throwaway session with the server's settings, so a
 bad input fails at start with the session's own one-line error (not when the first operator
 arrives), and the scorers are compiled by then. The server binds 127.0.0.1 by default;
@@ -88,6 +91,21 @@ def preflight(template: SessionConfig) -> None:
             setup.prompt_event()
 
 
+def with_person_horizon(session: SessionConfig) -> SessionConfig:
+    """``session`` with its horizon (0: the task's) set for people at a keyboard
+    (:func:`~elicit_jax.elicit.config.person_horizon` of the base demonstrations' lengths);
+    ``serve`` uses it when ``--horizon`` is not given."""
+    if session.horizon:
+        return session
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.elicit.config import person_horizon
+    from elicit_jax.sim.env import make_task
+
+    lengths = [e - s for _, s, e in read_demos(session.base_demos).episode_bounds()]
+    task_horizon = make_task(session.task).config.horizon
+    return dataclasses.replace(session, horizon=person_horizon(task_horizon, lengths))
+
+
 def bind(host: str, port: int) -> socket.socket:
     """A listening TCP socket on ``host:port`` (IPv4 or IPv6)."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -161,7 +179,7 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
     c = config.session
     echo(
         f"serving {c.task} ({c.mode}{', HG-DAgger' if c.dagger else ''}; {c.demos} demonstrations "
-        f"wanted per operator) — sessions in {root}"
+        f"wanted per operator; episodes of up to {c.horizon} steps) — sessions in {root}"
         + (f"; {len(known)} to resume: {', '.join(known)}" if known else "")
     )
     if token is not None:

@@ -215,27 +215,47 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         page.keyboard.press("Enter")
         screen(page, "demonstrate", "ready")
         assert page.get_attribute("#indicator", "data-state") == "none"
+        # the countdown: the whole horizon before the first move, then it runs down
+        assert page.is_visible("#countdown")
+        assert page.inner_text("#countdown-text") == "10 s once you start"  # --horizon 200
 
         # past the right of the pillar: the indicator turns red; rejected with feedback
         drive(page, -1)
-        red_m = page.wait_for_function(  # read in the page, at the moment it turns red
+        red = page.wait_for_function(  # read in the page, at the moment it turns red
             """() => { const i = document.getElementById('indicator');
-                       return i.dataset.state === 'red' ? i.dataset.m : null; }""",
+                       return i.dataset.state === 'red'
+                         ? [i.dataset.m, i.textContent,
+                            document.getElementById('m-value').textContent]
+                         : null; }""",
             timeout=60_000,
         )
-        assert red_m.json_value() == "0.000"  # red means M = 0
+        assert red.json_value() == ["0.000", "✗", "does not fit"]  # red means M = 0
+        count = page.inner_text("#inc-count")  # whole steps against whole steps
+        assert re.fullmatch(r"[✓✗] \d+ red steps? of \d+ allowed so far", count), count
+        page.wait_for_function(  # the countdown runs while the episode does
+            "() => /^[0-9] s left$/.test(document.getElementById('countdown-text').textContent)"
+        )
         shot(page, "demonstrate")
         assert "red" in driven(page)["seen"]
         screen(page, "review")
         assert page.inner_text("#phase") == "review"  # the screen, not the next episode's phase
         page.wait_for_selector("#verdict[data-verdict=rejected]")
         assert page.locator("#review-windows button").count() == 3
+        # plain words from the geometry: the side of the pillar, not field names
+        words = page.inner_text("#review-windows")
+        assert "you went right of the pillar; the base goes left of it" in words, words
+        assert "robot0_" not in words and "1−M" not in words
+        assert re.match(r"\d+ red steps? of \d+ allowed", page.inner_text("#review-text"))
+        assert page.get_attribute("#announce", "aria-live") == "polite"
+        assert page.inner_text("#announce").startswith("Not accepted.")
         page.wait_for_selector("#split-labels:not([hidden])")
-        assert page.inner_text("#label-left").startswith("you: steps")
+        assert page.inner_text("#label-left").startswith("you (orange): steps")
         assert page.inner_text("#label-right").startswith("base demo")
-        page.locator("#review-windows button").nth(1).click()
+        page.keyboard.press("Digit2")  # keyboard only: the second window
         assert page.get_attribute("#review-windows button >> nth=1", "aria-pressed") == "true"
         page.wait_for_function("() => elicit.state.viewKey.endsWith(':1')")
+        trails = page.evaluate("elicit.view.instances[0].trails.map((t) => t.visible)")
+        assert trails == [True, True]  # your path and the base's, in both halves
         shot(page, "review")
 
         # a server restart: the page reconnects by itself and the session resumes
@@ -275,6 +295,7 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         screen(page, "done")
         shot(page, "done")
         assert errors == []
+        narrow_layout(browser, url)
     finally:
         page.close()
         server.stop()
@@ -288,3 +309,28 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
     assert demos.n_episodes == 1 and len(demos.obs) == accepted.length
     assert accepted.success and accepted.operator.all()
     assert "ana" in "".join(server.output)  # the console logged the operator's episodes
+
+
+def narrow_layout(browser, url: str) -> None:
+    """A 390-px-wide phone screen: the view above the instructions, nothing wider than the
+    screen, the keys still work (a second operator, on the running server)."""
+    page = browser.new_page(viewport={"width": 390, "height": 844})
+    try:
+        page.goto(url)
+        page.wait_for_selector("#name")
+        page.click("#name")
+        page.keyboard.type("ben")
+        page.keyboard.press("Enter")
+        screen(page, "practice", "ready")
+        stage, panel = page.locator("#stage").bounding_box(), page.locator("#panel").bounding_box()
+        assert stage["width"] >= 380 and stage["height"] >= 300, stage
+        assert panel["y"] >= stage["y"] + stage["height"] - 1 and panel["width"] >= 380, panel
+        assert page.evaluate("document.documentElement.scrollWidth") <= 390
+        assert page.is_visible("#countdown")
+        shot(page, "narrow")
+        page.keyboard.down("KeyW")
+        page.wait_for_function("() => elicit.state.frameInfo && elicit.state.frameInfo.step >= 4")
+        page.keyboard.up("KeyW")
+        assert page.inner_text("#countdown-text").endswith("s left")
+    finally:
+        page.close()

@@ -216,7 +216,8 @@ def test_a_server_restart_resumes_every_operator(make_client, tmp_path):
     root = tmp_path / "shared"
     first = make_client(root=root)
     pages = {name: _join(first, name) for name in ("dana", "eli")}
-    pages["dana"].drive(+1, give_up_after=5)  # dana finishes her practice episode
+    ended = pages["dana"].drive(+1, give_up_after=5)  # dana gives up her practice episode
+    assert ended["gave_up"] and not ended["success"]  # not the same as running out of time
     pages["eli"].send(type="action", a=[1, 0, 0, 0, 0, 0, -1])
     pages["eli"].send(type="start")  # eli is mid-episode when the server stops
     pages["eli"].until(lambda m: m["type"] == "frame" and m["step"] >= 3)

@@ -111,8 +111,9 @@ function onBinary(buf) {
     S.frames.set(info.episode, poses);
     for (const k of S.frames.keys()) if (k < info.episode - 2) S.frames.delete(k);
     S.frameInfo = info;
-    if (S.viewKey === `live:${info.episode}` || S.viewKey === `end:${info.episode}`) view.pose(poses);
-    updateHud();
+    const glide = S.welcome ? 1000 / S.welcome.control_hz : 50;
+    if (S.viewKey === `live:${info.episode}` || S.viewKey === `end:${info.episode}`) view.pose(poses, 0, glide);
+    soon(updateHud);
   } else if (kind === 2) {
     const role = dv.getUint8(1), id = dv.getUint32(4, true), T = dv.getUint32(8, true);
     const data = new Float32Array(buf, 16, T * nbody * 7);
@@ -165,6 +166,7 @@ function onEvent(ev) {
     case 'phase': S.phase = ev; break;
     case 'episode-start':
       S.episode = ev;
+      S.spokenSecond = null;
       S.indicators = []; S.lastIndicator = null;
       S.control = !ev.dagger;
       teleop.gripperClosed = false;
@@ -173,10 +175,11 @@ function onEvent(ev) {
     case 'indicator':
       S.indicators.push([ev.step, ev.compatibility, ev.incompatible ? 1 : 0]);
       S.lastIndicator = ev;
-      updateIndicator();
+      soon(updateIndicator, 100);
       return;
     case 'episode-end':
       S.lastEnd = ev;
+      announce(endWords(ev));
       S.reviewStep = 'review';
       if (S.review && S.review.episode !== ev.episode) S.review = null;
       break;
@@ -188,6 +191,42 @@ function onEvent(ev) {
 const TOP_BAR_SCREENS = new Set(['practice', 'prompt', 'demonstrate', 'review', 'progress', 'retrain', 'done']);
 
 function informed() { return S.welcome && S.welcome.mode === 'informed'; }
+
+const VERDICT_WORDS = { accepted: 'Accepted', rejected: 'Not accepted', failed: 'Not completed', unused: 'Nothing to record' };
+
+// The verdict's words: "you gave up" is the operator's choice, "not completed" the clock's.
+function verdictWord(verdict, end) {
+  if (verdict === 'failed' && end && end.gave_up) return 'You gave up';
+  return VERDICT_WORDS[verdict] || verdict;
+}
+
+function endWords(ev) {
+  if (ev.gave_up) return 'You gave up this try.';
+  if (!ev.success) return 'Time is up: the task was not completed.';
+  return ev.episode_kind === 'practice' ? 'Solved.' : 'Solved: recorded.';
+}
+
+// Screen readers hear verdicts and ends of episodes (the #announce region is aria-live).
+function announce(text) {
+  const el = $('announce');
+  if (el.textContent === text) el.textContent = '';
+  el.textContent = text;
+}
+
+// Text and the strip change with every step (20 a second); they are redrawn at most 5 (the
+// indicator 10) times a second: each redraw of the page costs CPU that a software-rendered
+// view needs more.
+const pending = new Set();
+function soon(fn, ms = 200) {
+  if (pending.has(fn)) return;
+  pending.add(fn);
+  setTimeout(() => { pending.delete(fn); fn(); }, ms);
+}
+
+function plural(n, word) { return `${n} ${word}${n === 1 ? '' : 's'}`; }
+
+// Whole steps the rule allows for `scored` scored steps (it rejects above rule.allowed).
+function allowedSteps(allowed) { return Math.floor(allowed + 1e-9); }
 
 function pickScreen() {
   if (!S.name) return 'welcome';
@@ -210,6 +249,7 @@ function pickScreen() {
 
 function render() {
   const screen = pickScreen();
+  if (screen !== S.screen) window.scrollTo(0, 0);  // a narrow page scrolls: start at the view
   S.screen = screen;
   document.body.dataset.screen = screen;
   const w = S.welcome, st = S.state;
@@ -273,13 +313,18 @@ function renderReview() {
   const v = $('verdict');
   if (!r) { v.textContent = '…'; v.dataset.verdict = ''; return; }
   v.dataset.verdict = r.verdict;
-  v.textContent = { accepted: 'Accepted', rejected: 'Not accepted', failed: 'Not completed', unused: 'Nothing to record' }[r.verdict] || r.verdict;
-  const pct = (100 * r.fraction).toFixed(1);
-  $('review-text').textContent = r.verdict === 'rejected'
-    ? `${r.incompatible} of ${r.scored} of your steps (${pct}%) did not fit the robot's motion. Where it differed most:`
+  const end = S.lastEnd && S.lastEnd.episode === r.episode ? S.lastEnd : null;
+  v.textContent = verdictWord(r.verdict, end);
+  const allowed = allowedSteps(r.allowed_steps ?? r.scored * 0.05);
+  const red = `${plural(r.incompatible, 'red step')} of ${allowed} allowed (${r.scored} steps)`;
+  const text = r.verdict === 'rejected'
+    ? `${red}: too many of your steps did not fit the robot's motion. Where it differed most:`
     : r.verdict === 'accepted'
-      ? `${r.incompatible} of ${r.scored} steps (${pct}%) did not fit: within the rule. Thank you!`
-      : r.text;
+      ? `${red}: within the rule. Thank you!`
+      : end && end.gave_up ? `You ended this try after ${end.length} steps; it does not count. Try again when ready.`
+        : r.verdict === 'failed' ? `The time ran out (${S.welcome.horizon} steps) before the task was done; this try does not count.` : r.text;
+  $('review-text').textContent = text;
+  if (S.announcedReview !== r.episode) { S.announcedReview = r.episode; announce(`${v.textContent}. ${text}`); }
   const list = $('review-windows');
   if (list.dataset.for !== String(r.episode)) {
     list.dataset.for = String(r.episode);
@@ -287,10 +332,17 @@ function renderReview() {
       const b = document.createElement('button');
       b.type = 'button';
       b.className = 'window';
-      const words = win.text.replace(/^steps [^:]*: /, '');
-      b.innerHTML = `<b>Steps ${win.start}–${win.stop - 1}</b> <span class="meta">(1−M ${win.incompatibility.toFixed(2)})</span><br><span class="meta"></span>`;
-      b.querySelector('br + .meta').textContent = words;
-      b.onclick = () => { S.windowIndex = i; render(); player.play(); };
+      const head = document.createElement('b');
+      head.textContent = `${i + 1}. Steps ${win.start}–${win.stop - 1}`;
+      const meta = document.createElement('span');
+      meta.className = 'meta';
+      const reds = win.m.filter((m) => m !== null && m <= 0).length;
+      meta.textContent = ` · ${plural(reds, 'red step')} of ${win.m.length}`;
+      const words = document.createElement('span');
+      words.className = 'plain';
+      words.textContent = (win.plain && win.plain.length ? win.plain.join('; ') : win.text.replace(/^steps [^:]*: /, '').replace(/ — compare.*$/, '')) + '.';
+      b.append(head, meta, document.createElement('br'), words);
+      b.onclick = () => selectWindow(i);
       return b;
     }));
   }
@@ -299,16 +351,23 @@ function renderReview() {
   drawStrip($('review-strip'), r.indicators, S.welcome.horizon, r.windows.map((x) => x.episode_steps));
 }
 
+function selectWindow(i) {
+  if (!S.review || i < 0 || i >= S.review.windows.length) return;
+  S.windowIndex = i;
+  render();
+  player.play();
+}
+
 function renderProgress() {
   const c = S.state.counts, end = S.lastEnd, w = S.welcome;
   let last = '';
   if (end) {
     if (end.episode_kind === 'practice') last = `Practice ${Math.min(c.practice, w.practice)} of ${w.practice} done${end.success ? ': solved' : ''}.`;
-    else if (!informed()) last = end.success ? 'Recorded: the task was completed.' : 'Not completed: this try does not count.';
+    else if (!informed()) last = end.success ? 'Recorded: the task was completed.' : end.gave_up ? 'You gave up: this try does not count.' : 'Not completed: this try does not count.';
     else if (S.review) {
       const r = S.review, pct = (100 * r.fraction).toFixed(1);
-      const word = { accepted: 'Accepted', rejected: 'Not accepted', failed: 'Not completed', unused: 'Nothing recorded' }[r.verdict] || r.verdict;
-      last = r.scored ? `${word}: ${r.incompatible} of ${r.scored} steps (${pct}%) did not fit.` : `${word}.`;
+      const word = verdictWord(r.verdict, end);
+      last = r.scored && r.verdict !== 'failed' ? `${word}: ${plural(r.incompatible, 'red step')} of ${r.scored} (${pct}%).` : `${word}.`;
     }
   }
   $('last-result').textContent = last;
@@ -345,7 +404,7 @@ function applyView(screen) {
     const a = S.reviewClips.yours[i], b = S.reviewClips.base[i];
     clips = a && b ? [a, b] : null;
     split = true;
-    labels = [`you: steps ${win.start}–${win.stop - 1}`, `base demo ${win.base_episode}: steps ${win.base_start}–${win.base_stop - 1}`];
+    labels = [`you (orange): steps ${win.start}–${win.stop - 1}`, `base demo ${win.base_episode} (blue): steps ${win.base_start}–${win.base_stop - 1}`];
   } else if ((screen === 'review' || screen === 'progress') && S.lastEnd) {
     key = `end:${S.lastEnd.episode}`;
   } else {
@@ -360,6 +419,7 @@ function applyView(screen) {
   $('split-labels').hidden = !split;
   $('label-left').textContent = labels[0];
   $('label-right').textContent = labels[1];
+  view.setTrails(clips && split ? clips.map(path) : null);
   if (clips) {
     player.load(clips, S.welcome ? S.welcome.control_hz : 20);
     $('replay-bar').hidden = false;
@@ -372,6 +432,12 @@ function applyView(screen) {
   }
 }
 
+// The gripper's positions along a clip (its trail).
+function path(clip) {
+  const b = view.names.indexOf('gripper');
+  return b < 0 ? null : clip.map((poses) => [poses[b * 7], poses[b * 7 + 1], poses[b * 7 + 2]]);
+}
+
 function updateReplayBar(p) {
   const scrub = $('replay-scrub');
   scrub.max = String(Math.max(0, p.length - 1));
@@ -381,24 +447,49 @@ function updateReplayBar(p) {
   $('replay-step').textContent = p.length ? `step ${p.t + 1} / ${p.length}` : '';
 }
 
+// The light shows the last step (green ✓ circle: it fits; red ✗ square: it does not — the
+// rule counts the red steps), the count shows red steps against the whole steps the rule
+// allows so far, in red once over it.
 function updateIndicator() {
   const ind = $('indicator');
   const last = S.indicators.length ? S.indicators[S.indicators.length - 1] : null;
-  ind.dataset.state = last ? (last[2] ? 'red' : 'green') : 'none';
-  ind.dataset.m = last ? last[1].toFixed(3) : '';
-  $('m-value').textContent = last ? `M ${last[1].toFixed(2)}` : 'M –';
+  const state = last ? (last[2] ? 'red' : 'green') : 'none';
+  ind.dataset.state = state;
+  ind.dataset.m = last && last[1] !== null ? last[1].toFixed(3) : '';
+  ind.textContent = state === 'red' ? '✗' : state === 'green' ? '✓' : '';
+  $('m-value').textContent = state === 'red' ? 'does not fit' : state === 'green' ? 'fits' : 'waiting';
   const li = S.lastIndicator;
-  $('inc-count').textContent = li ? `red so far: ${li.incompatible_so_far} (the rule allows ${li.allowed.toFixed(1)})` : 'not started';
+  const count = $('inc-count');
+  if (li) {
+    const allowed = allowedSteps(li.allowed), over = li.incompatible_so_far > allowed;
+    count.textContent = `${over ? '✗' : '✓'} ${plural(li.incompatible_so_far, 'red step')} of ${allowed} allowed so far`;
+    count.dataset.over = String(over);
+  } else {
+    count.textContent = 'no steps yet';
+    count.dataset.over = 'false';
+  }
   drawStrip($('strip'), S.indicators, S.welcome ? S.welcome.horizon : 100, []);
 }
 
 function updateHud() {
   const f = S.frameInfo, w = S.welcome;
   const live = S.viewKey && S.viewKey.startsWith('live:');
-  $('hud-step').textContent = live && f && w ? `step ${f.step} / ${w.horizon} · ${w.control_hz} Hz` : '';
+  const running = S.state && S.state.state === 'running';
+  $('hud-step').textContent = live && f && w ? `step ${f.step} / ${w.horizon}` : '';
+  const cd = $('countdown');
+  cd.hidden = !(live && w && (S.screen === 'practice' || S.screen === 'demonstrate'));
+  if (!cd.hidden) {
+    const step = running && f && S.episode && f.episode === S.episode.episode ? f.step : 0;
+    const left = Math.max(0, (w.horizon - step) / w.control_hz);
+    const sec = Math.ceil(left);
+    $('countdown-text').textContent = running ? `${sec} s left` : `${sec} s once you start`;
+    $('countdown-bar').style.transform = `scaleX(${(w.horizon - step) / w.horizon})`;
+    cd.dataset.low = String(running && left <= 3);
+    if (running && sec !== S.spokenSecond && (sec === 5 || sec === 0)) { S.spokenSecond = sec; announce(`${sec} seconds left`); }
+  }
   const ctl = $('hud-control');
   if (w && w.dagger && live) {
-    const mine = S.state && S.state.state === 'running' && f ? f.operator : S.control;
+    const mine = running && f ? f.operator : S.control;
     ctl.dataset.control = mine ? 'operator' : 'robot';
     ctl.textContent = mine ? 'YOU are in control (T hands back)' : 'ROBOT in control (T takes over)';
   } else {
@@ -485,8 +576,17 @@ function reconnect() {
 document.addEventListener('keydown', (e) => {
   const t = e.target;
   if (t && t.tagName === 'INPUT' && t.type !== 'range') return;
+  // a focused button or link (reached with Tab) takes Enter and Space itself
+  const onControl = t && (t.tagName === 'BUTTON' || t.tagName === 'A' || t.tagName === 'SUMMARY');
+  if ((e.code === 'Enter' || e.code === 'NumpadEnter' || e.code === 'Space') && onControl) return;
   if (e.code === 'Enter' || e.code === 'NumpadEnter') { e.preventDefault(); if (!e.repeat) onEnter(); return; }
   if (e.code === 'Space' && player.clips.length) { e.preventDefault(); player.toggle(); return; }
+  if (S.screen === 'review' && /^Digit[1-9]$/.test(e.code)) { selectWindow(Number(e.code.slice(5)) - 1); return; }
+  if (S.screen === 'prompt' && /^Digit[1-9]$/.test(e.code)) {
+    const i = Number(e.code.slice(5)) - 1;
+    if (S.prompt && i < S.prompt.episodes.length) { S.promptIndex = i; render(); player.play(); }
+    return;
+  }
   if (e.code === 'Backspace') {
     e.preventDefault();
     if (S.state && S.state.state === 'running') send({ type: 'give-up' });
