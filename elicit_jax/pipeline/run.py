@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import make_header, write_json
-from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather
+from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather, gather_with_rollouts
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.runner import RunResult, StageFn, print_summary, run_graph, run_lock
 from elicit_jax.pipeline.spec import PipelineSpec, load_spec
@@ -261,4 +261,28 @@ def render_run_report(
 
         study = dataclasses.replace(gather_study(run_dir), findings=notes)
         return write_study_report(study, target)
-    return write_report(dataclasses.replace(gather(run_dir), findings=notes), target)
+    from elicit_jax.pipeline.evidence import round_trip
+
+    data, rollouts = gather_with_rollouts(run_dir)
+    return write_report(round_trip(dataclasses.replace(data, findings=notes)), target, rollouts)
+
+
+def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
+    """Rebuild a report from its folder alone: every table, interval and figure recomputed
+    from the raw results kept beside it (``rollouts.parquet``, ``report-data.json``, its maps
+    and ``findings.md``), without the run directory; returns the Markdown and HTML paths.
+
+    Args:
+      folder: a report folder written by this version of elicit-jax.
+      out: where to write the rebuilt report (default: ``folder`` itself, replaced
+        atomically).
+    """
+    from elicit_jax.pipeline.evidence import read_evidence
+    from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
+    from elicit_jax.pipeline.report import write_report
+
+    folder = Path(folder)
+    data, rollouts = read_evidence(folder)
+    if (folder / FINDINGS_FILE).is_file():
+        data = dataclasses.replace(data, findings=read_findings(folder / FINDINGS_FILE))
+    return write_report(data, Path(out) if out else folder, rollouts, rebuilt_from=folder)

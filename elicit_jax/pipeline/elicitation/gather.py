@@ -1,7 +1,7 @@
 """Gather an elicitation study's run directory into :class:`StudyData` for its report.
 
 Reads the run manifest and, per finished stage: evaluations (success per training seed, best
-checkpoint — the filtering report's :func:`~elicit_jax.pipeline.gather.result_rows`),
+checkpoint — the filtering report's :func:`~elicit_jax.pipeline.evidence.result_rows_of`),
 sessions (per-episode summaries from the episode files, and the person's record of what it
 changed), M-filter counts, thresholds and D_base's lengths. Unfinished stages are listed in a
 note, so a partial run's report is right about what it shows.
@@ -16,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import read_header, read_json
+from elicit_jax.artifact import PROVENANCE_KEY, read_header, read_json
+from elicit_jax.pipeline.evidence import cell_frame, empty_rollouts, result_rows_of
 from elicit_jax.pipeline.findings import Findings
-from elicit_jax.pipeline.gather import read_manifest, result_rows
+from elicit_jax.pipeline.gather import read_manifest
 from elicit_jax.pipeline.tables import ResultRow
 
 PERSON_FILE = "person.json"
@@ -95,6 +96,9 @@ class StudyData:
     versions: Mapping[str, str]
     notes: tuple[str, ...] = ()
     findings: Findings | None = None
+    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    rollouts: Any = None
+    raw_results: bool = False
 
 
 def _lengths(path: Path) -> tuple[float, float, int]:
@@ -102,7 +106,11 @@ def _lengths(path: Path) -> tuple[float, float, int]:
 
     episode = pq.read_table(path, columns=["episode"]).column("episode").to_numpy()
     _, counts = np.unique(episode, return_counts=True)
-    return float(counts.mean()), float(counts.std()), int(counts.size)
+    return (
+        float(counts.mean()),
+        float(counts.std(ddof=1)) if counts.size > 1 else 0.0,
+        int(counts.size),
+    )
 
 
 def _first_states(path: Path, n: int = 3) -> tuple[Any, ...]:
@@ -136,7 +144,9 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
 
 def gather_study(run_dir: str | Path) -> StudyData:
     """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
-    from elicit_jax.pipeline.gather import _training_note
+    import pandas as pd
+
+    from elicit_jax.pipeline.gather import training_note
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
@@ -149,6 +159,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
     thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
+    frames = []
     for stage in manifest["stages"]:
         kind, cfg, path = stage["kind"], stage["config"], run_dir / stage["output"]
         configs.setdefault(kind, {})[stage["id"]] = cfg
@@ -158,7 +169,8 @@ def gather_study(run_dir: str | Path) -> StudyData:
             missing.append(stage["id"])
             continue
         if kind == "evaluate":
-            results += result_rows(cfg, path)
+            frames.append(cell_frame(cfg, path))
+            results += result_rows_of(frames[-1])
         elif kind == "session":
             data = session_data(stage, path)
             if data is None:
@@ -191,7 +203,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
                     episodes_total=int(h["episodes_in"]),
                 )
             )
-    notes = [_training_note(configs["train"])] if configs.get("train") else []
+    notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
             f"{len(missing)} stage(s) have not finished, so their results are absent: "
@@ -213,4 +225,6 @@ def gather_study(run_dir: str | Path) -> StudyData:
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),
+        provenance=manifest.get(PROVENANCE_KEY, {}),
+        rollouts=pd.concat(frames, ignore_index=True) if frames else empty_rollouts(),
     )

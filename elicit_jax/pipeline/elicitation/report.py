@@ -30,9 +30,11 @@ from elicit_jax.pipeline.elicitation.tables import (
     table2,
     threshold_table,
 )
+from elicit_jax.pipeline.evidence import ROLLOUTS_FILE, selection_lines, write_rollouts_table
 from elicit_jax.pipeline.findings import write_beside
 from elicit_jax.pipeline.render import html_document, markdown_document
-from elicit_jax.pipeline.report import CPU_NOTE, provenance_blocks
+from elicit_jax.pipeline.report import CPU_NOTE, provenance_blocks, provenance_intro
+from elicit_jax.pipeline.tables import STD_NOTE
 
 FIGURES = "figures"
 INTERVAL_NOTE = (
@@ -121,14 +123,15 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
 
 def _intro(data: StudyData) -> list[str]:
     lines = [
-        f"Study **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
+        *provenance_intro(data),
+        f"Study **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`.",
     ]
     if data.profile == "cpu":
         lines.append(CPU_NOTE)
     if data.description:
         lines.append(data.description)
-    lines += [MODEL_NOTE, INTERVAL_NOTE, *_verdicts(data), *data.notes]
-    return lines
+    lines += [MODEL_NOTE, *selection_lines(data.results), INTERVAL_NOTE, STD_NOTE]
+    return [*lines, *_verdicts(data), *data.notes]
 
 
 def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
@@ -177,6 +180,8 @@ def write_study_report(data: StudyData, out_dir: str | Path) -> tuple[Path, Path
             figures[f"{task}-{model}-learning.png"] = png
     with atomic_path(out_dir) as tmp:
         (tmp / FIGURES).mkdir(parents=True)
+        if data.rollouts is not None:
+            write_rollouts_table(tmp / ROLLOUTS_FILE, data.rollouts, data.pipeline, data.profile)
         for name, png in figures.items():
             (tmp / FIGURES / name).write_bytes(png)
         (tmp / "report.md").write_text(render_markdown(data, figures))
@@ -188,9 +193,13 @@ def write_study_report(data: StudyData, out_dir: str | Path) -> tuple[Path, Path
             config={"pipeline": data.pipeline, "profile": data.profile},
             n_results=len(data.results),
             n_sessions=len(data.sessions),
+            run=dict(data.provenance),
+            seed=min((r.seed for r in data.results), default=None),
+            training_seeds=sorted({r.seed for r in data.results}),
             files=[
                 "report.md",
                 "report.html",
+                *([ROLLOUTS_FILE] if data.rollouts is not None else []),
                 *[f"{FIGURES}/{n}" for n in figures],
                 *([findings["file"]] if findings else []),
             ],
