@@ -167,7 +167,7 @@ def make_header(
     *,
     config: Mapping[str, Any] | None = None,
     inputs: Mapping[str, str | Path] | None = None,
-    seed: int | None = None,
+    seed: int | list[int] | None = None,
     **fields: Any,
 ) -> dict[str, Any]:
     """Build an artifact header.
@@ -177,7 +177,7 @@ def make_header(
       schema_version: version of that kind's layout.
       config: the config that produced the artifact (JSON-serialisable).
       inputs: name -> path of each input; stored as name -> {path, sha256}.
-      seed: the PRNG seed, if any.
+      seed: the PRNG seed, if any (a list: the seeds of a multi-seed artifact).
       **fields: kind-specific fields (shapes, names, ...).
     """
     header: dict[str, Any] = {
