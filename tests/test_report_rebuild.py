@@ -209,3 +209,24 @@ def test_rebuild_of_a_folder_without_raw_results_is_a_one_line_error(tmp_path):
     result = CliRunner().invoke(app, ["report", "--rebuild", str(tmp_path)])
     assert result.exit_code != 0 and isinstance(result.exception, ElicitError)
     assert "cannot rebuild: no rollouts.parquet" in str(result.exception)
+
+
+def _committed_studies() -> list[Path]:
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    return sorted(
+        p.parent for p in results.glob(f"*/{ROLLOUTS_FILE}") if (p.parent / DATA_FILE).is_file()
+    )
+
+
+def test_every_committed_study_with_raw_results_rebuilds_byte_for_byte(tmp_path):
+    studies = _committed_studies()
+    assert [s.name for s in studies if s.name == "quickstart-cpu"] == ["quickstart-cpu"]
+    for study in studies:
+        out = tmp_path / study.name
+        rebuild_report(study, out)
+        files = {p.relative_to(study) for p in study.rglob("*") if p.is_file()}
+        assert files == {p.relative_to(out) for p in out.rglob("*") if p.is_file()}
+        for name in files - {Path("artifact.json")}:
+            assert (out / name).read_bytes() == (study / name).read_bytes(), (study, name)
+        run = read_json(study / "artifact.json")["run"]
+        assert run["commit"] and run["command"] and read_json(out / "artifact.json")["run"] == run
