@@ -142,6 +142,19 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
     )
 
 
+def _filter_count(cfg: Mapping[str, Any], path: Path) -> FilterCount:
+    h = read_header(path)
+    return FilterCount(
+        task=cfg["task"],
+        model=cfg["model"],
+        person=cfg["person"],
+        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
+        pairs_total=int(h["pairs_in"]),
+        episodes_kept=int(h["episodes_out"]),
+        episodes_total=int(h["episodes_in"]),
+    )
+
+
 def gather_study(run_dir: str | Path) -> StudyData:
     """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
     import pandas as pd
@@ -191,18 +204,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
                 "balanced_accuracy": report.get("balanced_accuracy"),
             }
         elif kind == "filter-session":
-            h = read_header(path)
-            filters.append(
-                FilterCount(
-                    task=cfg["task"],
-                    model=cfg["model"],
-                    person=cfg["person"],
-                    pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-                    pairs_total=int(h["pairs_in"]),
-                    episodes_kept=int(h["episodes_out"]),
-                    episodes_total=int(h["episodes_in"]),
-                )
-            )
+            filters.append(_filter_count(cfg, path))
     notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
