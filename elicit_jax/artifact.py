@@ -143,10 +143,21 @@ def provenance_line(prov: Mapping[str, Any]) -> str:
     libs = ", ".join(
         f"{k} {v}" for k, v in dict(prov.get("versions", {})).items() if k != "elicit-jax"
     )
+    made = dict(prov.get("result_commits") or {})
+    own = str(prov.get("commit", "unknown")) + ("+dirty" if dirty else "")
+    results = ""
+    if made and set(made) != {own}:
+        parts = ", ".join(
+            f"`{c[:12]}{'+dirty' * c.endswith('+dirty')}` ({n})" for c, n in made.items()
+        )
+        results = (
+            f" The evaluations were made at code {parts}: cached stages carried the run "
+            "across versions."
+        )
     return (
         f"Provenance: code `{str(prov.get('commit', 'unknown'))[:12]}`{state}, elicit-jax "
         f"{prov.get('elicit_jax', '?')} ({libs}); command `{prov.get('command', '?')}`; "
-        f"made {prov.get('time', '?')}."
+        f"made {prov.get('time', '?')}.{results}"
     )
 
 

@@ -230,3 +230,82 @@ def test_every_committed_study_with_raw_results_rebuilds_byte_for_byte(tmp_path)
             assert (out / name).read_bytes() == (study / name).read_bytes(), (study, name)
         run = read_json(study / "artifact.json")["run"]
         assert run["commit"] and run["command"] and read_json(out / "artifact.json")["run"] == run
+
+
+def _study(tmp_path: Path):
+    """A small elicitation study's data: two people, naive and informed sessions, made-up
+    rollouts (the real gather is exercised by the tiny study in test_study_pipeline.py)."""
+    from elicit_jax.pipeline.elicitation.gather import FilterCount, SessionData, StudyData
+
+    rng = np.random.default_rng(3)
+    frames = []
+    cells = [("base", None), *[(c, p) for c in ("naive", "informed") for p in ("p0", "p1")]]
+    for i, (cond, person) in enumerate(cells):
+        path = tmp_path / f"e{i}.parquet"
+        wins = {(s, e, c): list(rng.random(4) < 0.5) for s in (0, 1) for e in (0, 100)
+                for c in ("2", "best")}  # fmt: skip
+        _write_eval(path, _rollouts(wins))
+        cfg = {**_config("heldout"), "method": cond, "operator": person}
+        frames.append(cell_frame(cfg, path))
+    rows = tuple(
+        {"episode_kind": "demonstration", "index": k, "verdict": "accepted" if k else "rejected",
+         "rule_verdict": "accept" if k else "reject", "length": 40 + k, "operator_steps": 40 + k,
+         "fraction_incompatible": 0.1 / (k + 1), "intervention_rate": None, "interventions": 0}
+        for k in range(3)
+    )  # fmt: skip
+    record = {"choices": {"route": "left"}, "start_choices": {}, "changes": [], "traits": {}}
+    sessions = tuple(
+        SessionData("reach-pillar", "mlp", c, p, f"person:mild,seed={p[1:]}", False, rows, record)
+        for c in ("naive", "informed")
+        for p in ("p0", "p1")
+    )
+    rollouts = pd.concat(frames, ignore_index=True)
+    return StudyData(
+        pipeline="tiny-study", profile="cpu", description="made up", run_dir="runs/x",
+        spec_text="[pipeline]\n", results=tuple(result_rows_of(rollouts)), sessions=sessions,
+        base_lengths={"reach-pillar": (41.0, 2.5, 4)},
+        base_states={"reach-pillar": (np.linspace(0, 1, 46, dtype=np.float32).reshape(2, 23),)},
+        thresholds={("reach-pillar", "mlp"): {"lambda": 0.3, "eta": 0.03, "method": "fit",
+                                              "trust": None, "balanced_accuracy": 1.0}},
+        filters=(FilterCount("reach-pillar", "mlp", "p0", 70, 100, 3, 3),),
+        configs={"train": {}}, versions={"jax": "0"}, rollouts=rollouts,
+        provenance={"commit": "abc", "dirty": False, "command": "elicit-jax x", "time": "t"},
+    )  # fmt: skip
+
+
+def test_an_elicitation_study_report_rebuilds_byte_for_byte(tmp_path):
+    from elicit_jax.pipeline.elicitation.evidence import round_trip_study
+    from elicit_jax.pipeline.elicitation.report import write_study_report
+
+    md, _ = write_study_report(round_trip_study(_study(tmp_path)), tmp_path / "study")
+    folder = md.parent
+    assert "Checkpoint selection: held-out" in md.read_text()
+    assert "`elicit-jax report --rebuild <this folder>`" in md.read_text()
+    rebuild_report(folder, tmp_path / "again")
+    for p in folder.rglob("*"):
+        if p.is_file() and p.name != "artifact.json":
+            assert (tmp_path / "again" / p.relative_to(folder)).read_bytes() == p.read_bytes(), p
+
+
+def test_provenance_line_names_every_commit_that_made_results():
+    from elicit_jax.artifact import provenance_line
+
+    prov = {
+        "commit": "a" * 40,
+        "dirty": False,
+        "elicit_jax": "0.1.0",
+        "versions": {"jax": "1"},
+        "command": "elicit-jax pipeline run x",
+        "time": "2026-01-01T00:00:00+00:00",
+    }
+    line = provenance_line({**prov, "result_commits": {"a" * 40: 3}})
+    assert line == (
+        "Provenance: code `aaaaaaaaaaaa`, elicit-jax 0.1.0 (jax 1); command "
+        "`elicit-jax pipeline run x`; made 2026-01-01T00:00:00+00:00."
+    )
+    mixed = provenance_line({**prov, "result_commits": {"a" * 40: 3, "b" * 40 + "+dirty": 2}})
+    assert mixed.endswith(
+        "The evaluations were made at code `aaaaaaaaaaaa` (3), `bbbbbbbbbbbb+dirty` (2): cached "
+        "stages carried the run across versions."
+    )
+    assert "not recorded" in provenance_line({})

@@ -293,3 +293,13 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
     res = CliRunner().invoke(app, ["report", str(out), "-o", str(tmp_path / "again")])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "again/report.md").read_text() == first.report_md.read_text()
+    # and `elicit-jax report --rebuild` remakes it from the report folder alone
+    from elicit_jax.pipeline.run import rebuild_report
+
+    shutil.copytree(tmp_path / "again", tmp_path / "kept")
+    shutil.rmtree(out)
+    rebuild_report(tmp_path / "kept", tmp_path / "rebuilt")
+    for name in ("report.md", "report.html", "rollouts.parquet", "report-data.json"):
+        assert (tmp_path / "rebuilt" / name).read_bytes() == (
+            tmp_path / "again" / name
+        ).read_bytes()

@@ -9,7 +9,8 @@ A study's report folder holds, beside ``report.md``:
 * ``report-data.json`` — everything else the report shows (threshold fits, filter counts,
   curation scores, demonstration lengths, stage configs, versions, the run's provenance).
 
-``elicit-jax report --rebuild DIR`` (:func:`rebuild_report`) recomputes every table, interval
+``elicit-jax report --rebuild DIR`` (:func:`elicit_jax.pipeline.run.rebuild_report`; an
+elicitation study: :mod:`elicit_jax.pipeline.elicitation.evidence`) recomputes every table, interval
 and figure from those two files (and the maps and findings beside them) alone.
 
 Checkpoint selection (:data:`SELECTIONS`): ``heldout`` (the default of new runs) chooses each
@@ -44,6 +45,7 @@ ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
 ROLLOUTS_KIND = "study-rollouts"
 DATA_KIND = "report-data"
+STUDY_DATA_KIND = "study-report-data"
 SELECTIONS = ("heldout", "reported")
 SELECT_SEED_OFFSET = 100
 """Default selection seed of held-out selection: the reported evaluation seed + this."""
@@ -58,6 +60,22 @@ SELECTION_TEXT = {
     "reported: a maximum over noisy checkpoints, **biased upwards**, and the intervals "
     "ignore it",
 }
+
+
+def run_provenance(manifest: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
+    """The run's provenance (its manifest's, i.e. the last ``pipeline run``), plus the code
+    commits that made its finished evaluations (``result_commits``: commit -> count), which
+    differ when cached stages carried the run across code versions."""
+    from elicit_jax.artifact import PROVENANCE_KEY
+
+    commits: dict[str, int] = {}
+    for stage in manifest.get("stages", []):
+        path = run_dir / stage["output"]
+        if stage["kind"] == "evaluate" and path.is_file():
+            made = read_header(path).get(PROVENANCE_KEY, {})
+            commit = str(made.get("commit", "unknown")) + ("+dirty" if made.get("dirty") else "")
+            commits[commit] = commits.get(commit, 0) + 1
+    return {**manifest.get(PROVENANCE_KEY, {}), "result_commits": commits}
 
 
 def selection_meta(meta: Mapping[str, Any], seed: int) -> dict[str, Any]:
@@ -302,9 +320,9 @@ def round_trip(data: ReportData) -> ReportData:
     )
 
 
-def read_evidence(folder: str | Path) -> tuple[ReportData, Any]:
-    """The report data and rollout table of a report folder, or a one-line error naming
-    what is missing."""
+def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
+    """A report folder's ``report-data.json`` header and rollout table, or a one-line error
+    naming what is missing."""
     import pyarrow.parquet as pq
 
     folder = Path(folder)
@@ -316,18 +334,18 @@ def read_evidence(folder: str | Path) -> tuple[ReportData, Any]:
                 folder,
             )
     header = read_json(folder / DATA_FILE)
-    if header.get("kind") != DATA_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected {DATA_KIND}", folder)
+    if header.get("kind") not in (DATA_KIND, STUDY_DATA_KIND):
+        raise ElicitError(f"{DATA_FILE} is a '{header.get('kind')}' artifact", folder)
     if read_header(folder / ROLLOUTS_FILE).get("kind") != ROLLOUTS_KIND:
         raise ElicitError(f"{ROLLOUTS_FILE} is not a study rollout table", folder)
-    frame = pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
-    data = data_from_json(header, folder)
-    results = result_rows_of(frame)
-    return (
-        dataclasses.replace(
-            data,
-            results=tuple(r for r in results if r.study == "main"),
-            heldout=tuple(r for r in results if r.study != "main"),
-        ),
-        frame,
+    return header, pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
+
+
+def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> ReportData:
+    """A filtering or models report's data from its folder's raw results."""
+    results = result_rows_of(frame) if len(frame) else []
+    return dataclasses.replace(
+        data_from_json(header, folder),
+        results=tuple(r for r in results if r.study == "main"),
+        heldout=tuple(r for r in results if r.study != "main"),
     )

@@ -15,9 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import PROVENANCE_KEY, read_header, read_json
+from elicit_jax.artifact import read_header, read_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.evidence import cell_frame, empty_rollouts, result_rows_of
+from elicit_jax.pipeline.evidence import (
+    cell_frame,
+    empty_rollouts,
+    result_rows_of,
+    run_provenance,
+)
 from elicit_jax.pipeline.tables import (
     CurationRow,
     FilterRow,
@@ -266,6 +271,6 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),
-        provenance=manifest.get(PROVENANCE_KEY, {}),
+        provenance=run_provenance(manifest, run_dir),
     )
     return data, rollouts

@@ -102,10 +102,6 @@ def provenance_intro(data: Any) -> list[str]:
         "report; `elicit-jax report --rebuild <this folder>` recomputes every table, interval "
         "and figure from them."
         if getattr(data, "raw_results", False)
-        else f"Raw results: `{ROLLOUTS_FILE}` (one row per rollout) beside this report; its "
-        "session tables come from the run's session files, so it cannot yet be rebuilt from "
-        "its folder alone."
-        if getattr(data, "rollouts", None) is not None
         else "Raw results: not kept beside this report, so it cannot be rebuilt from its folder."
     )
     return [

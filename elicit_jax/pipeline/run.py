@@ -256,10 +256,11 @@ def render_run_report(
     target = Path(out) if out else run_dir / REPORT_DIR
     notes = None if findings is None else read_findings(findings)
     if _is_study(run_dir):
+        from elicit_jax.pipeline.elicitation.evidence import round_trip_study
         from elicit_jax.pipeline.elicitation.gather import gather_study
         from elicit_jax.pipeline.elicitation.report import write_study_report
 
-        study = dataclasses.replace(gather_study(run_dir), findings=notes)
+        study = round_trip_study(dataclasses.replace(gather_study(run_dir), findings=notes))
         return write_study_report(study, target)
     from elicit_jax.pipeline.evidence import round_trip
 
@@ -277,12 +278,20 @@ def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[P
       out: where to write the rebuilt report (default: ``folder`` itself, replaced
         atomically).
     """
-    from elicit_jax.pipeline.evidence import read_evidence
+    from elicit_jax.pipeline.elicitation.evidence import study_from_json
+    from elicit_jax.pipeline.elicitation.report import write_study_report
+    from elicit_jax.pipeline.evidence import STUDY_DATA_KIND, read_raw, report_data_of
     from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
     from elicit_jax.pipeline.report import write_report
 
     folder = Path(folder)
-    data, rollouts = read_evidence(folder)
+    header, rollouts = read_raw(folder)
+    findings = None
     if (folder / FINDINGS_FILE).is_file():
-        data = dataclasses.replace(data, findings=read_findings(folder / FINDINGS_FILE))
-    return write_report(data, Path(out) if out else folder, rollouts, rebuilt_from=folder)
+        findings = read_findings(folder / FINDINGS_FILE)
+    target = Path(out) if out else folder
+    if header["kind"] == STUDY_DATA_KIND:
+        study = dataclasses.replace(study_from_json(header, rollouts), findings=findings)
+        return write_study_report(study, target, rebuilt_from=folder)
+    data = dataclasses.replace(report_data_of(header, rollouts, folder), findings=findings)
+    return write_report(data, target, rollouts, rebuilt_from=folder)

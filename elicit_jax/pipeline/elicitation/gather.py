@@ -16,8 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import PROVENANCE_KEY, read_header, read_json
-from elicit_jax.pipeline.evidence import cell_frame, empty_rollouts, result_rows_of
+from elicit_jax.artifact import read_header, read_json
+from elicit_jax.pipeline.evidence import (
+    cell_frame,
+    empty_rollouts,
+    result_rows_of,
+    run_provenance,
+)
 from elicit_jax.pipeline.findings import Findings
 from elicit_jax.pipeline.gather import read_manifest
 from elicit_jax.pipeline.tables import ResultRow
@@ -227,6 +232,6 @@ def gather_study(run_dir: str | Path) -> StudyData:
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),
-        provenance=manifest.get(PROVENANCE_KEY, {}),
+        provenance=run_provenance(manifest, run_dir),
         rollouts=pd.concat(frames, ignore_index=True) if frames else empty_rollouts(),
     )
