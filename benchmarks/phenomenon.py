@@ -148,12 +148,15 @@ class Study:
 
 
 def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -> str:
+    from elicit_jax.artifact import provenance, provenance_line
     from elicit_jax.stats import format_diff, paired_difference, paired_t_interval
 
     ops, cseeds = args.operators, args.collect_seeds
     cfg = study.train_cfg
     lines = [
         f"## Naive BC on `{args.task}`: base-only vs base + each operator",
+        "",
+        provenance_line(provenance()) + " (cells reused from earlier runs may be older.)",
         "",
         f"MLP {args.hidden}x{args.hidden}, {args.members} members, {args.epochs} epochs "
         f"(batch {args.batch_size}), "

@@ -16,7 +16,10 @@ import json
 import os
 import platform
 import re
+import shlex
 import shutil
+import subprocess
+import sys
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
@@ -27,6 +30,10 @@ from elicit_jax.runtime import available_cpus, process_alive
 
 HEADER_KEY = b"elicit_jax"
 DIR_HEADER = "artifact.json"
+PROVENANCE_KEY = "provenance"
+"""The header key holding where an artifact came from (code commit, dirty tree, command line,
+versions, time). Everything under it describes the making, not the content, so content hashes
+of a header leave it out."""
 
 
 def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -66,6 +73,94 @@ def _library_versions() -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
+def code_commit() -> dict[str, Any]:
+    """The git commit of the elicit-jax code that runs, and whether its tree had uncommitted
+    changes (``{"commit": sha, "dirty": bool}``).
+
+    Looked up once per process in the checkout that holds the imported package; an install
+    from a wheel (no checkout) gives the commit its installer recorded, if any, else
+    ``{"commit": "unknown (not a git checkout)", "dirty": None}``.
+    """
+    return dict(_code_commit())
+
+
+@functools.cache
+def _code_commit() -> tuple[tuple[str, Any], ...]:
+    root = Path(__file__).resolve().parent.parent
+    try:
+        sha = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        status = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout
+        return (("commit", sha), ("dirty", bool(status.strip())))
+    except (OSError, subprocess.SubprocessError):
+        return (("commit", _installed_commit()), ("dirty", None))
+
+
+def _installed_commit() -> str:
+    """The commit pip recorded for a VCS install (``direct_url.json``), if any."""
+    from importlib import metadata
+
+    with contextlib.suppress(metadata.PackageNotFoundError, ValueError, TypeError):
+        text = metadata.distribution("elicit-jax").read_text("direct_url.json")
+        commit = json.loads(text or "{}").get("vcs_info", {}).get("commit_id")
+        if commit:
+            return str(commit)
+    return "unknown (not a git checkout)"
+
+
+def provenance() -> dict[str, Any]:
+    """Where an artifact made now comes from: code commit and dirty flag, the command line,
+    the elicit-jax and library versions and the UTC time (kept under
+    :data:`PROVENANCE_KEY` in every header)."""
+    versions = library_versions()
+    return {
+        **code_commit(),
+        "elicit_jax": versions.get("elicit-jax", "unknown"),
+        "versions": versions,
+        "command": shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else "",
+        "python": platform.python_version(),
+        "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+    }
+
+
+def provenance_line(prov: Mapping[str, Any]) -> str:
+    """One line saying where a result came from (the first line of every report)."""
+    if not prov:
+        return "Provenance: not recorded (made before elicit-jax recorded provenance)."
+    dirty = prov.get("dirty")
+    state = " (uncommitted changes)" if dirty else "" if dirty is False else " (tree unknown)"
+    libs = ", ".join(
+        f"{k} {v}" for k, v in dict(prov.get("versions", {})).items() if k != "elicit-jax"
+    )
+    made = dict(prov.get("result_commits") or {})
+    own = str(prov.get("commit", "unknown")) + ("+dirty" if dirty else "")
+    results = ""
+    if made and set(made) != {own}:
+        parts = ", ".join(
+            f"`{c[:12]}{'+dirty' * c.endswith('+dirty')}` ({n})" for c, n in made.items()
+        )
+        results = (
+            f" The evaluations were made at code {parts}: cached stages carried the run "
+            "across versions."
+        )
+    return (
+        f"Provenance: code `{str(prov.get('commit', 'unknown'))[:12]}`{state}, elicit-jax "
+        f"{prov.get('elicit_jax', '?')} ({libs}); command `{prov.get('command', '?')}`; "
+        f"made {prov.get('time', '?')}.{results}"
+    )
+
+
 def runtime_settings() -> dict[str, Any]:
     """Settings outside the config that can change numerics: XLA flags, the XLA CPU thread
     count (results are bit-identical only for the same machine and thread count), CPUs."""
@@ -83,7 +178,7 @@ def make_header(
     *,
     config: Mapping[str, Any] | None = None,
     inputs: Mapping[str, str | Path] | None = None,
-    seed: int | None = None,
+    seed: int | list[int] | None = None,
     **fields: Any,
 ) -> dict[str, Any]:
     """Build an artifact header.
@@ -93,7 +188,7 @@ def make_header(
       schema_version: version of that kind's layout.
       config: the config that produced the artifact (JSON-serialisable).
       inputs: name -> path of each input; stored as name -> {path, sha256}.
-      seed: the PRNG seed, if any.
+      seed: the PRNG seed, if any (a list: the seeds of a multi-seed artifact).
       **fields: kind-specific fields (shapes, names, ...).
     """
     header: dict[str, Any] = {
@@ -107,6 +202,7 @@ def make_header(
         "seed": seed,
         "versions": library_versions(),
         "runtime": runtime_settings(),
+        PROVENANCE_KEY: provenance(),
     }
     header.update(fields)
     return header

@@ -1,20 +1,102 @@
-"""The shape of the code: no import cycles, and nothing in the repository points outside it."""
+"""The shape of the code as a checked contract (docs/architecture.md): layers only import
+downwards, no module imports another module's ``_private`` names, no import cycles (lazy
+imports and ``importlib.import_module("elicit_jax...")`` strings included), and nothing in the
+repository points outside it. A planted violation of each rule is caught."""
+
+from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "elicit_jax"
 
+LAYERS = {
+    # top-level package or module of elicit_jax -> its layer; a module may import its own
+    # layer and lower ones, never a higher one. Keep in step with docs/architecture.md.
+    "": 0,  # elicit_jax/__init__.py: the version only
+    "errors": 0,
+    "runtime": 1,
+    "stats": 1,
+    "sharding": 1,
+    "artifact": 2,
+    "data": 3,
+    "policy": 4,
+    "sim": 5,
+    "compat": 5,
+    "curation": 6,
+    "elicit": 7,
+    "describe": 8,
+    "pipeline": 8,
+    "web": 9,
+    "cli": 10,
+}
 
-def _module_graph() -> dict[str, set[str]]:
-    """Module -> the elicit_jax modules it imports (anywhere in the file, lazy ones too)."""
+UPWARD_EXCEPTIONS = {
+    # (importer, imported): why it is still there. Remove an entry when the import goes.
+    ("elicit_jax.sim.describe_rollouts", "elicit_jax.cli.sim_cmds"): (
+        "describe_rollouts borrows the CLI's summary printer; printing belongs in cli/ "
+        "(issue #28 item 4)"
+    ),
+}
+
+PRIVATE_EXCEPTIONS = {
+    # (importer, imported module, name): why. Remove an entry when the import goes.
+    **{
+        (cmd, "elicit_jax.cli.compat_cmds", name): "threshold resolution is private to "
+        "compat_cmds; a public Thresholds resolver in compat/ replaces it (issue #28 item 2)"
+        for cmd in ("elicit_jax.cli.elicit_cmds", "elicit_jax.cli.serve_cmd")
+        for name in ("_ETA", "_LAMBDA", "_THRESHOLDS", "_resolve")
+    },
+    **{
+        ("elicit_jax.elicit.live", "elicit_jax.compat.score", name): "the live scorer reuses "
+        "the batch scorer's internals; public scoring functions replace them (issue #28 item 2)"
+        for name in ("_score_rows", "_static")
+    },
+    **{
+        ("elicit_jax.pipeline.elicitation.spec", "elicit_jax.pipeline.spec", name): "the "
+        "elicitation spec reuses the filtering spec's parsing helpers; one spec parser "
+        "replaces both (issue #28 item 1)"
+        for name in ("_check_keys", "_table", "_task_table")
+    },
+}
+
+_MODULE_STRING = re.compile(r"elicit_jax(\.\w+)*")
+
+
+def _modules(root: Path) -> dict[str, Path]:
     mods = {}
-    for p in PACKAGE.rglob("*.py"):
-        name = ".".join(p.relative_to(ROOT).with_suffix("").parts)
+    for p in (root / "elicit_jax").rglob("*.py"):
+        name = ".".join(p.relative_to(root).with_suffix("").parts)
         mods[name.removesuffix(".__init__")] = p
-    graph = {}
+    return mods
+
+
+def _named_modules(node: ast.AST) -> list[str]:
+    """Modules a node names: imports, and module-path strings (``import_module`` targets,
+    lookup tables; an f-string counts by its constant prefix)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return [node.value] if _MODULE_STRING.fullmatch(node.value) else []
+    if isinstance(node, ast.JoinedStr) and node.values:
+        head = node.values[0]
+        if isinstance(head, ast.Constant) and isinstance(head.value, str):
+            prefix = head.value.rstrip(".")
+            return [prefix] if _MODULE_STRING.fullmatch(prefix) else []
+    return []
+
+
+def scan(root: Path = ROOT) -> tuple[dict[str, set[str]], list[tuple[str, str, str]]]:
+    """(module -> the elicit_jax modules it imports or names, anywhere in the file; every
+    ``from module import _private`` across modules as (importer, module, name))."""
+    mods = _modules(root)
+    graph: dict[str, set[str]] = {}
+    private = []
     for name, path in mods.items():
         deps = set()
         for node in ast.walk(ast.parse(path.read_text())):
@@ -22,17 +104,35 @@ def _module_graph() -> dict[str, set[str]]:
                 for alias in node.names:
                     full = f"{node.module}.{alias.name}"
                     deps.add(full if full in mods else node.module)
-            elif isinstance(node, ast.Import):
-                deps.update(a.name for a in node.names if a.name.startswith("elicit_jax"))
+                    is_private = alias.name.startswith("_") and not alias.name.startswith("__")
+                    if is_private and node.module != name:
+                        private.append((name, node.module, alias.name))
+            deps.update(d for d in _named_modules(node) if d.startswith("elicit_jax"))
         graph[name] = {
             d
             for d in deps
             if d in mods and d != name and not name.startswith(d + ".") and not d.startswith(name)
         }
-    return graph
+    return graph, private
 
 
-def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+@functools.cache
+def _repo() -> tuple[dict[str, set[str]], list[tuple[str, str, str]]]:
+    return scan(ROOT)
+
+
+def layer_of(module: str) -> int:
+    """The layer of an ``elicit_jax`` module (its top-level package's, :data:`LAYERS`)."""
+    parts = module.split(".")
+    return LAYERS[parts[1] if len(parts) > 1 else ""]
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Every (importer, imported) where the imported module sits in a higher layer."""
+    return sorted((a, b) for a, deps in graph.items() for b in deps if layer_of(b) > layer_of(a))
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
@@ -42,7 +142,7 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     def visit(v: str) -> None:
         index[v] = low[v] = len(index)
         stack.append(v)
-        for w in sorted(graph[v]):
+        for w in sorted(graph.get(v, ())):
             if w not in index:
                 visit(w)
                 low[v] = min(low[v], low[w])
@@ -64,16 +164,77 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
+def test_every_package_has_a_layer_and_the_doc_lists_them():
+    tops = {p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
+    tops |= {p.name for p in PACKAGE.iterdir() if p.is_dir() and any(p.rglob("*.py"))}
+    assert tops - set(LAYERS) == set(), "give each new package a layer (here and in the doc)"
+    doc = (ROOT / "docs" / "architecture.md").read_text()
+    table = dict(re.findall(r"^\| (\d+) \| (.+?) \|", doc, re.M))
+    documented = {
+        name.strip(" `/").removesuffix(".py"): int(layer)
+        for layer, names in table.items()
+        for name in names.split(",")
+    }
+    assert documented == {k: v for k, v in LAYERS.items() if k}
+
+
+def test_no_upward_imports():
+    found = upward_imports(_repo()[0])
+    assert [f for f in found if f not in UPWARD_EXCEPTIONS] == []
+    assert [e for e in UPWARD_EXCEPTIONS if e not in found] == [], "stale exception"
+
+
+def test_no_cross_module_private_imports():
+    found = _repo()[1]
+    assert [f for f in found if f not in PRIVATE_EXCEPTIONS] == []
+    assert [e for e in PRIVATE_EXCEPTIONS if e not in found] == [], "stale exception"
+
+
 def test_no_import_cycles():
-    assert _cycles(_module_graph()) == []
+    assert cycles(_repo()[0]) == []
 
 
 def test_cycle_finder_finds_a_cycle():
-    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+@pytest.fixture()
+def planted(tmp_path: Path) -> Path:
+    """A small elicit_jax tree with one violation of each rule."""
+    files = {
+        "__init__.py": "",
+        "data/__init__.py": "",
+        # upward: data (3) imports cli (10), lazily inside a function
+        "data/demos.py": "def f():\n    from elicit_jax.cli.app import app\n    return app\n",
+        "cli/__init__.py": "",
+        "cli/app.py": "app = 1\n",
+        "compat/__init__.py": "",
+        # a private name from another module
+        "compat/score.py": "from elicit_jax.compat.measures import _helper\n",
+        "compat/measures.py": "def _helper():\n    return 1\n",
+        "policy/__init__.py": "",
+        # a cycle closed only by import_module strings
+        "policy/a.py": "import importlib\n\ndef f():\n"
+        "    return importlib.import_module('elicit_jax.policy.b')\n",
+        "policy/b.py": "import importlib\n\ndef g(x):\n"
+        "    return importlib.import_module(f'elicit_jax.policy.a.{x}')\n",
+    }
+    for rel, text in files.items():
+        path = tmp_path / "elicit_jax" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return tmp_path
+
+
+def test_planted_violations_are_caught(planted):
+    graph, private = scan(planted)
+    assert upward_imports(graph) == [("elicit_jax.data.demos", "elicit_jax.cli.app")]
+    assert private == [("elicit_jax.compat.score", "elicit_jax.compat.measures", "_helper")]
+    assert cycles(graph) == [["elicit_jax.policy.a", "elicit_jax.policy.b"]]
 
 
 def test_nothing_points_outside_the_repository():
-    outside = re.compile(r"/work/|shared/METHOD|\.\./shared|METHOD\.md")
+    outside = re.compile(r"/work/|shared/METHOD|\.\./shared|METHOD\.md|ARCHITECTURE\.md")
     files = [ROOT / "README.md", *PACKAGE.rglob("*.py"), *(ROOT / "docs").rglob("*.md")]
     files += [*(ROOT / "benchmarks").rglob("*.py"), *(ROOT / "benchmarks").rglob("*.md")]
     hits = [

@@ -1,5 +1,5 @@
-"""A new user's walk with their own robomimic file, through the CLI exactly as the README's
-"Your own data" section gives it: import with --obs-keys → split → train → score → fit →
+"""A new user's walk with their own robomimic file, through the CLI exactly as docs/own-data.md
+gives it: import with --obs-keys → split → train → score → fit →
 filter. The file has non-default obs keys, two constant action dims, a ±1 gripper and two
 operator mask keys (:func:`fixtures_data.own_robomimic_file`)."""
 

@@ -79,8 +79,9 @@ def data(tmp_path, profile="cpu") -> ReportData:
 
 
 def test_mean_std_over_seeds_by_hand():
-    # 100 × (0.40, 0.36, 0.38) = 40, 36, 38: mean 38; var = (4 + 4 + 0) / 3 = 2.67 → std 1.63
-    assert mean_std([0.40, 0.36, 0.38]) == "38.0 (1.6)"
+    # 100 × (0.40, 0.36, 0.38) = 40, 36, 38: mean 38; sample var (ddof 1) = (4 + 4 + 0) / 2 = 4
+    # → std 2.0
+    assert mean_std([0.40, 0.36, 0.38]) == "38.0 (2.0)"
     assert mean_std([0.5]) == "50.0 (–)"
     assert mean_std([]) == "–"
 
@@ -89,16 +90,16 @@ def test_results_table_has_paper_layout(tmp_path):
     (title, (header, rows)), _ = results_tables(data(tmp_path))
     assert title.startswith("square-nut — mlp")
     assert header == ["operator", "Naive", "M-Filtered"]
-    assert rows[0][0] == "base only: 38.0 (1.6)"
-    # same-style naive: 50, 56, 56 → mean 54, var = (16 + 4 + 4) / 3 = 8 → std 2.83;
-    # filtered: 52, 50, 54 → mean 52, var = (0 + 4 + 4) / 3 → std 1.63
-    assert rows[1] == ["same-style", "54.0 (2.8)", "52.0 (1.6)"]
-    # conflict-ring naive: 20, 30, 28 → mean 26, var = (36 + 16 + 4) / 3 = 18.7 → std 4.32
-    assert rows[2] == ["conflict-ring", "26.0 (4.3)", "38.0 (1.6)"]
+    assert rows[0][0] == "base only: 38.0 (2.0)"
+    # same-style naive: 50, 56, 56 → mean 54, var = (16 + 4 + 4) / 2 = 12 → std 3.46;
+    # filtered: 52, 50, 54 → mean 52, var = (0 + 4 + 4) / 2 = 4 → std 2.0
+    assert rows[1] == ["same-style", "54.0 (3.5)", "52.0 (2.0)"]
+    # conflict-ring naive: 20, 30, 28 → mean 26, var = (36 + 16 + 4) / 2 = 28 → std 5.29
+    assert rows[2] == ["conflict-ring", "26.0 (5.3)", "38.0 (2.0)"]
     ((_, (mheader, mrows)),) = models_table(data(tmp_path))
     assert mheader == ["", "mlp", "mdn"]
-    assert mrows[0] == ["Base (D_base only)", "38.0 (1.6)", "10.0 (–)"]
-    assert mrows[1] == ["Naive + same-style", "54.0 (2.8)", "20.0 (–)"]
+    assert mrows[0] == ["Base (D_base only)", "38.0 (2.0)", "10.0 (–)"]
+    assert mrows[1] == ["Naive + same-style", "54.0 (3.5)", "20.0 (–)"]
 
 
 def test_markdown_and_html_carry_every_section(tmp_path):
@@ -106,7 +107,7 @@ def test_markdown_and_html_carry_every_section(tmp_path):
     md = render_markdown(d, map_dir="maps/")
     for text in (
         CPU_NOTE,
-        "| same-style | 54.0 (2.8) | 52.0 (1.6) |",
+        "| same-style | 54.0 (3.5) | 52.0 (2.0) |",
         "0.41",
         "0.052",
         "750/1000 (75.0%)",
@@ -124,7 +125,7 @@ def test_markdown_and_html_carry_every_section(tmp_path):
     assert not re.search(r"""(src|href)=["'](https?:|//|/)""", page)
     assert "<script" not in page and "<link" not in page
     assert "<b>CPU profile</b>" in page
-    assert "54.0 (2.8)" in page and "&lt;" not in md
+    assert "54.0 (3.5)" in page and "&lt;" not in md
 
 
 def test_paper_profile_has_no_cpu_note(tmp_path):

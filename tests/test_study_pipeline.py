@@ -180,8 +180,9 @@ def test_table2_and_ablation_by_hand():
                      {}, (), {}, {})  # fmt: skip
     header, (row,) = table2(data)
     cols = dict(zip(header, row, strict=True))
-    # base: seeds 20, 40 → 30 (10); naive per seed: mean(10, 20)=15, mean(30, 20)=25 → 20 (5)
-    assert cols["Base"] == "30.0 (10.0)" and cols["Naive"] == "20.0 (5.0)"
+    # base: seeds 20, 40 → 30, sample std (ddof 1) √200 = 14.1; naive per seed:
+    # mean(10, 20)=15, mean(30, 20)=25 → 20, std √50 = 7.1
+    assert cols["Base"] == "30.0 (14.1)" and cols["Naive"] == "20.0 (7.1)"
     # informed per seed: mean(50, 40)=45, mean(30, 60)=45 → 45 (0)
     assert cols["Informed"] == "45.0 (0.0)" and cols["Naive + M-filtered"] == "–"
     # per person, informed − naive: p0 .40 − .20 = .20, p1 .50 − .20 = .30 → mean .25, paired
@@ -208,7 +209,8 @@ def test_table2_and_ablation_by_hand():
     assert informed["rule accepts"] == "67%" and informed["demos per accepted"] == "1.5"
     assert informed["ends as base"] == "–"  # no D_base states to compare styles on
     lengths = {r[2]: r for r in length_table(data)[1]}
-    assert lengths["Informed"][4] == "75.0 (5.0)" and lengths["Informed"][5] == "-6.2%"
+    # accepted 80, 70 → 75, sample std √50 = 7.1
+    assert lengths["Informed"][4] == "75.0 (7.1)" and lengths["Informed"][5] == "-6.2%"
     assert lengths["D_base"][4] == "80.0 (5.0)"
 
 
@@ -291,3 +293,13 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
     res = CliRunner().invoke(app, ["report", str(out), "-o", str(tmp_path / "again")])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "again/report.md").read_text() == first.report_md.read_text()
+    # and `elicit-jax report --rebuild` remakes it from the report folder alone
+    from elicit_jax.pipeline.run import rebuild_report
+
+    shutil.copytree(tmp_path / "again", tmp_path / "kept")
+    shutil.rmtree(out)
+    rebuild_report(tmp_path / "kept", tmp_path / "rebuilt")
+    for name in ("report.md", "report.html", "rollouts.parquet", "report-data.json"):
+        assert (tmp_path / "rebuilt" / name).read_bytes() == (
+            tmp_path / "again" / name
+        ).read_bytes()

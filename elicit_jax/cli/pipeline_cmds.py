@@ -92,6 +92,12 @@ def report(
         help="Markdown file of your reading of the run, put first in a pipeline or study "
         "report and copied beside it as findings.md (it may be the previous report's copy).",
     ),
+    rebuild: bool = typer.Option(
+        False,
+        "--rebuild",
+        help="RUN_DIR is a report folder: recompute every table, interval and figure from the "
+        "raw results kept in it (rollouts.parquet, report-data.json), without the run.",
+    ),
 ) -> None:
     """Write the Markdown and self-contained HTML report of a pipeline run or a session.
 
@@ -99,8 +105,20 @@ def report(
       elicit-jax report runs/filtering-cpu
       elicit-jax report sessions/op4
       elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
+      elicit-jax report --rebuild docs/results/f
     """
     from elicit_jax.artifact import read_json
+
+    if rebuild:
+        from elicit_jax.pipeline.run import rebuild_report
+
+        if findings is not None:
+            from elicit_jax.errors import ElicitError
+
+            raise ElicitError("--rebuild uses the findings.md kept in the folder", run_dir)
+        md, page = rebuild_report(run_dir, out)
+        typer.echo(f"rebuilt {md} and {page}")
+        return
 
     header = read_json(run_dir / "artifact.json") if (run_dir / "artifact.json").is_file() else {}
     if isinstance(header, dict) and header.get("kind") == "elicit-session":

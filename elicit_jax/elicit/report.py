@@ -15,7 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import atomic_path, dumps, make_header, read_header
+from elicit_jax.artifact import (
+    PROVENANCE_KEY,
+    atomic_path,
+    dumps,
+    make_header,
+    provenance_line,
+    read_header,
+)
 from elicit_jax.elicit.pages import figure_png, html_page, html_table, img_tag, md_table
 from elicit_jax.elicit.progress import Progress
 from elicit_jax.elicit.store import SessionStore
@@ -248,8 +255,14 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
     ]
 
 
+def _provenance(data: dict[str, Any]) -> str:
+    """Where the session came from (its header's provenance) and its seed."""
+    header = data["header"]
+    return f"{provenance_line(header.get(PROVENANCE_KEY, {}))} Session seed: {header.get('seed')}."
+
+
 def render_markdown(data: dict[str, Any], figure: str | None) -> str:
-    out = [f"# Elicitation session `{data['root']}`", ""]
+    out = [f"# Elicitation session `{data['root']}`", "", _provenance(data), ""]
     for title, content in _sections(data):
         out += [f"## {title}", ""]
         if isinstance(content, str):
@@ -264,6 +277,7 @@ def render_markdown(data: dict[str, Any], figure: str | None) -> str:
 
 def render_html(data: dict[str, Any], png: bytes | None) -> str:
     body = [f"<h1>Elicitation session {html.escape(data['root'])}</h1>"]
+    body.append(f"<p>{html.escape(_provenance(data))}</p>")
     for title, content in _sections(data):
         body.append(f"<h2>{html.escape(title)}</h2>")
         body.append(

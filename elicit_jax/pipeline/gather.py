@@ -17,6 +17,12 @@ import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.evidence import (
+    cell_frame,
+    empty_rollouts,
+    result_rows_of,
+    run_provenance,
+)
 from elicit_jax.pipeline.tables import (
     CurationRow,
     FilterRow,
@@ -59,7 +65,7 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
                 operator=op,
                 n_episodes=len(lens),
                 mean_length=float(lens.mean()),
-                std_length=float(lens.std()),
+                std_length=float(lens.std(ddof=1)) if lens.size > 1 else 0.0,
             )
         )
     return rows
@@ -162,51 +168,16 @@ def _lambda_point(stage: Mapping[str, Any], path: Path) -> LambdaPoint:
 
 
 def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
-    """Per training seed: success rate and mean rollout length of its best checkpoint.
+    """Per training seed: success rate and mean rollout length of its chosen checkpoint.
 
-    The best checkpoint is the one with the highest success over the rollouts (the paper's
-    and robomimic's convention; ties go to the earliest saved).
+    The chosen checkpoint has the highest success over the selection rollouts (held-out
+    selection: another evaluation seed's; the paper's rule: the reported rollouts themselves;
+    ties go to the earliest saved); see :mod:`elicit_jax.pipeline.evidence`.
     """
-    import pyarrow.parquet as pq
-
-    frame = pq.read_table(path).to_pandas()
-    per = (
-        frame.groupby(["seed", "checkpoint"], sort=False)
-        .agg(success=("success", "mean"), length=("length", "mean"), n=("success", "size"))
-        .reset_index()
-    )
-    rows = []
-    for seed, g in per.groupby("seed", sort=True):
-        best = g.loc[g["success"].idxmax()]
-        chosen = frame[(frame["seed"] == seed) & (frame["checkpoint"] == best["checkpoint"])]
-        rows.append(
-            ResultRow(
-                task=config["evaluate"]["task"],
-                model=config["model"],
-                method=config["method"],
-                operator=config.get("operator"),
-                seed=int(seed),
-                success=float(best["success"]),
-                mean_length=float(best["length"]),
-                n_rollouts=int(best["n"]),
-                checkpoint=str(best["checkpoint"]),
-                init_states=init_states_id(chosen["init_seed"].to_numpy()),
-                study=str(config.get("study", "main")),
-                point=config.get("point"),
-            )
-        )
-    return rows
+    return result_rows_of(cell_frame(config, path))
 
 
-def init_states_id(init_seeds: np.ndarray) -> str:
-    """A short fingerprint of the ordered initial-state seeds of a set of rollouts (paired
-    comparisons require equal fingerprints)."""
-    import hashlib
-
-    return hashlib.sha256(np.asarray(init_seeds, np.int64).tobytes()).hexdigest()[:16]
-
-
-def _training_note(train: Mapping[str, Any]) -> str:
+def training_note(train: Mapping[str, Any]) -> str:
     """One line per distinct training setup (model, sizes, epochs), as the report states it."""
     setups = {}
     for cfg in train.values():
@@ -233,10 +204,18 @@ def _training_note(train: Mapping[str, Any]) -> str:
 
 def gather(run_dir: str | Path) -> ReportData:
     """Everything the report shows, read from ``run_dir``'s finished artifacts."""
+    return gather_with_rollouts(run_dir)[0]
+
+
+def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
+    """:func:`gather`, and the study's per-rollout table the results were computed from
+    (:func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
+    import pandas as pd
+
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     cfg = manifest["config"]
-    results: list[ResultRow] = []
+    frames = []
     thresholds, lengths, filters, maps, curation, points = [], [], [], [], [], []
     configs: dict[str, dict[str, Any]] = {}
     missing = []
@@ -265,15 +244,17 @@ def gather(run_dir: str | Path) -> ReportData:
             c = stage["config"]
             maps.append((f"{c['task']}, {c['model']}: compatibility map per operator", str(path)))
         elif kind == "evaluate":
-            results += result_rows(stage["config"], path)
-    notes = [_training_note(configs.get("train", {}))] if configs.get("train") else []
+            frames.append(cell_frame(stage["config"], path))
+    notes = [training_note(configs.get("train", {}))] if configs.get("train") else []
     if missing:
         notes.append(
             f"{len(missing)} stage(s) have not finished, so their results are absent: "
             + ", ".join(missing[:8])
             + (" …" if len(missing) > 8 else "")
         )
-    return ReportData(
+    rollouts = pd.concat(frames, ignore_index=True) if frames else empty_rollouts()
+    results = result_rows_of(rollouts) if frames else []
+    data = ReportData(
         pipeline=cfg["pipeline"],
         profile=cfg["profile"],
         description=cfg.get("description", ""),
@@ -290,4 +271,6 @@ def gather(run_dir: str | Path) -> ReportData:
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),
+        provenance=run_provenance(manifest, run_dir),
     )
+    return data, rollouts

@@ -13,11 +13,19 @@ import html
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import atomic_path, dumps
+from elicit_jax.artifact import atomic_path, dumps, provenance_line
+from elicit_jax.pipeline.evidence import (
+    DATA_FILE,
+    ROLLOUTS_FILE,
+    selection_lines,
+    write_data,
+    write_rollouts_table,
+)
 from elicit_jax.pipeline.findings import write_beside
 from elicit_jax.pipeline.render import html_document, markdown_document
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
+    STD_NOTE,
     ReportData,
     curation_table,
     decisions_table,
@@ -82,17 +90,40 @@ def provenance_blocks(data: Any, definition_title: str) -> list[tuple[str, Any]]
     ]
 
 
-def _intro(data: ReportData) -> list[str]:
-    lines = [
-        f"Pipeline **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
+def provenance_intro(data: Any) -> list[str]:
+    """The first lines of every study report: where its numbers came from (the run's code
+    commit, versions and command line; the seeds), and how to rebuild it from its folder."""
+    seeds = sorted({r.seed for r in (*data.results, *getattr(data, "heldout", ()))})
+    evals = sorted(
+        {s for r in (*data.results, *getattr(data, "heldout", ())) for s in r.eval_seeds}
+    )
+    raw = (
+        f"Raw results: `{ROLLOUTS_FILE}` (one row per rollout) and `{DATA_FILE}` beside this "
+        "report; `elicit-jax report --rebuild <this folder>` recomputes every table, interval "
+        "and figure from them."
+        if getattr(data, "raw_results", False)
+        else "Raw results: not kept beside this report, so it cannot be rebuilt from its folder."
+    )
+    return [
+        provenance_line(data.provenance),
+        f"Seeds: training {seeds or '–'}, evaluation {evals or '–'}. {raw}",
     ]
+
+
+def _intro(data: ReportData) -> list[str]:
+    lines = provenance_intro(data)
+    lines.append(
+        f"Pipeline **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
+    )
     if data.profile == "cpu":
         lines.append(CPU_NOTE)
     if data.description:
         lines.append(data.description)
     lines += list(data.notes)
+    lines += selection_lines((*data.results, *data.heldout))
     if data.results or data.heldout:
         lines.append(f"Differences between policies: {INTERVAL_NOTE}")
+        lines.append(STD_NOTE)
     return lines
 
 
@@ -131,15 +162,38 @@ def _heading(data: ReportData) -> str:
     return f"elicit-jax report: {data.pipeline} ({data.profile} profile)"
 
 
-def write_report(data: ReportData, out_dir: str | Path) -> tuple[Path, Path]:
-    """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``maps/*.png`` and
-    ``artifact.json``; returns the Markdown and HTML paths."""
+def write_report(
+    data: ReportData,
+    out_dir: str | Path,
+    rollouts: Any = None,
+    rebuilt_from: Path | None = None,
+) -> tuple[Path, Path]:
+    """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``maps/*.png``,
+    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``;
+    returns the Markdown and HTML paths.
+
+    Args:
+      data: what the report shows.
+      out_dir: the report folder.
+      rollouts: the per-rollout table the results were computed from (``None``: none kept,
+        and the report says it cannot be rebuilt).
+      rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
+        are (byte for byte) instead of written anew.
+    """
     from elicit_jax.artifact import make_header
     from elicit_jax.pipeline.figures import sensitivity_figure
 
     out_dir = Path(out_dir)
     with atomic_path(out_dir) as tmp:
         (tmp / "maps").mkdir(parents=True)
+        if rebuilt_from is not None:
+            for name in (ROLLOUTS_FILE, DATA_FILE):
+                (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
+        elif rollouts is not None:
+            write_rollouts_table(tmp / ROLLOUTS_FILE, rollouts, data.pipeline, data.profile)
+            write_data(tmp / DATA_FILE, data)
+        kept = [n for n in (ROLLOUTS_FILE, DATA_FILE) if (tmp / n).is_file()]
+        data = dataclasses.replace(data, raw_results=bool(kept))
         for _, png in data.maps:
             (tmp / "maps" / Path(png).name).write_bytes(Path(png).read_bytes())
         figures = sensitivity_figure(data, tmp / "maps" / "lambda-sensitivity.png")
@@ -147,13 +201,26 @@ def write_report(data: ReportData, out_dir: str | Path) -> tuple[Path, Path]:
         (tmp / "report.md").write_text(render_markdown(data, map_dir="maps/"))
         (tmp / "report.html").write_text(render_html(data))
         findings = write_beside(data.findings, tmp)
+        seeds = sorted({r.seed for r in (*data.results, *data.heldout)})
         header = make_header(
             "pipeline-report",
             1,
             config={"pipeline": data.pipeline, "profile": data.profile},
+            inputs={name: tmp / name for name in kept},
+            seed=seeds[0] if seeds else None,
+            training_seeds=seeds,
+            run=dict(data.provenance),
+            **({"rebuilt_from": str(rebuilt_from)} if rebuilt_from is not None else {}),
             n_results=len(data.results),
-            files=["report.md", "report.html", *([findings["file"]] if findings else [])],
+            files=[
+                "report.md",
+                "report.html",
+                *kept,
+                *([findings["file"]] if findings else []),
+            ],
             **({"findings": findings} if findings else {}),
         )
+        for entry in header["inputs"].values():
+            entry["path"] = Path(entry["path"]).name
         (tmp / "artifact.json").write_text(dumps(header) + "\n")
     return out_dir / "report.md", out_dir / "report.html"

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import make_header, write_json
-from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather
+from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather, gather_with_rollouts
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.runner import RunResult, StageFn, print_summary, run_graph, run_lock
 from elicit_jax.pipeline.spec import PipelineSpec, load_spec
@@ -256,9 +256,42 @@ def render_run_report(
     target = Path(out) if out else run_dir / REPORT_DIR
     notes = None if findings is None else read_findings(findings)
     if _is_study(run_dir):
+        from elicit_jax.pipeline.elicitation.evidence import round_trip_study
         from elicit_jax.pipeline.elicitation.gather import gather_study
         from elicit_jax.pipeline.elicitation.report import write_study_report
 
-        study = dataclasses.replace(gather_study(run_dir), findings=notes)
+        study = round_trip_study(dataclasses.replace(gather_study(run_dir), findings=notes))
         return write_study_report(study, target)
-    return write_report(dataclasses.replace(gather(run_dir), findings=notes), target)
+    from elicit_jax.pipeline.evidence import round_trip
+
+    data, rollouts = gather_with_rollouts(run_dir)
+    return write_report(round_trip(dataclasses.replace(data, findings=notes)), target, rollouts)
+
+
+def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
+    """Rebuild a report from its folder alone: every table, interval and figure recomputed
+    from the raw results kept beside it (``rollouts.parquet``, ``report-data.json``, its maps
+    and ``findings.md``), without the run directory; returns the Markdown and HTML paths.
+
+    Args:
+      folder: a report folder written by this version of elicit-jax.
+      out: where to write the rebuilt report (default: ``folder`` itself, replaced
+        atomically).
+    """
+    from elicit_jax.pipeline.elicitation.evidence import study_from_json
+    from elicit_jax.pipeline.elicitation.report import write_study_report
+    from elicit_jax.pipeline.evidence import STUDY_DATA_KIND, read_raw, report_data_of
+    from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
+    from elicit_jax.pipeline.report import write_report
+
+    folder = Path(folder)
+    header, rollouts = read_raw(folder)
+    findings = None
+    if (folder / FINDINGS_FILE).is_file():
+        findings = read_findings(folder / FINDINGS_FILE)
+    target = Path(out) if out else folder
+    if header["kind"] == STUDY_DATA_KIND:
+        study = dataclasses.replace(study_from_json(header, rollouts), findings=findings)
+        return write_study_report(study, target, rebuilt_from=folder)
+    data = dataclasses.replace(report_data_of(header, rollouts, folder), findings=findings)
+    return write_report(data, target, rollouts, rebuilt_from=folder)

@@ -128,13 +128,15 @@ def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
 
 
 def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.pipeline.evidence import selection_meta
     from elicit_jax.sim.evaluate import EvalConfig
 
-    meta, over = _split(raw, ("model", "profile", "method", "operator", "seeds", "study", "point"))
+    keys = ("model", "profile", "method", "operator", "seeds", "study", "point")
+    meta, over = _split(raw, (*keys, "selection", "select_seed"))
     over = {"checkpoints": ["all"], "select": "best", **over}
     over["checkpoints"] = tuple(str(c) for c in over["checkpoints"])
     cfg = EvalConfig(**_fields(EvalConfig, over, "evaluate"))
-    return {**meta, "evaluate": dataclasses.asdict(cfg)}
+    return {**meta, **selection_meta(meta, cfg.seed), "evaluate": dataclasses.asdict(cfg)}
 
 
 def _resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
@@ -411,21 +413,44 @@ def map_stage(ctx: StageContext) -> None:
 
 
 def evaluate_stage(ctx: StageContext) -> None:
-    """Roll out every seed and checkpoint of one training run on the same initial states."""
+    """Roll out every seed and checkpoint of one training run on the same initial states;
+    with held-out checkpoint selection, also on the selection seed's initial states (the
+    Parquet's ``eval_seed`` column says which rollouts are which)."""
+    import numpy as np
+    import pandas as pd
     from rich.progress import Progress
 
-    from elicit_jax.sim.evaluate import EvalConfig, evaluate_policies, expand_policies
+    from elicit_jax.sim.evaluate import (
+        EvalConfig,
+        evaluate_refs,
+        expand_policies,
+        summarize,
+        write_rollouts,
+    )
 
     raw = dict(ctx.config["evaluate"])
     cfg = EvalConfig(**{**raw, "checkpoints": tuple(raw["checkpoints"])})
     label = Path(ctx.stage.output).stem
-    spec = f"{label}={ctx.inputs['policy']}"
-    total = len(expand_policies([spec], cfg.checkpoints))
+    refs = expand_policies([f"{label}={ctx.inputs['policy']}"], cfg.checkpoints)
+    seeds = [cfg.seed]
+    if ctx.config.get("selection") == "heldout":
+        seeds = [int(ctx.config["select_seed"]), cfg.seed]
+    frames = []
     with Progress(console=ctx.console, transient=True) as progress:
-        bar = progress.add_task(f"evaluate {label} ({cfg.rollouts} rollouts each)", total=total)
-        rollouts, _ = evaluate_policies(
-            [spec], cfg, out=ctx.output, progress=lambda ref, success: progress.advance(bar)
-        )
+        for seed in seeds:
+            bar = progress.add_task(
+                f"evaluate {label} (evaluation seed {seed}, {cfg.rollouts} rollouts each)",
+                total=len(refs),
+            )
+            frame = evaluate_refs(
+                refs,
+                dataclasses.replace(cfg, seed=seed),
+                lambda ref, success, bar=bar: progress.advance(bar),
+            )
+            frames.append(frame.assign(eval_seed=np.int32(seed)))
+    rollouts = pd.concat(frames, ignore_index=True)
+    reported = rollouts[rollouts["eval_seed"] == cfg.seed]
+    write_rollouts(ctx.output, rollouts, summarize(reported, cfg.select), cfg, refs)
     unstable = int(rollouts["unstable"].sum())
     if unstable:
         ctx.console.print(
@@ -574,10 +599,12 @@ def lambda_valley_stage(ctx: StageContext) -> None:
 
 def report_stage(ctx: StageContext) -> None:
     """Gather the run's artifacts and write the Markdown + HTML report."""
-    from elicit_jax.pipeline.gather import gather
+    from elicit_jax.pipeline.evidence import round_trip
+    from elicit_jax.pipeline.gather import gather_with_rollouts
     from elicit_jax.pipeline.report import write_report
 
-    write_report(gather(ctx.run_dir), ctx.output)
+    data, rollouts = gather_with_rollouts(ctx.run_dir)
+    write_report(round_trip(data), ctx.output, rollouts)
 
 
 def real_registry() -> dict[str, StageFn]:

@@ -60,6 +60,9 @@ class ResultRow:
     init_states: str = ""
     study: str = "main"
     point: int | None = None
+    selection: str = "reported"
+    eval_seeds: tuple[int, ...] = ()
+    select_success: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,14 +154,22 @@ class ReportData:
     versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
     notes: tuple[str, ...] = ()
     findings: Findings | None = None
+    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    raw_results: bool = False
 
 
 Table = tuple[list[str], list[list[str]]]
 
 
+STD_NOTE = (
+    "Every std in these tables is the sample standard deviation (ddof = 1), the same "
+    "convention as the intervals; a single value shows no spread (–)."
+)
+
+
 def mean_std(values: Sequence[float], scale: float = 100.0) -> str:
-    """``mean (std)`` of ``values × scale``, one decimal; population std over seeds (ddof = 0,
-    as numpy and ``elicit-jax evaluate``).
+    """``mean (std)`` of ``values × scale``, one decimal; sample std over seeds (ddof = 1, as
+    the intervals beside it, :data:`STD_NOTE`).
 
     One value gives ``mean (–)``: a single seed has no spread.
     """
@@ -167,7 +178,17 @@ def mean_std(values: Sequence[float], scale: float = 100.0) -> str:
         return "–"
     if arr.size == 1:
         return f"{arr[0]:.1f} (–)"
-    return f"{arr.mean():.1f} ({arr.std():.1f})"
+    return f"{arr.mean():.1f} ({arr.std(ddof=1):.1f})"
+
+
+def selection_label(results: Sequence[ResultRow]) -> str:
+    """How the tables' checkpoints were chosen, in a few words for a table title."""
+    rules = {r.selection for r in results}
+    if rules == {"heldout"}:
+        return "checkpoint per seed chosen on held-out rollouts"
+    if rules == {"reported"}:
+        return "best checkpoint per seed on the reported rollouts: biased upwards"
+    return "checkpoint per seed: mixed selection rules, see above"
 
 
 def _cells(results: Sequence[ResultRow]) -> dict[tuple, list[float]]:
@@ -202,7 +223,8 @@ def results_tables(data: ReportData) -> list[tuple[str, Table]]:
             rows.append([op, *[mean_std(cells.get((task, model, m, op), [])) for m in methods]])
         out.append(
             (
-                f"{task} — {model}: success % (best checkpoint per seed), mean (std) over seeds",
+                f"{task} — {model}: success % ({selection_label(data.results)}), "
+                "mean (std) over seeds",
                 (header, rows),
             )
         )
@@ -492,7 +514,15 @@ def length_table(data: ReportData) -> Table:
     """Mean demonstration length per operator (steps), with std over episodes."""
     header = ["task", "demo set", "operator", "episodes", "mean length (std)"]
     rows = [
-        [r.task, r.name, r.operator, str(r.n_episodes), f"{r.mean_length:.1f} ({r.std_length:.1f})"]
+        [
+            r.task,
+            r.name,
+            r.operator,
+            str(r.n_episodes),
+            f"{r.mean_length:.1f} ({r.std_length:.1f})"
+            if r.n_episodes > 1
+            else f"{r.mean_length:.1f} (–)",
+        ]
         for r in data.lengths
     ]
     return header, rows

@@ -303,7 +303,7 @@ def train_policy(
                 ckpt.SCHEMA_VERSION,
                 config=config.to_dict(),
                 inputs=inputs,
-                seed=None,
+                seed=list(config.seeds),
                 seeds=list(config.seeds),
                 seed_dirs={str(s): f"seed{s}" for s in config.seeds},
                 model=ckpt.policy_spec(template),

@@ -323,5 +323,9 @@ def write_rollouts(
         backend=resolve_backend(config.backend),
         n_rows=len(rollouts),
         summary=summary.to_dict(orient="records"),
+        training_seeds=sorted({int(s) for s in rollouts["seed"]}),
+        eval_seeds=sorted({int(s) for s in rollouts["eval_seed"]})
+        if "eval_seed" in rollouts
+        else [config.seed],
     )
     write_parquet(path, pa.Table.from_pandas(rollouts, preserve_index=False), header)

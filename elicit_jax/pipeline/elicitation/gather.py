@@ -1,7 +1,7 @@
 """Gather an elicitation study's run directory into :class:`StudyData` for its report.
 
 Reads the run manifest and, per finished stage: evaluations (success per training seed, best
-checkpoint — the filtering report's :func:`~elicit_jax.pipeline.gather.result_rows`),
+checkpoint — the filtering report's :func:`~elicit_jax.pipeline.evidence.result_rows_of`),
 sessions (per-episode summaries from the episode files, and the person's record of what it
 changed), M-filter counts, thresholds and D_base's lengths. Unfinished stages are listed in a
 note, so a partial run's report is right about what it shows.
@@ -17,8 +17,14 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
+from elicit_jax.pipeline.evidence import (
+    cell_frame,
+    empty_rollouts,
+    result_rows_of,
+    run_provenance,
+)
 from elicit_jax.pipeline.findings import Findings
-from elicit_jax.pipeline.gather import read_manifest, result_rows
+from elicit_jax.pipeline.gather import read_manifest
 from elicit_jax.pipeline.tables import ResultRow
 
 PERSON_FILE = "person.json"
@@ -95,6 +101,9 @@ class StudyData:
     versions: Mapping[str, str]
     notes: tuple[str, ...] = ()
     findings: Findings | None = None
+    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    rollouts: Any = None
+    raw_results: bool = False
 
 
 def _lengths(path: Path) -> tuple[float, float, int]:
@@ -102,7 +111,11 @@ def _lengths(path: Path) -> tuple[float, float, int]:
 
     episode = pq.read_table(path, columns=["episode"]).column("episode").to_numpy()
     _, counts = np.unique(episode, return_counts=True)
-    return float(counts.mean()), float(counts.std()), int(counts.size)
+    return (
+        float(counts.mean()),
+        float(counts.std(ddof=1)) if counts.size > 1 else 0.0,
+        int(counts.size),
+    )
 
 
 def _first_states(path: Path, n: int = 3) -> tuple[Any, ...]:
@@ -134,9 +147,24 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
     )
 
 
+def _filter_count(cfg: Mapping[str, Any], path: Path) -> FilterCount:
+    h = read_header(path)
+    return FilterCount(
+        task=cfg["task"],
+        model=cfg["model"],
+        person=cfg["person"],
+        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
+        pairs_total=int(h["pairs_in"]),
+        episodes_kept=int(h["episodes_out"]),
+        episodes_total=int(h["episodes_in"]),
+    )
+
+
 def gather_study(run_dir: str | Path) -> StudyData:
     """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
-    from elicit_jax.pipeline.gather import _training_note
+    import pandas as pd
+
+    from elicit_jax.pipeline.gather import training_note
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
@@ -149,6 +177,7 @@ def gather_study(run_dir: str | Path) -> StudyData:
     thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
+    frames = []
     for stage in manifest["stages"]:
         kind, cfg, path = stage["kind"], stage["config"], run_dir / stage["output"]
         configs.setdefault(kind, {})[stage["id"]] = cfg
@@ -158,7 +187,8 @@ def gather_study(run_dir: str | Path) -> StudyData:
             missing.append(stage["id"])
             continue
         if kind == "evaluate":
-            results += result_rows(cfg, path)
+            frames.append(cell_frame(cfg, path))
+            results += result_rows_of(frames[-1])
         elif kind == "session":
             data = session_data(stage, path)
             if data is None:
@@ -179,19 +209,8 @@ def gather_study(run_dir: str | Path) -> StudyData:
                 "balanced_accuracy": report.get("balanced_accuracy"),
             }
         elif kind == "filter-session":
-            h = read_header(path)
-            filters.append(
-                FilterCount(
-                    task=cfg["task"],
-                    model=cfg["model"],
-                    person=cfg["person"],
-                    pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-                    pairs_total=int(h["pairs_in"]),
-                    episodes_kept=int(h["episodes_out"]),
-                    episodes_total=int(h["episodes_in"]),
-                )
-            )
-    notes = [_training_note(configs["train"])] if configs.get("train") else []
+            filters.append(_filter_count(cfg, path))
+    notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
             f"{len(missing)} stage(s) have not finished, so their results are absent: "
@@ -213,4 +232,6 @@ def gather_study(run_dir: str | Path) -> StudyData:
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),
+        provenance=run_provenance(manifest, run_dir),
+        rollouts=pd.concat(frames, ignore_index=True) if frames else empty_rollouts(),
     )

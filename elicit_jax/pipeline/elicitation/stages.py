@@ -167,10 +167,11 @@ def filter_session_stage(ctx: StageContext) -> None:
 
 def study_report_stage(ctx: StageContext) -> None:
     """Gather the study's artifacts and write its Markdown + HTML report."""
+    from elicit_jax.pipeline.elicitation.evidence import round_trip_study
     from elicit_jax.pipeline.elicitation.gather import gather_study
     from elicit_jax.pipeline.elicitation.report import write_study_report
 
-    write_study_report(gather_study(ctx.run_dir), Path(ctx.output))
+    write_study_report(round_trip_study(gather_study(ctx.run_dir)), Path(ctx.output))
 
 
 def study_registry() -> dict[str, StageFn]:

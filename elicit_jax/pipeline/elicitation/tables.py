@@ -2,7 +2,7 @@
 
 Success of a condition (the paper's Table 2 cells): per training seed, the mean over the
 population of each person's policy success (best checkpoint per seed, 50 rollouts), then
-mean (std) over seeds (std with ddof 0, as the filtering report). Differences between two
+mean (std) over seeds (sample std, ddof 1, as the filtering report). Differences between two
 conditions are paired by person: each person's difference of mean success over seeds, with
 the pipeline's paired 95% Student t interval
 (:func:`~elicit_jax.stats.paired_t_interval`), here over people — the person is the
@@ -268,7 +268,7 @@ def length_table(data: StudyData) -> Table:
                     model,
                     label,
                     str(len(lens)),
-                    f"{np.mean(lens):.1f} ({np.std(lens):.1f})",
+                    f"{np.mean(lens):.1f} ({np.std(lens, ddof=1) if len(lens) > 1 else 0.0:.1f})",
                     vs,
                 ]
             )

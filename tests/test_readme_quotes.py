@@ -1,0 +1,42 @@
+"""The README quotes reports only with numbers the reports hold (tests/readme_quotes.py), and
+the check fails when a quoted number is edited."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from readme_quotes import check_file, check_repository, numbers
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_numbers_are_normalised():
+    assert numbers("−7.2 [−20.1, +5.7] * 1,393.5 and 50 demos, 0.0 or -0.0") == {
+        "-7.2", "-20.1", "5.7", "1393.5", "0.0",
+    }  # fmt: skip
+
+
+def test_every_quoted_number_is_in_its_report():
+    count, problems = check_repository(ROOT)
+    assert problems == []
+    assert count >= 2  # the filtering table and HG-DAgger's
+
+
+def test_an_edited_quote_fails(tmp_path):
+    (tmp_path / "docs").mkdir()
+    shutil.copytree(ROOT / "docs" / "results", tmp_path / "docs" / "results")
+    readme = (ROOT / "README.md").read_text()
+    (tmp_path / "README.md").write_text(readme)
+    assert check_file(tmp_path / "README.md", tmp_path) == []
+    # HG-DAgger's informed cell, 32.0, edited to 34.0
+    assert "| Informed HG-DAgger | 32.0 (10.5) |" in readme
+    edited = readme.replace(
+        "| Informed HG-DAgger | 32.0 (10.5) |", "| Informed HG-DAgger | 34.0 (10.5) |"
+    )
+    (tmp_path / "README.md").write_text(edited)
+    (problem,) = check_file(tmp_path / "README.md", tmp_path)
+    assert "34.0 10.5 not in docs/results/elicitation-cpu-round-nut/report.md" in problem
+    # a quote naming a report that is not there
+    (tmp_path / "README.md").write_text("<!-- from docs/results/nope/report.md -->\n| 1.5 |\n")
+    assert "does not exist" in check_file(tmp_path / "README.md", tmp_path)[0]
