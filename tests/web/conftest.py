@@ -3,10 +3,32 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import pytest
+from chromium import CHROMIUM_NAMES, FLAGS, find_chromium
 
 from elicit_jax.elicit.config import SessionConfig
+
+
+@pytest.fixture(scope="session")  # session scope: looked for before the demo inputs are built
+def browser():
+    chromium = find_chromium()
+    if chromium is None:
+        where = os.environ.get("ELICIT_JAX_CHROMIUM") or " or ".join(CHROMIUM_NAMES) + " on PATH"
+        reason = (
+            f"no Chromium found ({where}): install Debian's package (apt-get install chromium) "
+            "to run the browser test"
+        )
+        if os.environ.get("ELICIT_JAX_REQUIRE_BROWSER") == "1":
+            pytest.fail(reason + " (ELICIT_JAX_REQUIRE_BROWSER=1)")
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium, args=FLAGS)
+        yield b
+        b.close()
 
 
 @pytest.fixture(scope="session")

@@ -16,7 +16,6 @@ import urllib.request
 import numpy as np
 import pytest
 from fixtures_data import robomimic_demo, write_robomimic
-from test_web_browser import browser  # noqa: F401  (the Chromium fixture)
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
@@ -119,7 +118,7 @@ def _status(url: str, host: str | None = None) -> int:
 
 
 def test_review_flags_two_episodes_and_the_export_reimports_without_them(
-    browser,  # noqa: F811
+    browser,
     imported,
 ):
     d = imported

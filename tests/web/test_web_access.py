@@ -115,8 +115,12 @@ def test_the_guard_answers_400_to_a_websocket_without_the_denial_extension():
     guard = AccessGuard(None, access_policy("127.0.0.1", 8765))
     scope = {"type": "websocket", "path": "/ws", "headers": [(b"host", b"evil:8765")]}
     import asyncio
+    import threading
 
-    asyncio.run(guard(scope, receive, send))
+    # in a thread of its own: Playwright's sync API (a session fixture) keeps a loop running here
+    worker = threading.Thread(target=asyncio.run, args=(guard(scope, receive, send),))
+    worker.start()
+    worker.join()
     assert sent == [{"type": "websocket.close", "code": 1008, "reason": "not allowed"}]
 
 

@@ -18,62 +18,18 @@ from __future__ import annotations
 import os
 import queue
 import re
-import shutil
 import signal
 import subprocess
 import sys
 import threading
 from pathlib import Path
 
-import pytest
-
 from elicit_jax.data.demos import read_demos
 from elicit_jax.elicit.store import SessionStore
 
-CHROMIUM_NAMES = ("chromium", "chromium-browser")
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",
-    "--use-angle=swiftshader",
-]
 AUTOPILOT = (Path(__file__).parent / "autopilot.js").read_text()
 SHOTS = os.environ.get("ELICIT_JAX_SCREENSHOTS")
 ATTEMPTS = 4  # at the base route (the session has 2 + ATTEMPTS episodes: practice, wrong side)
-
-
-def find_chromium() -> str | None:
-    """$ELICIT_JAX_CHROMIUM if set (it must exist), else `chromium` / `chromium-browser`."""
-    given = os.environ.get("ELICIT_JAX_CHROMIUM")
-    if given:
-        return given if Path(given).is_file() else None
-    return next(filter(None, map(shutil.which, CHROMIUM_NAMES)), None)
-
-
-@pytest.fixture(scope="session")  # session scope: looked for before the demo inputs are built
-def browser():
-    chromium = find_chromium()
-    if chromium is None:
-        where = os.environ.get("ELICIT_JAX_CHROMIUM") or " or ".join(CHROMIUM_NAMES) + " on PATH"
-        reason = (
-            f"no Chromium found ({where}): install Debian's package (apt-get install chromium) "
-            "to run the browser test"
-        )
-        if os.environ.get("ELICIT_JAX_REQUIRE_BROWSER") == "1":
-            pytest.fail(reason + " (ELICIT_JAX_REQUIRE_BROWSER=1)")
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=chromium, args=FLAGS)
-        yield b
-        b.close()
 
 
 class Server:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from test_web_browser import SHOTS, Server, browser, drive, driven, screen  # noqa: F401
+from test_web_browser import SHOTS, Server, drive, driven, screen
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
@@ -34,7 +34,7 @@ def row(name: str, **attrs: str) -> str:
     return f"tr[data-name={name}]" + "".join(f"[data-{k}={v}]" for k, v in attrs.items())
 
 
-def test_the_dashboard_follows_two_operators_and_downloads_their_demos(browser, demo, tmp_path):  # noqa: F811
+def test_the_dashboard_follows_two_operators_and_downloads_their_demos(browser, demo, tmp_path):
     sessions = tmp_path / "sessions"
     server = Server(demo.dir.parent, sessions)
     server.args = serve_args(demo.dir.parent, sessions)

@@ -1,0 +1,29 @@
+"""Where Debian's Chromium is and how the browser tests start it (shared by every browser test)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+CHROMIUM_NAMES = ("chromium", "chromium-browser")
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+    "--use-angle=swiftshader",
+]
+
+
+def find_chromium() -> str | None:
+    """$ELICIT_JAX_CHROMIUM if set (it must exist), else `chromium` / `chromium-browser`."""
+    given = os.environ.get("ELICIT_JAX_CHROMIUM")
+    if given:
+        return given if Path(given).is_file() else None
+    return next(filter(None, map(shutil.which, CHROMIUM_NAMES)), None)
