@@ -18,7 +18,8 @@ import platform
 import re
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping
+import zipfile
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,14 @@ from elicit_jax.runtime import available_cpus, process_alive
 
 HEADER_KEY = b"elicit_jax"
 DIR_HEADER = "artifact.json"
+
+VOLATILE_FIELDS: frozenset[str] = frozenset(
+    {"created", "imported", "train_seconds", "seconds", "started", "elapsed", "time"}
+)
+"""Header keys (at any depth) that differ between two identical runs: wall-clock times and
+durations. :func:`content_sha256` leaves them out, so that the same seed, config, inputs,
+machine and thread count give the same content hash. A new header field of that sort is
+added here, and only here."""
 
 
 def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -44,6 +53,98 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
                 h.update(block)
     except FileNotFoundError as e:
         raise ElicitError("file not found", path) from e
+    return h.hexdigest()
+
+
+def stable_fields(obj: Any, volatile: frozenset[str] = VOLATILE_FIELDS) -> Any:
+    """``obj`` (parsed JSON) without the keys in ``volatile``, at any depth."""
+    if isinstance(obj, dict):
+        return {k: stable_fields(v, volatile) for k, v in obj.items() if k not in volatile}
+    if isinstance(obj, list):
+        return [stable_fields(v, volatile) for v in obj]
+    return obj
+
+
+def content_sha256(path: str | Path) -> str:
+    """Hash of what an artifact holds, blind to when it was written.
+
+    Two runs with the same seed, config and inputs (same machine and XLA thread count) give
+    the same content hash even though their bytes differ:
+
+    - a Parquet file with an elicit-jax header: its data pages, its Arrow schema (without
+      metadata) and its header without :data:`VOLATILE_FIELDS`;
+    - a ``.json`` file: its parsed content without :data:`VOLATILE_FIELDS`;
+    - an ``.npz`` file: its arrays' names, dtypes, shapes and values (the zip entries'
+      timestamps left out);
+    - a directory: sorted relative paths and the content hash of each file;
+    - any other file (robomimic HDF5, images, ...): its bytes, as :func:`file_sha256`.
+    """
+    path = Path(path)
+    h = hashlib.sha256()
+    if path.is_dir():
+        for sub in sorted(p for p in path.rglob("*") if p.is_file()):
+            h.update(str(sub.relative_to(path)).encode())
+            h.update(content_sha256(sub).encode())
+        return h.hexdigest()
+    if not path.exists():
+        raise ElicitError("file not found", path)
+    try:
+        if path.suffix == ".parquet":
+            return _parquet_content_sha256(path) or file_sha256(path)
+        if path.suffix == ".json":
+            data = stable_fields(json.loads(path.read_text()))
+            h.update(json.dumps(data, sort_keys=True).encode())
+            return h.hexdigest()
+        if path.suffix == ".npz":
+            return _npz_content_sha256(path)
+    except (ValueError, OSError, zipfile.BadZipFile):
+        pass  # not what its name says: hashed by its bytes
+    return file_sha256(path)
+
+
+def matches_recorded(recorded: str | None, path: str | Path) -> bool:
+    """True when ``recorded`` (an input's ``sha256`` in a header) is the hash of ``path``: its
+    :func:`content_sha256`, or, for headers written before content hashes, its bytes'."""
+    if not recorded:
+        return False
+    return recorded == content_sha256(path) or recorded == file_sha256(path)
+
+
+def _parquet_content_sha256(path: Path) -> str | None:
+    """Content hash of a Parquet artifact, or None when it has no elicit-jax header. Column
+    chunks come before the footer, and only the footer holds the header."""
+    import pyarrow.parquet as pq
+
+    try:
+        pf = pq.ParquetFile(path)
+    except Exception:  # pyarrow raises several types for non-Parquet input
+        return None
+    meta = pf.schema_arrow.metadata or {}
+    if HEADER_KEY not in meta:
+        return None
+    h = hashlib.sha256()
+    h.update(json.dumps(stable_fields(json.loads(meta[HEADER_KEY])), sort_keys=True).encode())
+    h.update(pf.schema_arrow.remove_metadata().to_string().encode())
+    with open(path, "rb") as f:
+        f.seek(-8, os.SEEK_END)
+        footer = int.from_bytes(f.read(4), "little")
+        left = os.path.getsize(path) - 8 - footer
+        f.seek(0)
+        while left > 0 and (block := f.read(min(left, 1 << 20))):
+            h.update(block)
+            left -= len(block)
+    return h.hexdigest()
+
+
+def _npz_content_sha256(path: Path) -> str:
+    import numpy as np
+
+    h = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as z:
+        for name in sorted(z.files):
+            a = np.ascontiguousarray(z[name])
+            h.update(f"{name}|{a.dtype.str}|{a.shape}".encode())
+            h.update(a.tobytes())
     return h.hexdigest()
 
 
@@ -77,6 +178,19 @@ def runtime_settings() -> dict[str, Any]:
     }
 
 
+def now_utc() -> str:
+    """The time to record as an artifact's ``created``: now, or ``SOURCE_DATE_EPOCH`` when
+    that is set (reproducible-builds convention), so that identical runs can also give
+    identical bytes."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    when = (
+        _dt.datetime.fromtimestamp(int(epoch), _dt.UTC)
+        if epoch.isdigit()
+        else _dt.datetime.now(_dt.UTC)
+    )
+    return when.isoformat(timespec="seconds")
+
+
 def make_header(
     kind: str,
     schema_version: int,
@@ -92,17 +206,19 @@ def make_header(
       kind: artifact kind (``demos``, ``checkpoint``, ``scores``, ...).
       schema_version: version of that kind's layout.
       config: the config that produced the artifact (JSON-serialisable).
-      inputs: name -> path of each input; stored as name -> {path, sha256}.
+      inputs: name -> path of each input; stored as name -> {path, sha256}, the
+        :func:`content_sha256` of each.
       seed: the PRNG seed, if any.
       **fields: kind-specific fields (shapes, names, ...).
     """
     header: dict[str, Any] = {
         "kind": kind,
         "schema_version": schema_version,
-        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "created": now_utc(),
         "config": dict(config or {}),
         "inputs": {
-            name: {"path": str(p), "sha256": file_sha256(p)} for name, p in (inputs or {}).items()
+            name: {"path": str(p), "sha256": content_sha256(p)}
+            for name, p in (inputs or {}).items()
         },
         "seed": seed,
         "versions": library_versions(),
@@ -177,7 +293,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     untouched, so no half-written artifact is ever visible; temporaries a killed writer left
     behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
     written (read-only directory, a file in the way) is an :class:`ElicitError` naming
-    ``path``, not the temporary.
+    ``path``, not the temporary; so is an existing directory where a file was written (a
+    directory is only ever replaced by a directory).
     """
     path = Path(path)
     try:
@@ -189,6 +306,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     target = tmp / path.name
     try:
         yield target
+        if path.is_dir() and not path.is_symlink() and not target.is_dir():
+            raise ElicitError(
+                "is an existing directory; refusing to replace it with a file (nothing written)",
+                path,
+            )
         if path.is_dir() and not path.is_symlink():
             old = path.with_name(f".{path.name}.old-{os.getpid()}")
             os.replace(path, old)
@@ -207,7 +329,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 def refuse_overwriting_inputs(
     outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
 ) -> None:
-    """Raise when an output would replace one of the inputs (or a directory holding one).
+    """Raise when an output would replace an input, a directory holding one, or a file
+    inside an input directory (a run, a LeRobot dataset).
 
     Args:
       outputs: paths about to be written.
@@ -224,6 +347,69 @@ def refuse_overwriting_inputs(
                     "output",
                     out,
                 )
+            if i in o.parents and i.is_dir():
+                raise ElicitError(
+                    f"refusing to write here: this path is inside the input directory {i}; "
+                    "choose an output outside it",
+                    out,
+                )
+
+
+def check_outputs(
+    outputs: Iterable[str | Path | None],
+    inputs: Iterable[str | Path | None] = (),
+    *,
+    overwrite: bool = False,
+    replaceable: Callable[[Path], bool] | None = None,
+) -> None:
+    """The one rule for every path a command writes, checked before any work is done.
+
+    - an output that is, holds or lies inside an input is refused
+      (:func:`refuse_overwriting_inputs`);
+    - an existing directory is refused, always, unless ``replaceable`` says it holds an
+      artifact of the kind being written (and then only with ``overwrite``): a run, a folder
+      of notes, a dataset is never deleted to make room for an output;
+    - an existing file is refused unless ``overwrite``.
+
+    Args:
+      outputs: paths about to be written (``None`` entries are ignored).
+      inputs: paths being read (``None`` entries are ignored).
+      overwrite: the user passed ``--overwrite``.
+      replaceable: for outputs that are directories, whether an existing directory holds
+        an artifact of this kind that may be replaced.
+
+    Raises:
+      ElicitError: naming the output and what to do instead.
+    """
+    outs = [Path(p) for p in outputs if p is not None]
+    refuse_overwriting_inputs(outs, inputs)
+    for out in outs:
+        if out.is_dir() and not out.is_symlink():
+            if replaceable is None or not replaceable(out):
+                raise ElicitError(
+                    "is an existing directory; elicit-jax never replaces a directory with an "
+                    "output: give a file path (e.g. inside it, or beside it)",
+                    out,
+                )
+        elif not (out.exists() or out.is_symlink()):
+            continue
+        if not overwrite:
+            raise ElicitError(
+                "already exists; pass --overwrite to replace it, or choose another path", out
+            )
+
+
+def holds_artifact(*kinds: str) -> Callable[[Path], bool]:
+    """A ``replaceable`` test for :func:`check_outputs`: the directory's ``artifact.json``
+    names one of ``kinds``."""
+
+    def test(path: Path) -> bool:
+        try:
+            return read_header(path).get("kind") in kinds
+        except ElicitError:
+            return False
+
+    return test
 
 
 def write_json(path: str | Path, obj: Any) -> None:
@@ -294,4 +480,4 @@ def is_up_to_date(
     recorded = header.get("inputs", {})
     if set(recorded) != set(inputs):
         return False
-    return all(recorded[k].get("sha256") == file_sha256(p) for k, p in inputs.items())
+    return all(matches_recorded(recorded[k].get("sha256"), p) for k, p in inputs.items())

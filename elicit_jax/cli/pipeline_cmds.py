@@ -100,8 +100,14 @@ def report(
       elicit-jax report sessions/op4
       elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
     """
-    from elicit_jax.artifact import read_json
+    from elicit_jax.artifact import check_outputs, holds_artifact, read_json
 
+    # a report is re-rendered in place; any other directory at -o is never replaced
+    check_outputs(
+        [out or run_dir / "report"],
+        overwrite=True,
+        replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
+    )
     header = read_json(run_dir / "artifact.json") if (run_dir / "artifact.json").is_file() else {}
     if isinstance(header, dict) and header.get("kind") == "elicit-session":
         from elicit_jax.elicit.report import write_session_report

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
+from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
 
 
 @app.command(rich_help_panel=INSPECT)
@@ -40,6 +41,7 @@ def collect(
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Collect scripted demonstrations on C MuJoCo; only successful episodes are kept.
 
@@ -51,9 +53,11 @@ def collect(
     from rich.console import Console
     from rich.progress import Progress
 
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.sim.collect import CollectConfig
     from elicit_jax.sim.collect import collect as run
 
+    check_outputs([out], overwrite=overwrite)
     config = CollectConfig(
         task=task,
         operator=operator,
@@ -89,6 +93,7 @@ def evaluate(
     horizon: int = typer.Option(0, "--horizon", help="Control steps (0: the task's)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
     out: Path | None = typer.Option(None, "-o", "--out", help="Per-rollout Parquet to write."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies with rollouts from the same seeded initial states.
 
@@ -100,6 +105,7 @@ def evaluate(
     from rich.console import Console
     from rich.progress import Progress
 
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.sim.evaluate import (
         EvalConfig,
         evaluate_policies,
@@ -107,6 +113,7 @@ def evaluate(
         resolve_backend,
     )
 
+    check_outputs([out], policy_dirs(policy), overwrite=overwrite)
     config = EvalConfig(
         task=task,
         rollouts=rollouts,
