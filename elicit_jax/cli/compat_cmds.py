@@ -105,9 +105,9 @@ def score(
     from elicit_jax.compat.score import episodes_path
     from elicit_jax.compat.score_file import score_checkpoint
 
-    check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
     resolved = _resolve(thresholds, lambda_, eta, preset)
     _check_units(action_scale, thresholds, preset)
+    check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
     source = (
         f"file {thresholds}"
         if thresholds is not None
@@ -333,11 +333,11 @@ def filter_cmd(
     """
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
 
-    _check_filter_outputs(out, method, export_out, overwrite,
-                          [scores, demos, base, policy, source, thresholds])  # fmt: skip
     resolved = _resolve(thresholds, lambda_, eta)
     if scores is not None:
         _check_units(_scores_scale(scores), thresholds, None)
+    _check_filter_outputs(out, method, export_out, overwrite,
+                          [scores, demos, base, policy, source, thresholds])  # fmt: skip
     if method in CURATORS:
         if export is not None:
             raise ElicitError("--export works with the M-filter and its baselines only")
@@ -485,8 +485,8 @@ def map_cmd(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.maps import map_scores_file
 
-    check_outputs([out], [scores, thresholds], overwrite=overwrite)
     resolved = _resolve(thresholds, lambda_, eta)
     _check_units(_scores_scale(scores), thresholds, None)
+    check_outputs([out], [scores, thresholds], overwrite=overwrite)
     lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
     typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")
