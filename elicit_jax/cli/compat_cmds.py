@@ -105,9 +105,34 @@ def score(
     from elicit_jax.compat.score import episodes_path
     from elicit_jax.compat.score_file import score_checkpoint
 
-    resolved = _resolve(thresholds, lambda_, eta, preset)
-    _check_units(action_scale, thresholds, preset)
+    (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
     check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
+    config = ScoreConfig(
+        likelihood=likelihood,  # type: ignore[arg-type]
+        ddof=ddof,
+        lambda_=lam,
+        eta=et,
+        accept_fraction=accept_fraction,
+        chunk_size=chunk_size,
+        action_scale=action_scale,
+        dropout_samples=dropout_samples,
+        dropout_seed=dropout_seed,
+    )
+    which_: str | int = int(which) if which.isdigit() else which
+    score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
+
+
+def _score_thresholds(
+    demos: Path,
+    thresholds: Path | None,
+    lam: float | None,
+    eta: float | None,
+    preset: str | None,
+    action_scale: str,
+) -> tuple[tuple[float, float], str]:
+    """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
+    resolved = _resolve(thresholds, lam, eta, preset)
+    _check_units(action_scale, thresholds, preset)
     source = (
         f"file {thresholds}"
         if thresholds is not None
@@ -122,20 +147,7 @@ def score(
     elif action_scale == "std" and thresholds is None:
         typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
         source += " (std-scaled units)"
-    lam, et = resolved
-    config = ScoreConfig(
-        likelihood=likelihood,  # type: ignore[arg-type]
-        ddof=ddof,
-        lambda_=lam,
-        eta=et,
-        accept_fraction=accept_fraction,
-        chunk_size=chunk_size,
-        action_scale=action_scale,
-        dropout_samples=dropout_samples,
-        dropout_seed=dropout_seed,
-    )
-    which_: str | int = int(which) if which.isdigit() else which
-    score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
+    return resolved, source
 
 
 def _check_units(action_scale: str, thresholds: Path | None, preset: str | None) -> None:

@@ -50,7 +50,7 @@ from elicit_jax.artifact import (
     write_parquet,
 )
 from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
-from elicit_jax.data.duplicates import drop_rows, duplicates_of
+from elicit_jax.data.duplicates import drop_rows, duplicate_reasons, duplicates_of
 from elicit_jax.errors import ElicitError
 
 METHODS = ("m", "random", "shortest", "longest", "likelihood", "novelty")
@@ -348,14 +348,3 @@ def filter_demos(
         exported,
         dups,
     )
-
-
-def duplicate_reasons(
-    demos: Any, dups: dict[int, int], drop: np.ndarray, reason: str
-) -> np.ndarray:
-    """(N,) the drop log's reason of each row: ``reason``, or for an episode identical to a
-    D_base episode ``duplicate of --base episode B`` (dropped whatever its scores)."""
-    out = np.where(drop, reason, "").astype(object)
-    for e, b in dups.items():
-        out[demos.episode == e] = f"duplicate of --base episode {b}"
-    return out

@@ -126,6 +126,17 @@ class CurateResult:
     """Episodes of D_new dropped as identical to D_base's: new id -> base id."""
 
 
+def _base_and_duplicates(demos: Any, base_path: str | Path | None) -> tuple[Any, dict[int, int]]:
+    """D_base (or None) and the episodes of ``demos`` identical to one of its episodes."""
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.data.duplicates import duplicates_of
+
+    if base_path is None:
+        return None, {}
+    base = read_demos(base_path)
+    return base, duplicates_of(demos, base)
+
+
 def curate_demos(
     scores: EpisodeScores,
     demos_path: str | Path,
@@ -153,30 +164,22 @@ def curate_demos(
     import pyarrow as pa
 
     from elicit_jax.artifact import make_header, write_parquet
-    from elicit_jax.compat.filtering import (
-        PRE_EPISODE,
-        PRE_STEP,
-        apply_drop,
-        duplicate_reasons,
-        log_path,
-    )
+    from elicit_jax.compat.filtering import PRE_EPISODE, PRE_STEP, apply_drop, log_path
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
-    from elicit_jax.data.duplicates import duplicates_of
+    from elicit_jax.data.duplicates import duplicate_reasons
 
     demos = read_demos(demos_path)
     ids = np.asarray(scores.episode)
     if not np.array_equal(ids, demos.episode_ids):
         raise ElicitError("these demonstration scores were computed on another file", demos_path)
     drop_ep, reason = select_drop(scores, rule)
-    base = None if base_path is None else read_demos(base_path)
-    dups = {} if base is None else duplicates_of(demos, base)
+    base, dups = _base_and_duplicates(demos, base_path)
     drop_ep = drop_ep | np.isin(ids, list(dups))
     index = np.repeat(np.arange(len(ids)), np.asarray(scores.length))
     drop = drop_ep[index]
     reasons = duplicate_reasons(demos, dups, drop, reason)
     record = {"curate": dict(config or {}), "rule": dataclasses.asdict(rule), "reason": reason}
-    if dups:
-        record["duplicates_of_base"] = dups
+    record |= {"duplicates_of_base": dups} if dups else {}
     all_inputs: dict[str, str | Path] = {"demos": demos_path, **(inputs or {})}
     parts = []
     if base is not None:

@@ -70,3 +70,14 @@ def describe(dups: Sequence[Duplicate], names: Sequence[str], limit: int = 3) ->
 def drop_rows(demos: Demos, episodes: Sequence[int] | np.ndarray) -> np.ndarray:
     """(N,) bool: the rows of these episodes."""
     return np.isin(demos.episode, np.asarray(list(episodes), dtype=np.int64))
+
+
+def duplicate_reasons(
+    demos: Demos, dups: dict[int, int], drop: np.ndarray, reason: str
+) -> np.ndarray:
+    """(N,) the drop log's reason of each row: ``reason``, or for an episode identical to a
+    D_base episode ``duplicate of --base episode B`` (dropped whatever its scores)."""
+    out = np.where(drop, reason, "").astype(object)
+    for e, b in dups.items():
+        out[demos.episode == e] = f"duplicate of --base episode {b}"
+    return out
