@@ -21,37 +21,26 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.hashing import (  # noqa: F401  (re-exported: the artifact API)
+    HEADER_KEY,
+    VOLATILE_FIELDS,
+    content_sha256,
+    file_sha256,
+    matches_recorded,
+    stable_fields,
+)
 from elicit_jax.runtime import available_cpus, process_alive
 
-HEADER_KEY = b"elicit_jax"
 DIR_HEADER = "artifact.json"
 PROVENANCE_KEY = "provenance"
 """The header key holding where an artifact came from (code commit, dirty tree, command line,
 versions, time). Everything under it describes the making, not the content, so content hashes
 of a header leave it out."""
-
-
-def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
-    """Content hash of a file, or of a directory (sorted relative paths and file hashes)."""
-    path = Path(path)
-    h = hashlib.sha256()
-    if path.is_dir():
-        for sub in sorted(p for p in path.rglob("*") if p.is_file()):
-            h.update(str(sub.relative_to(path)).encode())
-            h.update(file_sha256(sub).encode())
-        return h.hexdigest()
-    try:
-        with open(path, "rb") as f:
-            while block := f.read(chunk):
-                h.update(block)
-    except FileNotFoundError as e:
-        raise ElicitError("file not found", path) from e
-    return h.hexdigest()
 
 
 def library_versions() -> dict[str, str]:
@@ -172,6 +161,19 @@ def runtime_settings() -> dict[str, Any]:
     }
 
 
+def now_utc() -> str:
+    """The time to record as an artifact's ``created``: now, or ``SOURCE_DATE_EPOCH`` when
+    that is set (reproducible-builds convention), so that identical runs can also give
+    identical bytes."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    when = (
+        _dt.datetime.fromtimestamp(int(epoch), _dt.UTC)
+        if epoch.isdigit()
+        else _dt.datetime.now(_dt.UTC)
+    )
+    return when.isoformat(timespec="seconds")
+
+
 def make_header(
     kind: str,
     schema_version: int,
@@ -187,17 +189,19 @@ def make_header(
       kind: artifact kind (``demos``, ``checkpoint``, ``scores``, ...).
       schema_version: version of that kind's layout.
       config: the config that produced the artifact (JSON-serialisable).
-      inputs: name -> path of each input; stored as name -> {path, sha256}.
+      inputs: name -> path of each input; stored as name -> {path, sha256}, the
+        :func:`content_sha256` of each.
       seed: the PRNG seed, if any (a list: the seeds of a multi-seed artifact).
       **fields: kind-specific fields (shapes, names, ...).
     """
     header: dict[str, Any] = {
         "kind": kind,
         "schema_version": schema_version,
-        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "created": now_utc(),
         "config": dict(config or {}),
         "inputs": {
-            name: {"path": str(p), "sha256": file_sha256(p)} for name, p in (inputs or {}).items()
+            name: {"path": str(p), "sha256": content_sha256(p)}
+            for name, p in (inputs or {}).items()
         },
         "seed": seed,
         "versions": library_versions(),
@@ -273,7 +277,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     untouched, so no half-written artifact is ever visible; temporaries a killed writer left
     behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
     written (read-only directory, a file in the way) is an :class:`ElicitError` naming
-    ``path``, not the temporary.
+    ``path``, not the temporary; so is an existing directory where a file was written (a
+    directory is only ever replaced by a directory).
     """
     path = Path(path)
     try:
@@ -285,6 +290,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     target = tmp / path.name
     try:
         yield target
+        if path.is_dir() and not path.is_symlink() and not target.is_dir():
+            raise ElicitError(
+                "is an existing directory; refusing to replace it with a file (nothing written)",
+                path,
+            )
         if path.is_dir() and not path.is_symlink():
             old = path.with_name(f".{path.name}.old-{os.getpid()}")
             os.replace(path, old)
@@ -303,7 +313,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 def refuse_overwriting_inputs(
     outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
 ) -> None:
-    """Raise when an output would replace one of the inputs (or a directory holding one).
+    """Raise when an output would replace an input, a directory holding one, or a file
+    inside an input directory (a run, a LeRobot dataset).
 
     Args:
       outputs: paths about to be written.
@@ -320,6 +331,69 @@ def refuse_overwriting_inputs(
                     "output",
                     out,
                 )
+            if i in o.parents and i.is_dir():
+                raise ElicitError(
+                    f"refusing to write here: this path is inside the input directory {i}; "
+                    "choose an output outside it",
+                    out,
+                )
+
+
+def check_outputs(
+    outputs: Iterable[str | Path | None],
+    inputs: Iterable[str | Path | None] = (),
+    *,
+    overwrite: bool = False,
+    replaceable: Callable[[Path], bool] | None = None,
+) -> None:
+    """The one rule for every path a command writes, checked before any work is done.
+
+    - an output that is, holds or lies inside an input is refused
+      (:func:`refuse_overwriting_inputs`);
+    - an existing directory is refused, always, unless ``replaceable`` says it holds an
+      artifact of the kind being written (and then only with ``overwrite``): a run, a folder
+      of notes, a dataset is never deleted to make room for an output;
+    - an existing file is refused unless ``overwrite``.
+
+    Args:
+      outputs: paths about to be written (``None`` entries are ignored).
+      inputs: paths being read (``None`` entries are ignored).
+      overwrite: the user passed ``--overwrite``.
+      replaceable: for outputs that are directories, whether an existing directory holds
+        an artifact of this kind that may be replaced.
+
+    Raises:
+      ElicitError: naming the output and what to do instead.
+    """
+    outs = [Path(p) for p in outputs if p is not None]
+    refuse_overwriting_inputs(outs, inputs)
+    for out in outs:
+        if out.is_dir() and not out.is_symlink():
+            if replaceable is None or not replaceable(out):
+                raise ElicitError(
+                    "is an existing directory; elicit-jax never replaces a directory with an "
+                    "output: give a file path (e.g. inside it, or beside it)",
+                    out,
+                )
+        elif not (out.exists() or out.is_symlink()):
+            continue
+        if not overwrite:
+            raise ElicitError(
+                "already exists; pass --overwrite to replace it, or choose another path", out
+            )
+
+
+def holds_artifact(*kinds: str) -> Callable[[Path], bool]:
+    """A ``replaceable`` test for :func:`check_outputs`: the directory's ``artifact.json``
+    names one of ``kinds``."""
+
+    def test(path: Path) -> bool:
+        try:
+            return read_header(path).get("kind") in kinds
+        except ElicitError:
+            return False
+
+    return test
 
 
 def write_json(path: str | Path, obj: Any) -> None:
@@ -399,4 +473,4 @@ def is_up_to_date(
     recorded = header.get("inputs", {})
     if set(recorded) != set(inputs):
         return False
-    return all(recorded[k].get("sha256") == file_sha256(p) for k, p in inputs.items())
+    return all(matches_recorded(recorded[k].get("sha256"), p) for k, p in inputs.items())

@@ -7,7 +7,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from elicit_jax.artifact import file_sha256, read_header
+from elicit_jax.artifact import content_sha256, read_header
 from elicit_jax.compat.episode_summary import summarise_episodes
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score import score_demos
@@ -129,7 +129,7 @@ def test_headers_and_episode_summary(policies, demos_file, tmp_path):
     assert header["kind"] == "scores"
     assert header["thresholds"] == {"lambda": 0.05, "eta": 10.0}
     assert header["config"]["likelihood"] == "ensemble-mean"
-    assert header["inputs"]["demos"]["sha256"] == file_sha256(demos_file)
+    assert header["inputs"]["demos"]["sha256"] == content_sha256(demos_file)
     ep_header = read_header(result.episodes_path)
     assert ep_header["kind"] == "episode-scores"
     assert result.episodes_path.name == "scores.episodes.parquet"

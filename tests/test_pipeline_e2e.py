@@ -100,13 +100,15 @@ def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
         PipelineRunConfig(pipeline=str(spec), out=str(out)), console=Console(file=io.StringIO())
     )
     third = run(spec, out)
-    assert status["to run"] == third.result.ran
-    assert third.result.ran == [
+    assert status["to run"] == [
         "filter/reach-pillar/mlp/filtered/conflict-right",
         "train/reach-pillar/mlp/filtered/conflict-right",
         "evaluate/reach-pillar/mlp/filtered-conflict-right",
         "report",
     ]
+    # the rebuilt filter output has the same content (only its 'created' time differs), so
+    # what depends on it is still up to date: nothing downstream re-runs (content hashes)
+    assert third.result.ran == ["filter/reach-pillar/mlp/filtered/conflict-right"]
 
     spec.write_text(TINY.replace("rollouts = 4", "rollouts = 3"))
     fourth = run(spec, out)

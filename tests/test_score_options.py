@@ -114,6 +114,7 @@ def _score(run, demos, *extra):
             str(run / demos),
             "-o",
             str(out),
+            "--overwrite",  # each test scores into the same file again
             *extra,
         ],
     )

@@ -20,9 +20,11 @@ def _invoke(*args):
 
 
 def test_a_folder_where_a_file_is_expected(tmp_path):
-    r = _invoke("import", tmp_path, "--format", "npz", "-o", tmp_path / "d.parquet")
+    folder = tmp_path / "folder"  # (an output inside the input folder would be refused first)
+    folder.mkdir()
+    r = _invoke("import", folder, "--format", "npz", "-o", tmp_path / "d.parquet")
     assert "is a folder, not a .npz file" in str(r.exception)
-    r = _invoke("import", tmp_path, "--format", "robomimic", "-o", tmp_path / "d.parquet")
+    r = _invoke("import", folder, "--format", "robomimic", "-o", tmp_path / "d.parquet")
     assert "is a folder, not an HDF5 file" in str(r.exception)
     f = tmp_path / "x.txt"
     f.write_text("x")

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import COMPAT, app
+from elicit_jax.cli.outputs import OVERWRITE, note_duplicates
 from elicit_jax.errors import ElicitError
 
 _THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
@@ -83,6 +84,7 @@ def score(
     chunk_size: int = typer.Option(4096, "--chunk-size", help="Pairs per compiled chunk."),
     which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
     seed: int | None = typer.Option(None, "--seed", help="Seed of a multi-seed run directory."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Score every state-action pair: likelihood error, novelty, compatibility M.
 
@@ -96,20 +98,13 @@ def score(
     Example: elicit-jax score --policy runs/base --demos new.parquet -o scores.parquet
     --preset round-nut
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score import episodes_path
     from elicit_jax.compat.score_file import score_checkpoint
 
-    resolved = _resolve(thresholds, lambda_, eta, preset)
-    source = (
-        f"file {thresholds}"
-        if thresholds is not None
-        else f"preset {preset}"
-        if preset is not None
-        else "given"
-    )
-    if resolved is None:
-        resolved, source = _task_preset(demos)
-    lam, et = resolved
+    (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
+    check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
     config = ScoreConfig(
         likelihood=likelihood,  # type: ignore[arg-type]
         ddof=ddof,
@@ -125,9 +120,73 @@ def score(
     score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
 
 
-def _task_preset(demos: Path) -> tuple[tuple[float, float], str]:
+def _score_thresholds(
+    demos: Path,
+    thresholds: Path | None,
+    lam: float | None,
+    eta: float | None,
+    preset: str | None,
+    action_scale: str,
+) -> tuple[tuple[float, float], str]:
+    """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
+    resolved = _resolve(thresholds, lam, eta, preset)
+    _check_units(action_scale, thresholds, preset)
+    source = (
+        f"file {thresholds}"
+        if thresholds is not None
+        else f"preset {preset}"
+        if preset is not None
+        else "given"
+    )
+    if resolved is None:
+        resolved, source = _task_preset(demos, quiet=action_scale == "std")
+        if action_scale == "std":
+            source = _std_placeholder(source)
+    elif action_scale == "std" and thresholds is None:
+        typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
+        source += " (std-scaled units)"
+    return resolved, source
+
+
+def _check_units(action_scale: str, thresholds: Path | None, preset: str | None) -> None:
+    """λ and η must be in the units the scores are computed in (docs/thresholds.md). The
+    paper's presets are in raw action units: ``--action-scale std`` refuses an explicit
+    ``--preset`` rather than apply it silently (no exact conversion exists: scaling weighs
+    each dim apart); a thresholds file must have been fitted on scores of the same scale."""
+    from elicit_jax.compat.thresholds import check_units
+
+    if thresholds is not None:
+        check_units(thresholds, action_scale)
+    if action_scale == "std" and preset is not None:
+        raise ElicitError(
+            f"--action-scale std: --preset {preset} is in raw action units and does not apply "
+            "to std-scaled scores; give --lambda/--eta in std-scaled units, --thresholds "
+            "fitted on std-scaled scores, or no thresholds (docs/thresholds.md)"
+        )
+
+
+def _std_placeholder(task_source: str) -> str:
+    """Said (and recorded) when ``--action-scale std`` scores without thresholds: the
+    task's preset is in raw units, so M and accept/reject only hold its values as a stand-in."""
+    typer.echo(
+        "warning: --action-scale std: the paper presets are in raw action units, so M and "
+        "accept/reject in this file are placeholders, not verdicts; ℓ and ν are std-scaled. "
+        "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
+        "filter and map.",
+        err=True,
+    )
+    return f"placeholder, not valid for --action-scale std scores: {task_source} (raw units)"
+
+
+def _scores_scale(scores: Path) -> str:
+    from elicit_jax.artifact import read_header
+
+    return str(read_header(scores).get("config", {}).get("action_scale", "none"))
+
+
+def _task_preset(demos: Path, quiet: bool = False) -> tuple[tuple[float, float], str]:
     """(λ, η) and their source when none are given: the paper preset of the demos' task, or
-    square-nut's values, borrowed and marked as such (said on stderr)."""
+    square-nut's values, borrowed and marked as such (said on stderr unless ``quiet``)."""
     from elicit_jax.artifact import read_header
     from elicit_jax.compat.measures import PRESETS, preset_for_task
 
@@ -135,15 +194,19 @@ def _task_preset(demos: Path) -> tuple[tuple[float, float], str]:
     name = preset_for_task(task)
     if name is not None:
         lam, eta = PRESETS[name]
-        typer.echo(f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}", err=True)
+        if not quiet:
+            typer.echo(
+                f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}", err=True
+            )
         return (lam, eta), f"preset {name} (task {task})"
     lam, eta = PRESETS["square-nut"]
-    typer.echo(
-        f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
-        f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
-        "(elicit-jax fit-thresholds) and pass --thresholds to filter and map.",
-        err=True,
-    )
+    if not quiet:
+        typer.echo(
+            f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
+            f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
+            "(elicit-jax fit-thresholds) and pass --thresholds to filter and map.",
+            err=True,
+        )
     return (lam, eta), f"borrowed: square-nut preset, not fitted for task {task} (it has no preset)"
 
 
@@ -177,6 +240,7 @@ def fit_thresholds_cmd(
         help="The base policy's training demos, to check the thresholds accept them (default: "
         "those in the scores, and the file the checkpoint records).",
     ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
 
@@ -194,9 +258,11 @@ def fit_thresholds_cmd(
     Example (hand-set): elicit-jax fit-thresholds --scores scores.parquet --lambda 0.4 --eta
     0.05 -o thresholds.json
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.thresholds import FitConfig
 
+    check_outputs([out], [scores], overwrite=overwrite)
     job = FitJob(
         compatible=compatible,
         incompatible=incompatible,
@@ -264,6 +330,7 @@ def filter_cmd(
         "best", "--checkpoint", help="cupid: the checkpoint of --policy that was rolled out."
     ),
     proj_dim: int = typer.Option(512, "--proj-dim", help="cupid: gradient projection dim."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.
 
@@ -299,7 +366,11 @@ def filter_cmd(
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
 
     resolved = _resolve(thresholds, lambda_, eta)
-    if method in ("deminf", "demo-score", "cupid", "quality"):
+    if scores is not None:
+        _check_units(_scores_scale(scores), thresholds, None)
+    inputs = [scores, demos, base, policy, source, thresholds, trajectories]
+    _check_filter_outputs(out, method, export_out, overwrite, inputs)
+    if method in CURATORS:
         from elicit_jax.cli.curation_cmds import CurateArgs, curate
 
         if export is not None:
@@ -327,14 +398,34 @@ def filter_cmd(
             out=str(export_out),
             mask_key=mask_key,
             source=None if source is None else str(source),
+            overwrite=overwrite,
         )
     r = filter_demos(scores, demos, out, config, base_path=base, export=spec)
+    note_duplicates(r.duplicates)
     typer.echo(
         f"{out}: dropped {r.pairs_dropped}/{r.pairs_in} pairs of D_new "
         f"({r.episodes_in} -> {r.episodes_out} episodes; {r.reason}); log: {r.log_path}"
     )
     if r.export is not None:
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
+
+
+def _check_filter_outputs(
+    out: Path, method: str, export_out: Path | None, overwrite: bool, inputs: list
+) -> None:
+    """Every file ``filter`` writes (the demos, its drop log or per-demo scores, an export),
+    checked by the one output rule before any work."""
+    from elicit_jax.artifact import check_outputs
+    from elicit_jax.compat.filtering import log_path
+    from elicit_jax.curation.select import scores_path_for
+    from elicit_jax.data.export import is_lerobot_dataset
+
+    outs = [out, log_path(out)] + ([scores_path_for(out)] if method in CURATORS else [])
+    check_outputs(outs, inputs, overwrite=overwrite)
+    check_outputs([export_out], inputs, overwrite=overwrite, replaceable=is_lerobot_dataset)
+
+
+CURATORS = ("deminf", "demo-score", "cupid", "quality")
 
 
 @app.command("map", rich_help_panel=COMPAT)
@@ -347,13 +438,17 @@ def map_cmd(
     axis: str = typer.Option(
         "likelihood-error", "--axis", help="likelihood-error (ℓ) or neg-likelihood-error (−ℓ)."
     ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Draw the compatibility map: likelihood vs novelty per operator, threshold box.
 
     Example: elicit-jax map --scores scores.parquet -o map.png
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.maps import map_scores_file
 
     resolved = _resolve(thresholds, lambda_, eta)
+    _check_units(_scores_scale(scores), thresholds, None)
+    check_outputs([out], [scores, thresholds], overwrite=overwrite)
     lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
     typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")

@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import COMPAT, app
+from elicit_jax.cli.outputs import OVERWRITE
 from elicit_jax.errors import ElicitError
 
 
@@ -37,7 +38,8 @@ class CurateArgs:
 def curate(a: CurateArgs) -> None:
     """``filter --method deminf|demo-score|cupid|quality``: build the config, make ONE
     library call, print."""
-    from elicit_jax.artifact import read_header, refuse_overwriting_inputs
+    from elicit_jax.artifact import read_header
+    from elicit_jax.cli.outputs import note_duplicates
     from elicit_jax.curation.cupid import CupidConfig
     from elicit_jax.curation.deminf import DemInfConfig
     from elicit_jax.curation.demo_score import DemoScoreConfig, at_chance
@@ -45,9 +47,6 @@ def curate(a: CurateArgs) -> None:
 
     if a.level not in ("pair", "episode"):
         raise ElicitError(f"unknown level '{a.level}' (choose pair or episode)")
-    refuse_overwriting_inputs(
-        [a.out, scores_path_for(a.out)], [a.demos, a.base, a.scores, a.trajectories]
-    )
     config = CurateConfig(
         method=a.method,
         deminf=DemInfConfig(drop_fraction=a.drop_fraction),
@@ -75,6 +74,7 @@ def curate(a: CurateArgs) -> None:
         ),
         trajectories_path=a.trajectories,
     )
+    note_duplicates(result.duplicates)
     if not per_demo.trusted:
         typer.echo(f"warning: {a.method} had no signal: {per_demo.report.get('why')}", err=True)
     elif a.method == "demo-score" and at_chance(per_demo.report):
@@ -110,6 +110,7 @@ def quality_cmd(
     idle_eps: float = typer.Option(
         0.02, "--idle-eps", help="Max-norm below which a motion action is idle (action units)."
     ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Per-episode quality metrics with outlier flags: duration, jerk, idle fraction, action
     spikes, gripper chatter, action variance and state distance (docs/curation.md).
@@ -124,10 +125,10 @@ def quality_cmd(
     from rich.console import Console
     from rich.table import Table
 
-    from elicit_jax.artifact import refuse_overwriting_inputs
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.curation.quality import METRICS, QualityConfig, quality_file
 
-    refuse_overwriting_inputs([out], [demos])
+    check_outputs([out], [demos], overwrite=overwrite)
     config = QualityConfig(
         z_threshold=z_threshold,
         gripper_dim=None if no_gripper else gripper_dim,

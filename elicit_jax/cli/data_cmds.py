@@ -10,6 +10,7 @@ from typing import Any
 import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app
+from elicit_jax.cli.outputs import OVERWRITE
 from elicit_jax.errors import ElicitError
 
 
@@ -145,14 +146,17 @@ def import_cmd(
     warn_actions: bool = _WARN,
     action_bounds: str = _ACTION_BOUNDS,
     skip_bad_episodes: bool = _SKIP_BAD,
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Import demonstrations from a robomimic, LeRobot or .npz dataset into a Parquet artifact.
 
     Example: elicit-jax import low_dim.hdf5 --format robomimic --operators-from-masks
     '*_operator_*' -o demos.parquet
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.data.convert import import_dataset
 
+    check_outputs([out], [source], overwrite=overwrite)
     cfg = import_config(
         source,
         out,
@@ -346,14 +350,17 @@ def make_example(
     out: Path = typer.Option(Path("example.hdf5"), "-o", "--out", help="HDF5 file to write."),
     demos_per_operator: int = typer.Option(25, "--demos-per-operator", min=1),
     seed: int = typer.Option(0, "--seed"),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Generate a SYNTHETIC toy dataset (2-D point reaching, two operator styles) in
     robomimic's HDF5 layout, to try the tool without downloading anything.
 
     Example: elicit-jax make-example -o example.hdf5
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.data.synthetic import ToyConfig, make_toy_robomimic
 
+    check_outputs([out], overwrite=overwrite)
     counts = make_toy_robomimic(out, ToyConfig(demos_per_operator=demos_per_operator, seed=seed))
     typer.echo(
         f"wrote {out}: synthetic toy 2-D reaching task (not robot data), "

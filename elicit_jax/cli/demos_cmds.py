@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import DATA, OrderedGroup, app
+from elicit_jax.cli.outputs import OVERWRITE
 
 demos_app = typer.Typer(
     help="List, select (subsets, splits) and concatenate demonstration files.",
@@ -69,6 +70,7 @@ def select_cmd(
     source_episodes: str | None = typer.Option(
         None, "--source-episodes", help="Keep these source names, e.g. demo_3,demo_7."
     ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Write a subset of episodes; ids stay those of the input, source names are kept.
 
@@ -79,8 +81,10 @@ def select_cmd(
 
     Example: elicit-jax demos select demos.parquet --exclude 0-4 -o train.parquet
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.data.subsets import SubsetSpec, select_file
 
+    check_outputs([out], [demos], overwrite=overwrite)
     spec = SubsetSpec(
         episodes=episodes, exclude=exclude, operators=operator, source_episodes=source_episodes
     )
@@ -92,15 +96,26 @@ def select_cmd(
 def concat_cmd(
     demos: list[Path] = typer.Argument(..., help="Two or more demos .parquet files, in order."),
     out: Path = typer.Option(..., "-o", "--out", help="Demos .parquet to write."),
+    allow_duplicates: bool = typer.Option(
+        False,
+        "--allow-duplicates",
+        help="Keep episodes identical (same observations and actions) to earlier ones.",
+    ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Concatenate demos files; episodes are renumbered 0..E-1 in input order.
+
+    An episode identical to an earlier one (same observations and actions, e.g. overlapping
+    files) is refused unless --allow-duplicates.
 
     The column `part` says which input each episode came from; `source_episode` still names
     it in its dataset.
 
     Example: elicit-jax demos concat base.parquet op2.parquet -o mixed.parquet
     """
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.data.subsets import concat_files
 
-    d = concat_files(demos, out)
+    check_outputs([out], demos, overwrite=overwrite)
+    d = concat_files(demos, out, allow_duplicates=allow_duplicates)
     _print_episodes(d, f"wrote {out}: {d.n_episodes} episodes, {d.n_steps} steps")

@@ -22,6 +22,15 @@ def _stored_config(out: Path) -> dict[str, Any]:
     return dict(SessionStore(out).header().get("config", {}))
 
 
+def _raw_units(thresholds: Path | None) -> None:
+    """Live scoring is in raw action units: thresholds fitted on std-scaled scores do not
+    apply (docs/thresholds.md)."""
+    from elicit_jax.compat.thresholds import check_units
+
+    if thresholds is not None:
+        check_units(thresholds, "none")
+
+
 @app.command("elicit", rich_help_panel=ELICIT)
 def elicit_cmd(
     ctx: typer.Context,
@@ -79,6 +88,7 @@ def elicit_cmd(
 
     given = so.given(ctx.params)
     resolved = _resolve(thresholds, lambda_, eta, preset)
+    _raw_units(thresholds)
     if resolved is not None:
         given.update({"lambda": resolved[0], "eta": resolved[1]})
         given["thresholds_file"] = None if thresholds is None else str(thresholds)
@@ -147,6 +157,7 @@ def watch_cmd(
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     resolved = _resolve(thresholds, lambda_, eta, preset)
+    _raw_units(thresholds)
     if resolved is None:
         raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
     imp = data_cmds.import_config(

@@ -107,8 +107,14 @@ def report(
       elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
       elicit-jax report --rebuild docs/results/f
     """
-    from elicit_jax.artifact import read_json
+    from elicit_jax.artifact import check_outputs, holds_artifact, read_json
 
+    # a report is re-rendered in place; any other directory at -o is never replaced
+    check_outputs(
+        [out or (run_dir if rebuild else run_dir / "report")],
+        overwrite=True,
+        replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
+    )
     if rebuild:
         from elicit_jax.pipeline.run import rebuild_report
 

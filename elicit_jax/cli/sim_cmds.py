@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
+from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
 from elicit_jax.errors import ElicitError
 
 
@@ -41,6 +42,7 @@ def collect(
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Collect scripted demonstrations on C MuJoCo; only successful episodes are kept.
 
@@ -52,9 +54,11 @@ def collect(
     from rich.console import Console
     from rich.progress import Progress
 
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.sim.collect import CollectConfig
     from elicit_jax.sim.collect import collect as run
 
+    check_outputs([out], overwrite=overwrite)
     config = CollectConfig(
         task=task,
         operator=operator,
@@ -96,6 +100,7 @@ def evaluate(
     action_noise: float = typer.Option(
         0.0, "--action-noise", help="With --trajectories: std of Gaussian exploration noise."
     ),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies with rollouts from the same seeded initial states.
 
@@ -114,6 +119,7 @@ def evaluate(
     from rich.console import Console
     from rich.progress import Progress
 
+    from elicit_jax.artifact import check_outputs
     from elicit_jax.sim.evaluate import (
         EvalConfig,
         evaluate_policies,
@@ -121,6 +127,7 @@ def evaluate(
         resolve_backend,
     )
 
+    check_outputs([out, trajectories], policy_dirs(policy), overwrite=overwrite)
     config = EvalConfig(
         task=task,
         rollouts=rollouts,

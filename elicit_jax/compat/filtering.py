@@ -44,12 +44,13 @@ from typing import Any, Literal
 import numpy as np
 
 from elicit_jax.artifact import (
-    file_sha256,
     make_header,
+    matches_recorded,
     refuse_overwriting_inputs,
     write_parquet,
 )
 from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
+from elicit_jax.data.duplicates import drop_rows, duplicate_reasons, duplicates_of
 from elicit_jax.errors import ElicitError
 
 METHODS = ("m", "random", "shortest", "longest", "likelihood", "novelty")
@@ -190,12 +191,14 @@ class ExportSpec:
       out: where to write it.
       mask_key: robomimic: the new filter key.
       source: the original dataset (default: the one recorded at import).
+      overwrite: replace an existing ``out`` (a file, or an earlier LeRobot export).
     """
 
     format: Literal["robomimic", "lerobot"]
     out: str
     mask_key: str | None = None
     source: str | None = None
+    overwrite: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -210,6 +213,8 @@ class FilterResult:
     episodes_out: int
     reason: str
     export: dict[str, Any] | None = None
+    duplicates: dict[int, int] = dataclasses.field(default_factory=dict)
+    """Episodes of D_new dropped as identical to D_base's: new id -> base id."""
 
 
 def log_path(out_path: str | Path) -> Path:
@@ -221,7 +226,7 @@ def log_path(out_path: str | Path) -> Path:
 def check_scores_match(scores_header: dict, scores: dict, demos: Any, demos_path: Path) -> None:
     """Error unless the scores were computed on exactly these demonstrations."""
     recorded = scores_header.get("inputs", {}).get("demos", {}).get("sha256")
-    if recorded and recorded != file_sha256(demos_path):
+    if recorded and not matches_recorded(recorded, demos_path):
         raise ElicitError(
             "these scores were computed on a different demonstrations file (sha256 mismatch)",
             demos_path,
@@ -276,6 +281,10 @@ def filter_demos(
     demos = read_demos(demos_path)
     check_scores_match(header, scores, demos, demos_path)
     drop, reason = drop_mask(scores, config)
+    base = None if base_path is None else read_demos(base_path)
+    dups = {} if base is None else duplicates_of(demos, base)
+    reasons = duplicate_reasons(demos, dups, drop, reason)
+    drop = drop | drop_rows(demos, dups)
     inputs: dict[str, Path] = {"scores": Path(scores_path), "demos": demos_path}
     new = None
     if not drop.all() or base_path is None:
@@ -284,8 +293,7 @@ def filter_demos(
             new, extra={**new.extra, "subset": np.full(new.n_steps, "new", dtype=object)}
         )
     out = new
-    if base_path is not None:
-        base = read_demos(base_path)
+    if base is not None:
         base_extra = {
             **base.extra,
             PRE_EPISODE: base.episode.astype(np.int64),
@@ -296,7 +304,8 @@ def filter_demos(
         out = concat_demos(parts, renumber=True)
         inputs["base"] = Path(base_path)
     cfg = dataclasses.asdict(config)
-    write_demos(out_path, out, config={"filter": cfg}, inputs=inputs, seed=config.seed)
+    record = {"filter": cfg} | ({"duplicates_of_base": dups} if dups else {})
+    write_demos(out_path, out, config=record, inputs=inputs, seed=config.seed)
     log = pa.table(
         {
             "episode": pa.array(demos.episode[drop]),
@@ -305,7 +314,7 @@ def filter_demos(
             "likelihood": pa.array(np.asarray(scores["likelihood"])[drop]),
             "novelty": pa.array(np.asarray(scores["novelty"])[drop]),
             "compatibility": pa.array(np.asarray(scores["compatibility"])[drop]),
-            "reason": pa.array([reason] * int(drop.sum()), type=pa.string()),
+            "reason": pa.array(reasons[drop].tolist(), type=pa.string()),
         }
     )
     lp = log_path(out_path)
@@ -325,6 +334,7 @@ def filter_demos(
                 out=str(export.out),
                 mask_key=export.mask_key,
                 source=export.source,
+                overwrite=export.overwrite,
             )
         )
     return FilterResult(
@@ -336,4 +346,5 @@ def filter_demos(
         new.n_episodes if new is not None else 0,
         reason,
         exported,
+        dups,
     )

@@ -330,7 +330,15 @@ def write_thresholds(
     config: Mapping[str, Any],
     report: Mapping[str, Any],
 ) -> dict[str, Any]:
-    """Write a ``thresholds`` artifact (JSON) recording the scores file it was fitted on."""
+    """Write a ``thresholds`` artifact (JSON) recording the scores file it was fitted on and
+    the units of its λ and η (``action_scale`` of those scores: ``none`` = raw action units,
+    ``std`` = each dim divided by the training actions' std)."""
+    from elicit_jax.artifact import read_header
+
+    try:
+        units = read_header(scores_path).get("config", {}).get("action_scale", "none")
+    except ElicitError:  # not a scores artifact: nothing says its scale, raw units
+        units = "none"
     header = make_header(
         THRESHOLDS_KIND,
         SCHEMA_VERSION,
@@ -338,10 +346,26 @@ def write_thresholds(
         inputs={"scores": scores_path},
         method=method,
         report=dict(report),
+        action_scale=units,
         **{"lambda": float(lambda_), "eta": float(eta)},
     )
     write_json(path, header)
     return header
+
+
+def check_units(path: str | Path, action_scale: str) -> None:
+    """Raise unless the thresholds file ``path`` was fitted on scores of ``action_scale``
+    (``none``: raw action units; ``std``: per-dim scaled). λ and η of one scale mean nothing
+    on the other, and no exact conversion exists. Files that do not record it are raw units.
+    """
+    units = str(read_thresholds(path)[2].get("action_scale", "none"))
+    if units != action_scale:
+        raise ElicitError(
+            f"these thresholds were fitted on --action-scale {units} scores and do not apply "
+            f"to --action-scale {action_scale} scores: fit thresholds on scores of the same "
+            "scale (docs/thresholds.md)",
+            path,
+        )
 
 
 def read_thresholds(path: str | Path) -> tuple[float, float, dict[str, Any]]:

@@ -144,6 +144,19 @@ class CurateResult:
     episodes_in: int
     episodes_out: int
     reason: str
+    duplicates: dict[int, int] = dataclasses.field(default_factory=dict)
+    """Episodes of D_new dropped as identical to D_base's: new id -> base id."""
+
+
+def _base_and_duplicates(demos: Any, base_path: str | Path | None) -> tuple[Any, dict[int, int]]:
+    """D_base (or None) and the episodes of ``demos`` identical to one of its episodes."""
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.data.duplicates import duplicates_of
+
+    if base_path is None:
+        return None, {}
+    base = read_demos(base_path)
+    return base, duplicates_of(demos, base)
 
 
 def curate_demos(
@@ -175,19 +188,23 @@ def curate_demos(
     from elicit_jax.artifact import make_header, write_parquet
     from elicit_jax.compat.filtering import PRE_EPISODE, PRE_STEP, apply_drop, log_path
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
+    from elicit_jax.data.duplicates import duplicate_reasons
 
     demos = read_demos(demos_path)
     ids = np.asarray(scores.episode)
     if not np.array_equal(ids, demos.episode_ids):
         raise ElicitError("these demonstration scores were computed on another file", demos_path)
     drop_ep, reason = select_drop(scores, rule)
+    base, dups = _base_and_duplicates(demos, base_path)
+    drop_ep = drop_ep | np.isin(ids, list(dups))
     index = np.repeat(np.arange(len(ids)), np.asarray(scores.length))
     drop = drop_ep[index]
+    reasons = duplicate_reasons(demos, dups, drop, reason)
     record = {"curate": dict(config or {}), "rule": dataclasses.asdict(rule), "reason": reason}
+    record |= {"duplicates_of_base": dups} if dups else {}
     all_inputs: dict[str, str | Path] = {"demos": demos_path, **(inputs or {})}
     parts = []
-    if base_path is not None:
-        base = read_demos(base_path)
+    if base is not None:
         extra = {
             **base.extra,
             PRE_EPISODE: base.episode.astype(np.int64),
@@ -195,7 +212,7 @@ def curate_demos(
             "subset": np.full(base.n_steps, "base", dtype=object),
         }
         parts.append(dataclasses.replace(base, extra=extra))
-        all_inputs["base"] = base_path
+        all_inputs["base"] = base_path  # type: ignore[assignment]
     if not drop.all():
         new = apply_drop(demos, drop, "renumber")
         subset = np.full(new.n_steps, "new", dtype=object)
@@ -203,7 +220,7 @@ def curate_demos(
     counts = (demos.n_steps, int(drop.sum()), demos.n_episodes, int((~drop_ep).sum()))
     if not parts:
         if allow_empty:
-            return CurateResult(None, None, *counts, reason + "; every demo dropped")
+            return CurateResult(None, None, *counts, reason + "; every demo dropped", dups)
         raise ElicitError(f"{reason}: every demonstration dropped, nothing to write")
     out = parts[0] if len(parts) == 1 else concat_demos(parts, renumber=True)
     write_demos(out_path, out, config=record, inputs=all_inputs)
@@ -214,13 +231,13 @@ def curate_demos(
             "operator": pa.array(demos.operator[drop].astype(str).tolist(), type=pa.string()),
             "step": pa.array(demos.step[drop]),
             "score": pa.array(per_step_score[drop]),
-            "reason": pa.array([reason] * int(drop.sum()), type=pa.string()),
+            "reason": pa.array(reasons[drop].tolist(), type=pa.string()),
         }
     )
     lp = log_path(out_path)
     header = make_header("filter-log", 1, config=record, inputs=all_inputs, n_dropped=counts[1])
     write_parquet(lp, log, header)
-    return CurateResult(Path(out_path), lp, *counts, reason)
+    return CurateResult(Path(out_path), lp, *counts, reason, dups)
 
 
 def scores_path_for(out_path: str | Path) -> Path:

@@ -61,15 +61,13 @@ def episode_digest(obs: np.ndarray, action: np.ndarray, reward: np.ndarray | Non
 
 def make_provenance(source: str | Path, importer: str, **fields: Any) -> dict[str, Any]:
     """Provenance of imported data: source path, its sha256, importer, time, and ``fields``."""
-    import datetime as _dt
-
-    from elicit_jax.artifact import file_sha256
+    from elicit_jax.artifact import file_sha256, now_utc
 
     return {
         "source": str(Path(source).resolve()),
         "sha256": file_sha256(source),
         "importer": importer,
-        "imported": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "imported": now_utc(),
         **fields,
     }
 

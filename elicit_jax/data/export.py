@@ -31,7 +31,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Literal
 
-from elicit_jax.artifact import make_header, read_header
+from elicit_jax.artifact import check_outputs, make_header, read_header
 from elicit_jax.data.demos import Demos, read_demos
 from elicit_jax.data.lerobot_record import carried_record, lerobot_indices
 from elicit_jax.data.selection import (
@@ -111,12 +111,19 @@ class ExportConfig:
             raise ElicitError("--mask-key applies to --format robomimic only")
 
 
+def is_lerobot_dataset(path: Path) -> bool:
+    """``path`` is a LeRobot dataset folder (``meta/info.json``): an earlier export that
+    ``--overwrite`` may replace, unlike any other directory."""
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
 def _check_out(cfg: ExportConfig) -> None:
     out = Path(cfg.out or "")
     if out.resolve() == Path(cfg.selection).resolve():
         raise ElicitError("output would overwrite the selection it is made from", out)
-    if out.exists() and not cfg.overwrite:
-        raise ElicitError("already exists; pass --overwrite to replace it", out)
+    check_outputs(
+        [out], [cfg.selection, cfg.source], overwrite=cfg.overwrite, replaceable=is_lerobot_dataset
+    )
 
 
 def _selected_demos(cfg: ExportConfig, sel: Selection) -> Demos:
@@ -189,6 +196,7 @@ def export_dataset(cfg: ExportConfig, progress: Any = None) -> dict[str, Any]:
     sel = read_selection(cfg.selection, cfg.episodes)
     if not cfg.in_place:
         _check_out(cfg)
+    sel, duplicates = _without_duplicates(cfg, sel)
     config = dataclasses.asdict(cfg)
     header = make_header(
         EXPORT_KIND, EXPORT_SCHEMA_VERSION, config=config, inputs={"selection": cfg.selection}
@@ -208,7 +216,40 @@ def export_dataset(cfg: ExportConfig, progress: Any = None) -> dict[str, Any]:
         demos = _selected_demos(cfg, sel)
         export_npz(demos, str(cfg.out), header=header)
         summary.update(steps=demos.n_steps)
+    if duplicates:
+        summary["notes"] = [duplicates, *summary.get("notes", [])]
     return summary
+
+
+def _without_duplicates(cfg: ExportConfig, sel: Selection) -> tuple[Selection, str]:
+    """The selection without episodes identical to an earlier selected one (an export never
+    carries a demonstration twice), and a note saying which were left out ("" if none)."""
+    from elicit_jax.data.duplicates import find_duplicates
+
+    if read_header(cfg.selection).get("kind") != "demos":
+        return sel, ""
+    demos = read_demos(cfg.selection, bounds="warn").select_episodes(sel.episodes)
+    dups = find_duplicates([demos])
+    if not dups:
+        return sel, ""
+    gone = {d.episode for d in dups}
+    keep = [i for i, e in enumerate(sel.episodes) if e not in gone]
+
+    def pick(values: Any) -> Any:
+        return None if values is None else tuple(values[i] for i in keep)
+
+    sel = dataclasses.replace(
+        sel,
+        episodes=pick(sel.episodes),
+        source_episodes=pick(sel.source_episodes),
+        operators=pick(sel.operators),
+        lengths=pick(sel.lengths),
+    )
+    pairs = ", ".join(f"{d.episode} (= {d.of_episode})" for d in dups[:5])
+    more = f" and {len(dups) - 5} more" if len(dups) > 5 else ""
+    return sel, (
+        f"left out {len(dups)} episode(s) identical to an earlier selected one: {pairs}{more}"
+    )
 
 
 def _mask(cfg: ExportConfig, sel: Selection, header: dict, progress: Any) -> dict[str, Any]:

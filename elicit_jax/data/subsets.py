@@ -24,6 +24,7 @@ import numpy as np
 from elicit_jax.artifact import refuse_overwriting_inputs
 from elicit_jax.data.demo_set import SOURCE_EPISODE, Demos
 from elicit_jax.data.demos import concat_demos, read_demos, write_demos
+from elicit_jax.data.duplicates import describe, find_duplicates
 from elicit_jax.data.selection import parse_episode_ids
 from elicit_jax.errors import ElicitError
 
@@ -122,11 +123,15 @@ def select_file(path: str | Path, out: str | Path, spec: SubsetSpec) -> Demos:
     )
 
 
-def concat_files(paths: Sequence[str | Path], out: str | Path) -> Demos:
+def concat_files(
+    paths: Sequence[str | Path], out: str | Path, *, allow_duplicates: bool = False
+) -> Demos:
     """Concatenate demos files into ``out``; episodes renumbered 0..E-1 in input order.
 
     The extra column ``part`` holds each episode's input index; columns every input has
     (``source_episode``, ...) are kept. Inputs must agree on dimensions and observation fields.
+    An episode identical to an earlier one (:mod:`elicit_jax.data.duplicates`) is refused
+    unless ``allow_duplicates``; the header's ``config.duplicates_kept`` lists those kept.
     """
     if len(paths) < 2:
         raise ElicitError("concat needs at least two demos files")
@@ -144,11 +149,22 @@ def concat_files(paths: Sequence[str | Path], out: str | Path) -> Demos:
     dropped = sorted(
         set().union(*(d.extra for d in parts)) - set.intersection(*(set(d.extra) for d in parts))
     )
+    dups = find_duplicates(parts)
+    if dups and not allow_duplicates:
+        raise ElicitError(
+            f"{len(dups)} episode(s) repeat earlier ones: "
+            f"{describe(dups, [str(p) for p in paths])}; pass --allow-duplicates to keep them",
+            out,
+        )
     joined = concat_demos(tagged, renumber=True)
     return write_demos(
         out,
         joined,
-        config={"concat": [str(p) for p in paths], "columns_dropped": dropped},
+        config={
+            "concat": [str(p) for p in paths],
+            "columns_dropped": dropped,
+            "duplicates_kept": [dataclasses.asdict(d) for d in dups],
+        },
         inputs={f"demos{i}": p for i, p in enumerate(paths)},
         bounds=_policy(paths[0]),
     )

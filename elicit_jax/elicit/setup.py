@@ -15,7 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import file_sha256, make_header, read_header
+from elicit_jax.artifact import (
+    make_header,
+    matches_recorded,
+    read_header,
+    refuse_overwriting_inputs,
+)
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import PRACTICE, PromptEpisode, PromptEvent, RetrainEvent
 from elicit_jax.elicit.explain import explain_episode, summary_text
@@ -302,6 +307,7 @@ def _open_store(
     for name, p in inputs.items():
         if Path(p).resolve().is_relative_to(root.resolve()):
             raise ElicitError(f"the {name} input lies inside the session directory", p)
+    refuse_overwriting_inputs([root], inputs.values())
     if root.is_dir() and any(root.iterdir()):
         try:
             old = store.header()
@@ -314,7 +320,7 @@ def _open_store(
         diffs += [
             f"{k} file"
             for k, p in inputs.items()
-            if recorded.get(k, {}).get("sha256") != file_sha256(p)
+            if not matches_recorded(recorded.get(k, {}).get("sha256"), p)
         ]
         if not overwrite and diffs:
             raise ElicitError(

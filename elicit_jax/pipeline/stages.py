@@ -250,7 +250,7 @@ def reuse_training(ctx: StageContext, demos: Any, config: Any, files: Mapping[st
     this stage's inputs and say where it was reused from (``reused_from``)."""
     import shutil
 
-    from elicit_jax.artifact import file_sha256, read_json
+    from elicit_jax.artifact import content_sha256, read_json
     from elicit_jax.policy.dataset import demos_sha256
 
     index = _index_path(ctx, _training_key(demos, config))
@@ -264,7 +264,7 @@ def reuse_training(ctx: StageContext, demos: Any, config: Any, files: Mapping[st
     same_config = header.get("config") == json.loads(dumps(config.to_dict()))
     if not same_config or header.get("data_sha256") != demos_sha256(demos):
         return False
-    inputs = {n: {"path": str(p), "sha256": file_sha256(p)} for n, p in files.items()}
+    inputs = {n: {"path": str(p), "sha256": content_sha256(p)} for n, p in files.items()}
     with atomic_path(ctx.output) as tmp:
         shutil.copytree(source, tmp)
         for head in [tmp / "artifact.json", *tmp.glob("seed*/artifact.json")]:

@@ -197,23 +197,31 @@ def _nan_to_none(x: float) -> float | None:
 
 
 def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwrite: bool) -> None:
-    """Refuse to replace ``out_dir`` unless it is empty, ``overwrite`` is set, or it holds a run
-    of this very config on these very data (training is deterministic: nothing is lost)."""
-    if overwrite or not out_dir.exists():
+    """Refuse to replace ``out_dir`` unless it is empty, or it holds a training run and either
+    ``overwrite`` is set or that run is of this very config on these very data (training is
+    deterministic: nothing is lost). Anything else (a file, a folder of notes) is never
+    replaced, ``overwrite`` or not."""
+    if not out_dir.exists():
         return
     if out_dir.is_dir() and not any(out_dir.iterdir()):
         return
     try:
-        header = read_header(out_dir)
+        header = read_header(out_dir) if out_dir.is_dir() else {}
     except ElicitError:
         header = {}
     if header.get("kind") == ckpt.RUN_KIND:
+        if overwrite:
+            return
         same = header.get("config") == json.loads(dumps(config.to_dict()))
         if same and header.get("data_sha256") == data_hash:
             return
         what = "a training run of another config" if not same else "a run trained on other data"
     else:
-        what = "something that is not a training run"
+        raise ElicitError(
+            "already holds something that is not a training run; elicit-jax replaces only "
+            "training runs (with --overwrite): choose another --out",
+            out_dir,
+        )
     raise ElicitError(
         f"already holds {what}; pass --overwrite to replace it, or choose another --out", out_dir
     )
