@@ -21,12 +21,16 @@ HEADER_KEY = b"elicit_jax"
 """Key of the elicit-jax header in a Parquet artifact's schema metadata."""
 
 VOLATILE_FIELDS: frozenset[str] = frozenset(
-    {"created", "imported", "train_seconds", "seconds", "started", "elapsed", "time"}
-)
+    {
+        "created", "imported", "train_seconds", "seconds", "started", "elapsed", "time",
+        "provenance",
+    }
+)  # fmt: skip
 """Header keys (at any depth) that differ between two identical runs: wall-clock times and
-durations. :func:`content_sha256` leaves them out, so that the same seed, config, inputs,
-machine and thread count give the same content hash. A new header field of that sort is
-added here, and only here."""
+durations, and the ``provenance`` block (code commit, command line, library versions: who
+made the artifact and how, not what it holds). :func:`content_sha256` leaves them out, so
+that the same seed, config, inputs, machine and thread count give the same content hash. A
+new header field of that sort is added here, and only here."""
 
 
 def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
