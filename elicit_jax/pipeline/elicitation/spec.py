@@ -3,8 +3,8 @@
 Layout (see ``pipelines/elicitation.toml``)::
 
     [pipeline]      # kind = "elicitation", name, description, profile, seeds, collect_seed,
-                    # conditions (naive, filtered, rejection, informed), ablation (prompt, indicator,
-                    # feedback), dagger_conditions (naive, informed)
+                    # conditions (naive, filtered, rejection, informed), ablation
+                    # (prompt, indicator, feedback), dagger_conditions (naive, informed)
     [people]        # size, seed, styles, [people.ranges] trait = [low, high]
     [session]       # session settings (SessionConfig fields: demos, practice, prompt, ...)
     [[task]]        # name, base_operator, base_episodes, holdout_episodes,
@@ -13,9 +13,10 @@ Layout (see ``pipelines/elicitation.toml``)::
     [profiles.cpu.*]  [task.profiles.cpu]                         # profile overrides
 
 A task's ``incompatible_operator`` may not be a person's starting style (the thresholds would
-be fitted on that person's own way of doing the task). Each task's population is drawn by :func:`~elicit_jax.elicit.people.traits.make_population`
-from ``[people]`` (the task's ``styles`` replace ``[people] styles``): person ``i`` starts
-from the ``i``-th style (cycling), with traits drawn from the ranges, all seeded.
+be fitted on that person's own way of doing the task). Each task's population is drawn by
+:func:`~elicit_jax.elicit.people.traits.make_population` from ``[people]`` (the task's
+``styles`` replace ``[people] styles``): person ``i`` starts from the ``i``-th style
+(cycling), with traits drawn from the ranges, all seeded.
 """
 
 from __future__ import annotations

@@ -178,8 +178,8 @@ def _value(v: Any) -> str:
 def acts_as_base(data: StudyData, task: str, choices: Mapping[str, Any]) -> bool | None:
     """Whether a person with ``choices`` acts as the base operator's style does: both imagined
     (noise-free, the base's motor parameters) along D_base's first states give actions within
-    :data:`AS_BASE` (mean squared difference per dimension). The report's check, never a person's: it reads the base style. None when D_base
-    or the base style is not available."""
+    :data:`AS_BASE` (mean squared difference per dimension). The report's check, never a
+    person's: it reads the base style. None when D_base or the base style is not available."""
     from elicit_jax.elicit.people.imagine import action_error, calm, imagine
     from elicit_jax.errors import ElicitError
     from elicit_jax.sim.env import make_task
