@@ -10,7 +10,7 @@ knows anything about the task's styles: the objective is the error on shown acti
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,11 @@ MAX_EVALS = 40
 """Objective evaluations per fit (each imagines every remembered segment)."""
 FIRST_STEP = 0.5
 """The search's first step per coordinate, as a fraction of the person's reachable range."""
+WATCH_TOL = 0.05
+"""Waypoint tolerance (m) of a person's imagination: watching someone else, it counts its own
+waypoint reached when the demonstrator passes within this distance (acting: the operator's)."""
+WATCH_ALIGN = 1.0
+"""Wrist-yaw tolerance (rad) of a person's imagination, likewise (acting: the operator's)."""
 MIN_STEP = 0.02
 """The search stops when every step is below this fraction of the reachable range."""
 
@@ -81,6 +86,13 @@ def compass_search(
     return x, fx, evals
 
 
+def watching(motor: Style, choices: Mapping[str, Any]) -> Style:
+    """The calm style a person imagines with: its own speed and gain, the choices given, and
+    loose waypoint tolerances (:data:`WATCH_TOL`, :data:`WATCH_ALIGN`)."""
+    loose = dataclasses.replace(motor, tol=WATCH_TOL)
+    return calm(loose, {**choices, "align_tol": WATCH_ALIGN})
+
+
 def imagined_error(
     task: Any, motor: Style, space: ParamSpace, theta: np.ndarray, shown: Sequence[Shown]
 ) -> float:
@@ -88,7 +100,7 @@ def imagined_error(
     parameters θ (its own calm controller fed the shown states)."""
     if not shown:
         return 0.0
-    imagined = imagine(task, calm(motor, space.choices(theta)), [s.states for s in shown])
+    imagined = imagine(task, watching(motor, space.choices(theta)), [s.states for s in shown])
     total, count = 0.0, 0
     for s, a in zip(shown, imagined, strict=True):
         err = action_error([a], [s.actions], [s.span], s.weights)

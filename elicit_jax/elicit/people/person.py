@@ -230,11 +230,11 @@ class SimulatedPerson:
             return
         self.episodes_done += 1
         rng = np.random.default_rng([self.traits.seed, seen.index, 17])
+        changed = self.trial is not None  # a trial just judged: no new one this time
         if self.trial is not None:
             self._settle_trial(seen)
-        changed = False
         if seen.kind == DEMONSTRATION and seen.feedback:
-            changed = self._learn_from_feedback(seen, rng)
+            changed = self._learn_from_feedback(seen, rng) or changed
         if not changed and self.trial is None and seen.bad and rng.random() < self.traits.explore:
             step = rng.normal(0.0, TRIAL_STEP * self.space.width)
             self.trial = {"old": self.theta.copy(), "red_before": seen.red_fraction}
