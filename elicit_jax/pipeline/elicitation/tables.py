@@ -32,7 +32,7 @@ CONDITION_LABELS = {
     "naive": "Naive",
     "filtered": "Naive + M-filtered",
     "informed": "Informed",
-    "rejection": "Informed rejection, no adaptation",
+    "rejection": "Rejection, no adaptation",
     "prompt": "Prompt only",
     "indicator": "Live indicator only",
     "feedback": "Post-hoc feedback only",
@@ -124,12 +124,15 @@ def compare(
 
 
 # The differences the study reports, ``(a, b)`` for ``a − b``: the paper's two claims (naive
-# data hurts, informed data helps) and what the M-filter adds.
+# data hurts, informed data helps), what the M-filter adds, and teaching apart from filtering:
+# what the 5% rule's rejections alone do, and what the interface adds beyond them.
 DIFFERENCES = (
     ("naive", "base"),
     ("informed", "naive"),
     ("filtered", "naive"),
     ("informed", "base"),
+    ("rejection", "naive"),
+    ("informed", "rejection"),
 )
 
 
@@ -156,7 +159,8 @@ def table2(data: StudyData) -> Table:
 def _traits(record: Mapping[str, Any]) -> str:
     t = record.get("traits", {})
     keys = (("imitation", "im"), ("uptake", "up"), ("explore", "ex"), ("noise", "noise"))
-    keys += (("practice", "pr"),)
+    keys += (("practice", "pr"), ("speed", "sp"), ("gain", "gain"), ("delay", "delay"))
+    keys += (("memory", "mem"), ("reach", "reach"))
     return " ".join(f"{short} {t[k]:g}" for k, short in keys if k in t)
 
 
