@@ -54,8 +54,9 @@ max_episodes = 5
 name = "reach-pillar"
 base_episodes = 8
 holdout_episodes = 3
-# the contrast set is another conflicting style, never the person's own (the study refuses it)
-incompatible_operator = "conflict-over"
+# the contrast set is another conflicting style (right of the pillar after a pause), never the
+# person's own (the study refuses it)
+incompatible_operator = "conflict-right-pause"
 incompatible_episodes = 3
 styles = ["conflict-right"]
 dagger = true
@@ -127,7 +128,7 @@ def test_shipped_definition_and_its_graph():
         (('styles = ["conflict-right"]', 'styles = ["base"]'), "cannot start from the base"),
         (('styles = ["conflict-right"]', 'styles = ["nope"]'), "no operator 'nope'"),
         (("demos = 2", "demos = 2\nmode = 'naive'"), "set by the study"),
-        (('"conflict-over"', '"conflict-right"'), "is also a person's starting style"),
+        (('"conflict-right-pause"', '"conflict-right"'), "is also a person's starting style"),
         (("size = 1", "size = 1\ncolour = 2"), "unknown key"),
     ],
 )
