@@ -203,7 +203,7 @@ class SimulatedPerson:
         rng = np.random.default_rng([self.traits.seed, episode, 23])
         best, now, after = fit_theta(
             self.task, self.motor, self.space, self.theta, self.bounds, list(self.memory),
-            first_step=float(rng.uniform(0.3, 0.6)),
+            first_step=float(rng.uniform(0.5, 1.0)),
         )  # fmt: skip
         if now <= ERROR_FLOOR or after >= (1.0 - MIN_GAIN) * now:
             return False

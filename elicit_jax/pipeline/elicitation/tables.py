@@ -181,10 +181,13 @@ def _value(v: Any) -> str:
 
 def acts_as_base(data: StudyData, task: str, choices: Mapping[str, Any]) -> bool | None:
     """Whether a person with ``choices`` acts as the base operator's style does: both imagined
-    (noise-free, the base's motor parameters) along D_base's first states give actions within
-    :data:`AS_BASE` (mean squared difference per dimension). The report's check, never a
-    person's: it reads the base style. None when D_base or the base style is not available."""
-    from elicit_jax.elicit.people.imagine import action_error, calm, imagine
+    (noise-free, the base's motor parameters, the people's loose watching tolerances, so a
+    wrist a few degrees off does not stall the comparison) along D_base's first states give
+    actions within :data:`AS_BASE` (mean squared difference per dimension). The report's
+    check, never a person's: it reads the base style. None when D_base or the base style is
+    not available."""
+    from elicit_jax.elicit.people.imagine import action_error, imagine
+    from elicit_jax.elicit.people.learn import watching
     from elicit_jax.errors import ElicitError
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.operators import style_of
@@ -200,8 +203,8 @@ def acts_as_base(data: StudyData, task: str, choices: Mapping[str, Any]) -> bool
     if key not in _ACTS_AS_BASE:
         sim = make_task(task)
         own = {k: tuple(v) if isinstance(v, list) else v for k, v in choices.items()}
-        mine = imagine(sim, calm(base, own), list(states))
-        theirs = imagine(sim, calm(base, dict(base.choices)), list(states))
+        mine = imagine(sim, watching(base, own), list(states))
+        theirs = imagine(sim, watching(base, dict(base.choices)), list(states))
         _ACTS_AS_BASE[key] = action_error(mine, theirs) < AS_BASE
     return _ACTS_AS_BASE[key]
 
