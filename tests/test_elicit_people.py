@@ -323,3 +323,19 @@ def test_resumed_person_continues_as_if_never_interrupted(informed, nut, tmp_pat
     assert resumed.log == person.log and resumed.choices == person.choices
     for a, b in zip(_episodes(out), _episodes(tmp_path / "r"), strict=True):
         np.testing.assert_array_equal(a.action, b.action)
+
+
+def test_person_with_every_channel_open_learns_from_the_prompt_first(nut, tmp_path):
+    """Not the feedback-only settings above: imitation 1 and explore 1. The prompt comes before
+    the first demonstration, so the first change is the prompt's, and it turns the wrist
+    towards the prompt's way (away from its starting half turn)."""
+    spec = "person:conflict-flip-pause,imitation=1,uptake=1,explore=1,reach=1,slip=0.01,seed=5"
+    session, _, person = _session(nut, tmp_path / "open", operator=spec, max_episodes=4)
+    sources = [c["source"] for c in person.log]
+    assert sources and sources[0] == "prompt", sources
+    first_demo = min(r.index for r in _episodes(tmp_path / "open") if r.kind == "demonstration")
+    assert person.log[0]["episode"] <= first_demo
+    assert abs(person.log[0]["to"]["yaw_offset"]) < abs(person.log[0]["from"]["yaw_offset"]) - 1
+    assert set(sources) <= {"prompt", "feedback", "practice-try", "practice-keep", "practice-undo"}
+    # having turned the wrist round before demonstrating, both its demonstrations pass the rule
+    assert (session.progress.counts.accepted, session.progress.counts.rejected) == (2, 0)
