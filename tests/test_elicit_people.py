@@ -205,6 +205,28 @@ def test_practice_trials_are_judged_by_success(pillar):
     assert not calm.log and np.allclose(calm.theta, calm.start_theta)
 
 
+def test_memory_keeps_the_last_segments_and_delay_acts_on_old_states(pillar):
+    from elicit_jax.elicit.events import Observation
+
+    task, shown, _ = pillar
+    person = SimulatedPerson(task, parse_person("conflict-right,imitation=0,memory=2"), None)
+    _watch_prompt(person, shown)  # 4 demonstrations shown, 2 remembered: the last two
+    assert len(person.memory) == 2 and person.memory[0].states is shown[2].states
+    states = shown[0].states[:12]
+
+    def actions(spec):
+        p = SimulatedPerson(task, parse_person(spec), None)
+        p.on_event(EpisodeStartEvent(0, "practice", states[0], 1, 0, 100, False, False))
+        obs = [Observation(o, t, 0, "practice", False, None, True) for t, o in enumerate(states)]
+        return np.array([p.act(o) for o in obs])
+
+    late = actions("conflict-right,delay=3,noise=0,seed=1")
+    prompt = actions("conflict-right,delay=0,noise=0,seed=1")
+    # delay 3: the first 4 steps act on the first state; then on the state 3 steps back
+    np.testing.assert_allclose(late[:4], np.repeat(prompt[:1], 4, 0), atol=1e-9)
+    assert not np.allclose(late[4:8], prompt[4:8])
+
+
 def test_a_person_cannot_start_as_base():
     from elicit_jax.sim.env import make_task
 
