@@ -35,14 +35,14 @@ kind = "elicitation"
 name = "tiny-study"
 profile = "cpu"
 seeds = [0]
-conditions = ["naive", "filtered", "informed"]
+conditions = ["naive", "filtered", "rejection", "informed"]
 ablation = ["feedback"]
 dagger_conditions = ["informed"]
 
 [people]
 size = 1
 seed = 0
-ranges = {imitation = [0, 0], uptake = [1, 1], explore = [0, 0]}
+ranges = {imitation = [0, 0], uptake = [1, 1], explore = [0, 0], reach = [1, 1]}
 
 [session]
 demos = 2
@@ -54,10 +54,9 @@ max_episodes = 5
 name = "reach-pillar"
 base_episodes = 8
 holdout_episodes = 3
-# the person's own starting style is the known conflict: a 32 x 32 model on 8 demos flags
-# another conflicting style (conflict-over) only by luck of the draw, which is not what this
-# test checks (it checks the study's plumbing and that feedback moves the person)
-incompatible_operator = "conflict-right"
+# the contrast set is another conflicting style (right of the pillar after a pause), never the
+# person's own (the study refuses it)
+incompatible_operator = "conflict-right-pause"
 incompatible_episodes = 3
 styles = ["conflict-right"]
 dagger = true
@@ -89,7 +88,7 @@ def test_shipped_definition_and_its_graph():
     assert all(p.startswith("person:") for p in task.people)
     graph = build_study_graph(spec)
     kinds = [s.kind for s in graph]
-    per_person = 7  # naive, informed, 3 ablation arms, naive and informed DAgger
+    per_person = 8  # naive, rejection, informed, 3 ablation arms, naive and informed DAgger
     assert kinds.count("session") == 6 * per_person
     assert kinds.count("filter-session") == 6
     assert kinds.count("train") == 1 + 6 * (per_person + 1)  # + base, + filtered
@@ -100,6 +99,7 @@ def test_shipped_definition_and_its_graph():
         assert set(s.inputs) == {"policy", "base", "thresholds"}
     modes = {s.config["condition"]: (s.config["mode"], s.config["show"]) for s in sessions}
     assert modes["naive"] == ("naive", [])
+    assert modes["rejection"] == ("informed", [])  # the rule filters, nothing is shown
     assert modes["informed"] == ("informed", ["prompt", "indicator", "feedback"])
     assert modes["indicator"] == ("informed", ["indicator"])
     assert {c for c in modes if c.endswith("dagger")} == {"naive-dagger", "informed-dagger"}
@@ -116,6 +116,8 @@ def test_shipped_definition_and_its_graph():
         "square-nut",
         "reach-pillar",
     ]
+    for task in paper.tasks:  # no person starts from the contrast set's operator
+        assert all(p.split(",")[0] != f"person:{task.incompatible_operator}" for p in task.people)
 
 
 @pytest.mark.parametrize(
@@ -126,6 +128,7 @@ def test_shipped_definition_and_its_graph():
         (('styles = ["conflict-right"]', 'styles = ["base"]'), "cannot start from the base"),
         (('styles = ["conflict-right"]', 'styles = ["nope"]'), "no operator 'nope'"),
         (("demos = 2", "demos = 2\nmode = 'naive'"), "set by the study"),
+        (('"conflict-right-pause"', '"conflict-right"'), "is also a person's starting style"),
         (("size = 1", "size = 1\ncolour = 2"), "unknown key"),
     ],
 )
@@ -234,18 +237,23 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
     conds = {(r.method, r.operator) for r in data.results}
     assert conds == {
         ("base", None),
-        *{(c, "p0") for c in ("naive", "filtered", "informed", "feedback", "informed-dagger")},
+        *{
+            (c, "p0")
+            for c in ("naive", "filtered", "rejection", "informed", "feedback", "informed-dagger")
+        },
     }
     assert all(r.n_rollouts == 4 for r in data.results)
     by = {s.condition: s for s in data.sessions}
-    assert set(by) == {"naive", "informed", "feedback", "informed-dagger"}
+    assert set(by) == {"naive", "rejection", "informed", "feedback", "informed-dagger"}
     naive, informed = by["naive"], by["informed"]
-    assert naive.person_record["changes"] == []  # naive: practice only
+    # explore 0: no practice trials, so in naive mode and under rejection alone nothing changes
+    assert naive.person_record["changes"] == [] == by["rejection"].person_record["changes"]
+    assert {r["rule_verdict"] for r in by["rejection"].demonstrations} <= {"accept", "reject"}
     assert len(naive.accepted) == 2 and naive.spec == informed.spec
     # the informed person changed only on feedback (imitation 0, explore 0), and only after it
     changes = informed.person_record["changes"]
     assert changes and all(c["source"] == "feedback" for c in changes)
-    assert "route" not in informed.person_record["choices"]  # it now passes on the left
+    assert informed.person_record["choices"]["route"] == "left"  # it now passes on the left
     rejected = [r["index"] for r in informed.rows if r["verdict"] == "rejected"]
     assert all(c["episode"] in rejected for c in changes)
     assert (

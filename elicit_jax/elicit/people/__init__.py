@@ -1,8 +1,10 @@
-"""Simulated people for elicitation studies: scripted styles that learn from the interface.
+"""Simulated people for elicitation studies: their own parameters, changed by what they see.
 
-* :mod:`.traits` — who a person is (starting style, learning traits), as an operator spec
-  ``person:STYLE[,trait=value,...]``, and seeded populations;
-* :mod:`.imagine` — the repertoire of style choices and "what would I do at these states";
+* :mod:`.traits` — who a person is (starting style, motor and learning traits), as an operator
+  spec ``person:STYLE[,trait=value,...]``, and seeded populations;
+* :mod:`.space` — per task, the continuous parameters θ a person adjusts and their bounds;
+* :mod:`.imagine` — "what would I do at these states" (teacher forcing, calm controller);
+* :mod:`.learn` — the generic fit of θ to shown segments (compass search);
 * :mod:`.person` — :class:`~.person.SimulatedPerson`, the operator, and its update rules.
 
 Importing this package registers the ``person`` operator kind, so sessions accept

@@ -3,7 +3,8 @@
 Per task: collect D_base and the two contrast sets. Per task × model: train the base policy
 (all seeds at once) and evaluate it; score the contrast sets with the first seed's base policy
 and fit (λ, η). Per person of the task's population, one session per condition — ``naive``
-(practice only), ``informed`` (prompt + live indicator + feedback), each ablation arm
+(practice only), ``rejection`` (the rule applied, nothing shown: filtering without
+teaching), ``informed`` (prompt + live indicator + feedback), each ablation arm
 (``prompt``, ``indicator`` or ``feedback`` only) and, on a DAgger task, ``naive-dagger`` and
 ``informed-dagger`` — all against the first seed's base policy and the fitted thresholds, all
 from the same session seed (the person meets the same initial states in every condition);
@@ -34,6 +35,8 @@ def session_modes(spec: StudySpec, task: StudyTask) -> dict[str, dict[str, Any]]
     out: dict[str, dict[str, Any]] = {}
     if {"naive", "filtered"} & set(spec.conditions):
         out["naive"] = {"mode": "naive", "show": [], "dagger": False}
+    if "rejection" in spec.conditions:
+        out["rejection"] = {"mode": "informed", "show": []}
     if "informed" in spec.conditions:
         out["informed"] = {"mode": "informed", "show": ["prompt", "indicator", "feedback"]}
     for arm in spec.ablation:

@@ -52,9 +52,10 @@ INTERVAL_NOTE = (
     "base policy's mean, Welch's t over the people and the base policy's seeds."
 )
 MODEL_NOTE = (
-    "The people are simulated (docs/people.md): scripted styles that change their style "
-    "choices only from what the interface shows. What they learn, and how fast, is a "
-    "consequence of that model, not a measurement of human operators."
+    "The people are simulated (docs/people.md): the task's phase machine driven by each "
+    "person's own parameters and motor traits, changed only by fitting what the interface "
+    "shows (and, in every mode, by trials judged by their own success). What they learn, "
+    "and how fast, is a consequence of that model, not a measurement of human operators."
 )
 
 

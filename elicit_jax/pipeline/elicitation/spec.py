@@ -3,8 +3,8 @@
 Layout (see ``pipelines/elicitation.toml``)::
 
     [pipeline]      # kind = "elicitation", name, description, profile, seeds, collect_seed,
-                    # conditions (naive, filtered, informed), ablation (prompt, indicator,
-                    # feedback), dagger_conditions (naive, informed)
+                    # conditions (naive, filtered, rejection, informed), ablation
+                    # (prompt, indicator, feedback), dagger_conditions (naive, informed)
     [people]        # size, seed, styles, [people.ranges] trait = [low, high]
     [session]       # session settings (SessionConfig fields: demos, practice, prompt, ...)
     [[task]]        # name, base_operator, base_episodes, holdout_episodes,
@@ -12,9 +12,11 @@ Layout (see ``pipelines/elicitation.toml``)::
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # library config overrides
     [profiles.cpu.*]  [task.profiles.cpu]                         # profile overrides
 
-Each task's population is drawn by :func:`~elicit_jax.elicit.people.traits.make_population`
-from ``[people]`` (the task's ``styles`` replace ``[people] styles``): person ``i`` starts
-from the ``i``-th style (cycling), with traits drawn from the ranges, all seeded.
+A task's ``incompatible_operator`` may not be a person's starting style (the thresholds would
+be fitted on that person's own way of doing the task). Each task's population is drawn by
+:func:`~elicit_jax.elicit.people.traits.make_population` from ``[people]`` (the task's
+``styles`` replace ``[people] styles``): person ``i`` starts from the ``i``-th style
+(cycling), with traits drawn from the ranges, all seeded.
 """
 
 from __future__ import annotations
@@ -30,8 +32,10 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.spec import PROFILES, _check_keys, _table, _task_table, load_spec
 
 KIND = "elicitation"
-CONDITIONS = ("naive", "filtered", "informed")
-"""The paper's Table 2 columns (besides the base policy)."""
+CONDITIONS = ("naive", "filtered", "rejection", "informed")
+"""The paper's Table 2 columns (besides the base policy), plus ``rejection``: informed
+rejection without adaptation (the rule filters; the person is shown nothing but what naive
+mode shows, so it cannot learn from the interface) — teaching and filtering apart."""
 ABLATION = ("prompt", "indicator", "feedback")
 """Informed sessions that show one part of the interface only (all three = ``informed``)."""
 DAGGER = ("naive", "informed")
@@ -239,6 +243,12 @@ def _task(raw: Mapping[str, Any], people: Mapping[str, Any], source: str) -> Stu
     if base_operator in styles:
         raise ElicitError(
             f"[[task]] {name}: a person cannot start from the base operator's style", source
+        )
+    if str(raw["incompatible_operator"]) in styles:
+        raise ElicitError(
+            f"[[task]] {name}: incompatible_operator '{raw['incompatible_operator']}' is also a "
+            "person's starting style (the thresholds would be fitted on that person's own way)",
+            source,
         )
     size = int(people.get("size", 6))
     population = make_population(

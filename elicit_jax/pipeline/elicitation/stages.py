@@ -102,10 +102,11 @@ def session_stage(ctx: StageContext) -> None:
         raise ElicitError(f"operator {config.operator!r} is not a simulated person")
     write_json(ctx.output / PERSON_FILE, person.summary())
     c = session.progress.counts
-    changes = ", ".join(f"{x['key']}→{x['to']} (e{x['episode']})" for x in person.log) or "none"
+    changes = ", ".join(f"{x['source']} (e{x['episode']})" for x in person.log) or "none"
+    theta = " ".join(f"{k}={v:.3g}" for k, v in person.space.named(person.theta).items())
     ctx.console.print(
         f"{label}: {c.accepted}/{c.wanted} accepted, {c.rejected} rejected, {c.failed} failed, "
-        f"{c.episodes} episodes; style changes: {changes}"
+        f"{c.episodes} episodes; changes: {changes}; θ now {theta}"
     )
 
 

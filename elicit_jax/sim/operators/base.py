@@ -155,6 +155,9 @@ class Operator(abc.ABC):
 
 
 _NOISY = [0, 1, 2, 5]
+ALIGN_TOL = 0.08
+"""Wrist yaw error (rad) at which a grasp or placing yaw counts as reached (a style may set
+the ``align_tol`` choice; simulated people imagine others' demonstrations with a looser one)."""
 YAW_LIMIT = 3.07
 """Largest wrist yaw an operator turns to (the joint stops at 3.09 rad, so the observed yaw
 equals the joint angle and operators turn within the joint's range, never across pi)."""

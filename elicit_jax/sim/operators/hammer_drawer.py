@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from elicit_jax.sim.env import quat_yaw
-from elicit_jax.sim.operators.base import YAW_LIMIT, Operator, Style, Targets, wrap
+from elicit_jax.sim.operators.base import ALIGN_TOL, YAW_LIMIT, Operator, Style, Targets, wrap
 from elicit_jax.sim.operators.square_nut import rot2
 from elicit_jax.sim.tasks.hammer_drawer import BAR_RADIUS, BAR_X, FLOOR_Z, HAMMER_Z, INTERIOR_X
 
@@ -132,7 +132,8 @@ class HammerDrawerOperator(Operator):
         """HOVER, DESCEND, CLOSE: fill ``pos``, ``yaw`` and ``done`` in place."""
         eef, ph = obs[:, 0:3], self.phase
         point, g_yaw = self.grasp_frame(obs)
-        aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - quat_yaw(obs[:, 3:7])) < 0.08
+        aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - quat_yaw(obs[:, 3:7]))
+        aligned = aligned < self.style.choice("align_tol", ALIGN_TOL)
         hover = point + self.jitter
         hover[:, 2] = HIGH_Z * 0.6
         m = ph == HOVER
@@ -182,7 +183,11 @@ class HammerDrawerOperator(Operator):
         pos[m] = carry[m]
         yaw[m] = g_yaw[m]
         xy_err = np.linalg.norm(hammer[:, :2] - drop, axis=1)
-        done |= m & (xy_err < 0.01) & (np.abs(eef_yaw - g_yaw) < 0.08)
+        done |= (
+            m
+            & (xy_err < 0.01)
+            & (np.abs(eef_yaw - g_yaw) < self.style.choice("align_tol", ALIGN_TOL))
+        )
         m = ph == LOWER
         low = over.copy()
         low[:, 2] = eef[:, 2] - hammer[:, 2] + FLOOR_Z + HAMMER_Z + 0.008

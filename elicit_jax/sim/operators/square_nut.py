@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from elicit_jax.sim.env import quat_yaw
-from elicit_jax.sim.operators.base import YAW_LIMIT, Operator, Style, Targets, wrap
+from elicit_jax.sim.operators.base import ALIGN_TOL, YAW_LIMIT, Operator, Style, Targets, wrap
 
 HOVER_Z = 0.07
 GRASP_Z = 0.012
@@ -77,7 +77,9 @@ class SquareNutOperator(Operator):
         pos = eef.copy()
         grip = np.where((ph >= CLOSE) & (ph < RELEASE), 1.0, -1.0)
         done = np.zeros(len(obs), bool)
-        aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - eef_yaw) < 0.08
+        aligned = np.abs(np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT) - eef_yaw) < self.style.choice(
+            "align_tol", ALIGN_TOL
+        )
         self.pause_at_phase_starts()
         self._grasp_phases(obs, point, aligned, pos, done)
         self._place_phases(obs, pos, done)
