@@ -20,6 +20,7 @@ LAYERS = {
     # layer and lower ones, never a higher one. Keep in step with docs/architecture.md.
     "": 0,  # elicit_jax/__init__.py: the version only
     "errors": 0,
+    "hashing": 1,
     "runtime": 1,
     "stats": 1,
     "sharding": 1,

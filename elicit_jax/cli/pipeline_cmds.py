@@ -110,8 +110,9 @@ def report(
     from elicit_jax.artifact import check_outputs, holds_artifact, read_json
 
     # a report is re-rendered in place; any other directory at -o is never replaced
+    # (--rebuild without -o rebuilds the report folder itself, which it checks)
     check_outputs(
-        [out or (run_dir if rebuild else run_dir / "report")],
+        [out if rebuild else out or run_dir / "report"],
         overwrite=True,
         replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
     )

@@ -5,7 +5,7 @@ the contrast sets say, and a contrast set that holds training demonstrations is 
 in-sample (:mod:`elicit_jax.compat.trust`). Both checks need to know, for the policy a scores
 file was computed with, which demonstrations it was trained on. Demonstrations are matched by
 content — the hash of an episode's observations and actions
-(:func:`~elicit_jax.policy.dataset.episode_digests`) — never by id, since ids change between a
+(:func:`~elicit_jax.data.duplicates.episode_digests`) — never by id, since ids change between a
 file and its subsets.
 
 Where the evidence comes from, in this order:
@@ -33,10 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import file_sha256, read_header
+from elicit_jax.artifact import read_header
 from elicit_jax.data.demo_set import Demos
+from elicit_jax.data.duplicates import episode_digests
 from elicit_jax.errors import ElicitError
-from elicit_jax.policy.dataset import episode_digests
+from elicit_jax.hashing import matches_recorded
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +88,7 @@ def _recorded(rec: Mapping[str, Any], *near: Path) -> tuple[Path | None, str]:
     if not found:
         return None, f"{rec['path']} is not there"
     for t in found:
-        if not rec.get("sha256") or file_sha256(t) == rec["sha256"]:
+        if not rec.get("sha256") or matches_recorded(rec["sha256"], t):
             return t, ""
     return None, f"{found[0]} changed since it was recorded"
 

@@ -13,7 +13,7 @@ import hashlib
 
 import numpy as np
 
-from elicit_jax.data.demos import Demos, episode_digest
+from elicit_jax.data.demos import Demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import normalization_stats
 
@@ -129,12 +129,3 @@ def demos_sha256(demos: Demos) -> str:
         h.update(f"{arr.dtype}{arr.shape}".encode())
         h.update(arr.tobytes())
     return h.hexdigest()
-
-
-def episode_digests(demos: Demos) -> dict[int, str]:
-    """Episode id -> content hash of its observations and actions
-    (:func:`~elicit_jax.data.demos.episode_digest`): how a demonstration is recognised in
-    another file, whatever its id there."""
-    return {
-        e: episode_digest(demos.obs[s:t], demos.action[s:t]) for e, s, t in demos.episode_bounds()
-    }

@@ -26,6 +26,7 @@ from elicit_jax.artifact import (
     write_parquet,
 )
 from elicit_jax.data.demos import Demos
+from elicit_jax.data.duplicates import episode_digests
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
@@ -33,7 +34,6 @@ from elicit_jax.policy.dataset import (
     TrainData,
     action_stats,
     demos_sha256,
-    episode_digests,
     prepare,
 )
 
