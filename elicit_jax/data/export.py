@@ -299,6 +299,8 @@ def _fresh_robomimic(cfg: ExportConfig, sel: Selection, header: dict) -> dict[st
     except ElicitError:
         prov = {}
     env = prov.get("env_args") if prov.get("importer") == "robomimic" else None
+    if env is None:
+        env = _collected_env_args(demos)
     written = write_fresh(
         demos,
         str(cfg.out),
@@ -319,6 +321,15 @@ def _fresh_robomimic(cfg: ExportConfig, sel: Selection, header: dict) -> dict[st
     )
     written["notes"] += _imported_note(demos, "robomimic")
     return {"mode": "new file", **written, "reimport": reimport}
+
+
+def _collected_env_args(demos: Demos) -> dict[str, Any] | None:
+    """The robosuite ``env_args`` every part of ``demos`` was collected in (``collect`` on a
+    robosuite task records them), or ``None`` when the parts name none or differ."""
+    found = [p.get("env_args") for p in provenance_leaves(demos.provenance)]
+    if not found or found[0] is None or any(f != found[0] for f in found):
+        return None
+    return dict(found[0])
 
 
 def _imported_note(demos: Demos, fmt: str) -> list[str]:
