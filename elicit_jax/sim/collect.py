@@ -162,11 +162,9 @@ def batch_sim(task: Any, batch: int, threads: int = 0) -> Iterator[Any]:
     task one worker process per environment (at most one per CPU, or ``threads``)."""
     if getattr(task, "backend", "") == "robosuite":
         from elicit_jax.runtime import available_cpus
-        from elicit_jax.sim.rollout_robosuite import EnvPool, PoolBatch
+        from elicit_jax.sim.rollout_robosuite import PoolBatch, shared_pool
 
-        workers = min(batch, threads or available_cpus())
-        with EnvPool(task.spec, workers, task.config.horizon) as pool:
-            yield PoolBatch(pool)
+        yield PoolBatch(shared_pool(task.spec, min(batch, threads or available_cpus())))
         return
     from elicit_jax.sim.rollout_mujoco import BatchSim
 

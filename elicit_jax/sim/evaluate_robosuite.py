@@ -96,7 +96,7 @@ def evaluate_refs_robosuite(
     from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.runtime import available_cpus
     from elicit_jax.sim.evaluate import jitted_act
-    from elicit_jax.sim.rollout_robosuite import EnvPool, rollout_policy
+    from elicit_jax.sim.rollout_robosuite import rollout_policy, shared_pool
 
     policies = []
     for ref in refs:
@@ -106,15 +106,15 @@ def evaluate_refs_robosuite(
     workers = min(config.workers or available_cpus(), len(seeds))
     results, timing = [], {"policy_seconds": 0.0, "env_steps": 0, "seconds": 0.0}
     t0 = time.perf_counter()
-    with EnvPool(spec, workers, horizon) as pool:
-        for ref, policy in zip(refs, policies, strict=True):
-            _check_policy(config, ref, policy, spec, pool, file_dims)
-            out = rollout_policy(spec, jitted_act(), policy, seeds, horizon, workers, pool)
-            timing["policy_seconds"] += float(out.pop("policy_seconds"))
-            timing["env_steps"] += int(out.pop("env_steps"))
-            results.append((ref, out))
-            if progress is not None:
-                progress(ref, float(np.mean(out["success"])))
+    pool = shared_pool(spec, workers)
+    for ref, policy in zip(refs, policies, strict=True):
+        _check_policy(config, ref, policy, spec, pool, file_dims)
+        out = rollout_policy(spec, jitted_act(), policy, seeds, horizon, workers, pool)
+        timing["policy_seconds"] += float(out.pop("policy_seconds"))
+        timing["env_steps"] += int(out.pop("env_steps"))
+        results.append((ref, out))
+        if progress is not None:
+            progress(ref, float(np.mean(out["success"])))
     timing["seconds"] = time.perf_counter() - t0
     return results, horizon, timing
 

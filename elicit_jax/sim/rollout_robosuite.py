@@ -17,6 +17,7 @@ worker runs it, so every policy sees the same initial states.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import multiprocessing as mp
 from collections.abc import Sequence
@@ -96,10 +97,20 @@ class EnvPool:
 
     def request(self, items: Sequence[tuple[int, str, Any]]) -> list[Any]:
         """Send ``(worker, cmd, arg)`` requests, then wait for every answer, in order:
-        ``(obs, success, finite)`` per request."""
-        for i, cmd, arg in items:
-            self._conns[i].send((cmd, arg))
-        return [self._recv(i) for i, _, _ in items]
+        ``(obs, success, finite)`` per request. Interrupted half-way, the pool closes (its
+        pipes would be out of step)."""
+        try:
+            for i, cmd, arg in items:
+                self._conns[i].send((cmd, arg))
+            return [self._recv(i) for i, _, _ in items]
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def alive(self) -> bool:
+        """Every worker is running."""
+        return bool(self._procs) and all(p.is_alive() for p in self._procs)
 
     def close(self) -> None:
         """Stop the workers."""
@@ -107,9 +118,11 @@ class EnvPool:
             if proc.is_alive():
                 with contextlib.suppress(BrokenPipeError, OSError):
                     conn.send(("close", None))
-            proc.join(timeout=10)
+        for proc in self._procs:
+            proc.join(timeout=5)
             if proc.is_alive():
                 proc.kill()
+                proc.join()
         self._conns, self._procs = [], []
 
     def __enter__(self) -> EnvPool:
@@ -117,6 +130,35 @@ class EnvPool:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+SHARED_HORIZON = 1_000_000
+"""Horizon the shared pools' environments are built with: episodes never end on robosuite's
+clock (``ignore_done``); the callers count steps."""
+_SHARED: dict[tuple[RobosuiteSpec, int], EnvPool] = {}
+
+
+def shared_pool(spec: RobosuiteSpec, workers: int) -> EnvPool:
+    """A pool of ``workers`` environments of ``spec`` kept for the rest of the process.
+
+    Building robosuite environments takes seconds per worker, so later collections and
+    evaluations in the same process (several policies, a pipeline's stages, a test module)
+    reuse it; every rollout resets its environment to a seeded initial state, so a reused
+    environment starts exactly as a fresh one. The pools close when the process exits.
+    """
+    key = (spec, int(workers))
+    pool = _SHARED.get(key)
+    if pool is None or not pool.alive:
+        if not _SHARED:
+            atexit.register(close_shared)
+        pool = _SHARED[key] = EnvPool(spec, workers, SHARED_HORIZON)
+    return pool
+
+
+def close_shared() -> None:
+    """Close every shared pool."""
+    while _SHARED:
+        _SHARED.popitem()[1].close()
 
 
 class PoolBatch:
