@@ -38,10 +38,13 @@ def collect(
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
     seed: int = typer.Option(0, "--seed", help="Seed of initial states and operator noise."),
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
-    threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
+    threads: int = typer.Option(
+        0, "--threads", help="C MuJoCo threads or robosuite processes (0: one per CPU)."
+    ),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
 ) -> None:
-    """Collect scripted demonstrations on C MuJoCo; only successful episodes are kept.
+    """Collect scripted demonstrations (C MuJoCo, or robosuite for its tasks); only
+    successful episodes are kept.
 
     Example: elicit-jax collect --task square-nut --operator base --episodes 50 --seed 0
     -o base.parquet

@@ -332,7 +332,7 @@ def write_rollouts(
         config=dataclasses.asdict(config),
         inputs=inputs,
         seed=config.seed,
-        task=config.task,
+        task=f"env-from:{Path(config.env_from).name}" if config.env_from else config.task,
         backend=resolve_backend(config.backend, config.task, config.env_from),
         n_rows=len(rollouts),
         summary=summary.to_dict(orient="records"),

@@ -250,6 +250,9 @@ def rollout_policy(
                     starts.append((i, "reset", int(seeds[nxt])))
                     nxt += 1
                 for (i, _, _), (o, ok, _) in zip(starts, pool.request(starts), strict=True):
+                    if o is None:  # the reset itself failed: an unstable rollout
+                        out["unstable"][slot[i]], slot[i] = True, -1
+                        continue
                     obs[i] = out["init_obs"][slot[i]] = o
                     if ok:  # solved at the start: a success in zero steps
                         out["success"][slot[i]], out["steps_to_success"][slot[i]] = True, 0
