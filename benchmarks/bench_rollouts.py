@@ -182,12 +182,14 @@ def main_robosuite(args: argparse.Namespace) -> None:
     cpus = available_cpus()
     workers = args.workers or cpus
     n, h = args.rs_rollouts, args.rs_horizon
-    res = {"task": args.robosuite, "cpus": cpus, "rollouts": n, "steps_per_rollout": h}
+    res = {"task": args.robosuite, "cpus": cpus, "rollouts": n, "steps_per_rollout": h,
+           "loadavg_start": os.getloadavg()}  # fmt: skip
     log("config", res)
     res["serial"] = bench_robosuite_serial(task.spec, policy, np.arange(n), h)
     log("serial", res["serial"])
     res["backend"] = bench_robosuite_pool(task.spec, policy, np.arange(n * workers), h, workers)
     log("backend", res["backend"])
+    res["loadavg_end"] = os.getloadavg()
     speedup = res["backend"]["env_steps_s"] / res["serial"]["env_steps_s"]
     res["speedup"], res["target"] = speedup, 0.8 * cpus
     print(f"task: {res['task']}; policy MLP 5 x (2 x 1024); {h} control steps per rollout")
@@ -196,6 +198,8 @@ def main_robosuite(args: argparse.Namespace) -> None:
                       (f"robosuite backend ({workers} workers)", "backend")):  # fmt: skip
         r = res[key]
         print(f"{name:34s} {r['env_steps_s']:12.1f} {r['policy_share']:13.0%}")
+    load = ", ".join(f"{x:.1f}" for x in res["loadavg_start"][:1] + res["loadavg_end"][:1])
+    print(f"1-min load average at start, end: {load} (on {cpus} CPUs; other processes share them)")
     verdict = "met" if speedup >= res["target"] else "NOT met"
     print(f"speed-up {speedup:.2f}x; target 0.8 x {cpus} CPUs = {res['target']:.1f}x: {verdict}")
     if args.json:

@@ -16,7 +16,9 @@ yaws half a turn apart:
   its start pose) allows that; otherwise it takes the nearer one as well. Measured over
   initial states: see docs/operators.md.
 - ``pause_at`` / ``pause_steps``: hold still on entering those phases (the conflicting D_new
-  of the studies holds still 60 steps at the start, above the handle and above the peg);
+  of the studies holds still 40 steps at the start, above the handle and above the peg:
+  the base takes ~170 steps here, so 60-step pauses left too little of the 500-step horizon
+  for a second try after a slip);
 - ``approach = tip``: come down beside the handle's free end and slide in along it;
 - ``grasp_offset``: grasp point along the handle, from the nut's centre (m).
 """
@@ -202,7 +204,7 @@ STYLES: dict[str, tuple[Style, str]] = {
             choices=(
                 ("yaw_offset", np.pi),
                 ("pause_at", (HOVER, DESCEND, LOWER)),
-                ("pause_steps", 60),
+                ("pause_steps", 40),
             ),
         ),
         "conflicting: wrist turned half a turn (where it can), and stops still before each move",
