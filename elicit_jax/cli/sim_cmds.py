@@ -40,11 +40,14 @@ def collect(
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
     seed: int = typer.Option(0, "--seed", help="Seed of initial states and operator noise."),
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
-    threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
+    threads: int = typer.Option(
+        0, "--threads", help="C MuJoCo threads or robosuite processes (0: one per CPU)."
+    ),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
     overwrite: bool = OVERWRITE,
 ) -> None:
-    """Collect scripted demonstrations on C MuJoCo; only successful episodes are kept.
+    """Collect scripted demonstrations (C MuJoCo, or robosuite for its tasks); only
+    successful episodes are kept.
 
     Example: elicit-jax collect --task square-nut --operator base --episodes 50 --seed 0
     -o base.parquet
@@ -86,13 +89,19 @@ def evaluate(
     task: str = typer.Option("square-nut", "--task", help="Task name."),
     rollouts: int = typer.Option(50, "--rollouts", help="Rollouts per policy."),
     seed: int = typer.Option(0, "--seed", help="Seed of the set of initial states."),
-    backend: str = typer.Option("auto", "--backend", help="auto, mjx or mujoco (C MuJoCo)."),
+    backend: str = typer.Option(
+        "auto", "--backend", help="auto, mjx, mujoco (C MuJoCo) or robosuite (its tasks)."
+    ),
     checkpoint: list[str] = typer.Option(
         ["best"], "--checkpoint", help="best, final, all or an epoch; repeatable."
     ),
     select: str = typer.Option("all", "--select", help="all, or best checkpoint per seed."),
     horizon: int = typer.Option(0, "--horizon", help="Control steps (0: the task's)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
+    env_from: Path | None = typer.Option(
+        None, "--env-from", help="robomimic .hdf5: evaluate in the robosuite env it names."
+    ),
+    workers: int = typer.Option(0, "--workers", help="robosuite processes (0: one per CPU)."),
     out: Path | None = typer.Option(None, "-o", "--out", help="Per-rollout Parquet to write."),
     trajectories: Path | None = typer.Option(
         None, "--trajectories", help="Also record every step (state, action) to this Parquet."
@@ -113,6 +122,8 @@ def evaluate(
 
     Example: elicit-jax evaluate --policy runs/naive --task square-nut --rollouts 50
     --backend mujoco --trajectories steps.parquet --action-noise 0.1
+
+    Example: elicit-jax evaluate --policy runs/base --env-from square_ph.hdf5 --rollouts 50
     """
     import time
 
@@ -137,6 +148,8 @@ def evaluate(
         checkpoints=tuple(checkpoint),
         select=select,
         threads=threads,
+        env_from=str(env_from or ""),
+        workers=workers,
     )
     traj = None
     if trajectories is not None:
@@ -146,9 +159,12 @@ def evaluate(
     elif action_noise:
         raise ElicitError("--action-noise only applies with --trajectories")
     console = Console()
-    chosen = resolve_backend(backend)
+    chosen = resolve_backend(backend, task, config.env_from)
     reason = " (auto: JAX runs on CPU)" if backend == "auto" and chosen == "mujoco" else ""
-    console.print(f"backend: {'C MuJoCo' if chosen == 'mujoco' else 'MJX'}{reason}")
+    names = {"mujoco": "C MuJoCo", "mjx": "MJX", "robosuite": "robosuite (worker processes)"}
+    console.print(f"backend: {names[chosen]}{reason}")
+    if env_from is not None:
+        task = f"{env_from.name}'s env"
     n = len(expand_policies(policy, config.checkpoints))
     t0 = time.perf_counter()
     with Progress(transient=True) as bar:

@@ -370,6 +370,11 @@ def open_session(
         raise ElicitError("choose one of --resume and --overwrite")
     config = _absolute_inputs(config)
     task = make_task(config.task, **({"horizon": config.horizon} if config.horizon else {}))
+    if getattr(task, "backend", "") == "robosuite":
+        raise ElicitError(
+            f"task '{task.name}' runs on robosuite, which sessions (elicit, serve) do not "
+            "support yet: use collect and evaluate"
+        )
     base = read_demos(config.base_demos)
     policy = load_policy(config.policy, config.which, seed=config.policy_seed)
     _check_inputs(config, task, base, policy)

@@ -7,8 +7,10 @@ horizon (discarded; the attempt success rate is reported).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -107,7 +109,6 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
     """
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.operators import make_operator
-    from elicit_jax.sim.rollout_mujoco import BatchSim
 
     if config.episodes < 1:
         raise ElicitError(f"--episodes must be at least 1, got {config.episodes}")
@@ -119,7 +120,8 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
     kept: list[dict[str, np.ndarray]] = []
     lengths: list[int] = []
     attempts = successes = 0
-    with BatchSim(task, batch, threads=config.threads or None) as sim:
+    with batch_sim(task, batch, config.threads) as sim:
+        batch = sim.batch
         while len(kept) < config.episodes and attempts < max_attempts:
             seeds = config.seed * COLLECT_SEED_STRIDE + attempts + np.arange(batch)
             out = run_batch(task, operator, sim, seeds, rng)
@@ -154,6 +156,22 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
     return CollectResult(kept, attempts, successes, lengths)
 
 
+@contextlib.contextmanager
+def batch_sim(task: Any, batch: int, threads: int = 0) -> Iterator[Any]:
+    """``batch`` environments of ``task`` to collect in: C MuJoCo threads, or for a robosuite
+    task one worker process per environment (at most one per CPU, or ``threads``)."""
+    if getattr(task, "backend", "") == "robosuite":
+        from elicit_jax.runtime import available_cpus
+        from elicit_jax.sim.rollout_robosuite import PoolBatch, shared_pool
+
+        yield PoolBatch(shared_pool(task.spec, min(batch, threads or available_cpus())))
+        return
+    from elicit_jax.sim.rollout_mujoco import BatchSim
+
+    with BatchSim(task, batch, threads=threads or None) as sim:
+        yield sim
+
+
 def collect(config: CollectConfig, out: str | Path, progress: Any = None) -> CollectResult:
     """Collect demonstrations and write them as a ``demos`` Parquet artifact at ``out``."""
     from elicit_jax.data.demos import from_episodes, write_demos
@@ -175,6 +193,7 @@ def collect(config: CollectConfig, out: str | Path, progress: Any = None) -> Col
             "attempt_successes": result.successes,
             "attempt_success_rate": result.success_rate,
             "task_config": dataclasses.asdict(task.config),
+            **({"env_args": task.spec.env_args()} if hasattr(task, "spec") else {}),
         },
     )
     write_demos(out, demos, config=dataclasses.asdict(config), seed=config.seed)

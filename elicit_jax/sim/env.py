@@ -273,7 +273,7 @@ def register_task(cls: type[Task]) -> type[Task]:
 def _load_tasks() -> None:
     import importlib
 
-    for mod in ("reach_pillar", "square_nut", "round_nut", "hammer_drawer"):
+    for mod in ("reach_pillar", "square_nut", "round_nut", "hammer_drawer", "robosuite_nuts"):
         try:
             importlib.import_module(f"elicit_jax.sim.tasks.{mod}")
         except ModuleNotFoundError as e:

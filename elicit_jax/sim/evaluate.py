@@ -26,7 +26,7 @@ ROLLOUTS_KIND = "rollouts"
 ROLLOUTS_SCHEMA_VERSION = 1
 EVAL_SEED_BASE = 1_000_000_000
 """Initial-state seeds of evaluation, far from those of collection (``seed * 100000 + i``)."""
-BACKENDS = ("auto", "mjx", "mujoco")
+BACKENDS = ("auto", "mjx", "mujoco", "robosuite")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +42,9 @@ class EvalConfig:
       checkpoints: ``best``, ``final``, ``all`` (every saved epoch and best) or epoch numbers.
       select: ``all`` (summarise every checkpoint) or ``best`` (best checkpoint per seed).
       threads: C MuJoCo threads (0: one per CPU).
+      env_from: a robomimic ``.hdf5`` whose ``env_args`` name the robosuite environment to
+        evaluate in (instead of ``task``); the policies' observation keys must match it.
+      workers: robosuite worker processes, one environment each (0: one per CPU).
     """
 
     task: str = "square-nut"
@@ -52,6 +55,8 @@ class EvalConfig:
     checkpoints: tuple[str, ...] = ("best",)
     select: str = "all"
     threads: int = 0
+    env_from: str = ""
+    workers: int = 0
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
@@ -67,13 +72,32 @@ def eval_seeds(config: EvalConfig) -> np.ndarray:
     return EVAL_SEED_BASE + config.seed * 100_000 + np.arange(config.rollouts)
 
 
-def resolve_backend(backend: str) -> str:
-    """``mjx`` or ``mujoco`` for a requested backend (``auto``: C MuJoCo on CPU-only JAX)."""
+def resolve_backend(backend: str, task: str | None = None, env_from: str = "") -> str:
+    """``mjx``, ``mujoco`` or ``robosuite`` for a requested backend and task (``auto``: C
+    MuJoCo on CPU-only JAX; robosuite tasks and ``env_from`` always run on robosuite).
+
+    Raises:
+      ElicitError: a robosuite task on another backend, or the reverse.
+    """
+    on_robosuite = bool(env_from) or (task is not None and is_robosuite_task(task))
+    if on_robosuite and backend not in ("auto", "robosuite"):
+        raise ElicitError(f"robosuite environments run on --backend robosuite, not {backend!r}")
+    if on_robosuite or backend == "robosuite":
+        if not on_robosuite:
+            raise ElicitError(f"task '{task}' does not run on robosuite")
+        return "robosuite"
     if backend != "auto":
         return backend
     import jax
 
     return "mujoco" if jax.default_backend() == "cpu" else "mjx"
+
+
+def is_robosuite_task(name: str) -> bool:
+    """Whether task ``name`` plays in robosuite (built without importing robosuite)."""
+    from elicit_jax.sim.env import make_task
+
+    return getattr(make_task(name), "backend", "") == "robosuite"
 
 
 def rollout_mujoco_policy(
@@ -97,12 +121,13 @@ def rollout_mujoco_policy(
     from elicit_jax.sim.rollout_mujoco import rollout_policy
 
     return rollout_policy(
-        task, _jitted_act(), policy, seeds, horizon, threads or None, record_states, action_noise
+        task, jitted_act(), policy, seeds, horizon, threads or None, record_states, action_noise
     )
 
 
 @functools.cache
-def _jitted_act() -> Callable:
+def jitted_act() -> Callable:
+    """The jitted ``act(policy, carry, obs) -> (carry, action)`` (built once)."""
     import jax
 
     return jax.jit(lambda policy, carry, obs: policy.act(carry, obs))
@@ -167,15 +192,22 @@ def evaluate_refs(
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.rollout_mjx import rollout_mjx
 
-    task = make_task(config.task)
-    horizon = config.horizon or task.config.horizon
-    backend = resolve_backend(config.backend)
+    backend = resolve_backend(config.backend, config.task, config.env_from)
+    seeds = eval_seeds(config)
     if trajectories is not None:
         from elicit_jax.sim.trajectories import steps_frame, write_trajectories
 
-        if backend == "mjx":
+        if backend != "mujoco":
             raise ElicitError("--trajectories records on C MuJoCo: use --backend mujoco")
-    seeds = eval_seeds(config)
+    if backend == "robosuite":
+        from elicit_jax.sim.evaluate_robosuite import evaluate_refs_robosuite
+
+        results, horizon, _ = evaluate_refs_robosuite(refs, config, seeds, progress)
+        return pd.concat(
+            [rollout_frame(ref, seeds, out, horizon) for ref, out in results], ignore_index=True
+        )
+    task = make_task(config.task)
+    horizon = config.horizon or task.config.horizon
     frames, steps = [], []
     for ref in refs:
         which: str | int = int(ref.checkpoint) if ref.checkpoint.isdigit() else ref.checkpoint
@@ -313,14 +345,16 @@ def write_rollouts(
         f"{r.label}/seed{r.seed}": r.path
         for r in dict.fromkeys(PolicyRef(r.label, r.path, r.seed, "") for r in refs)
     }
+    if config.env_from:
+        inputs["env_from"] = Path(config.env_from)
     header = make_header(
         ROLLOUTS_KIND,
         ROLLOUTS_SCHEMA_VERSION,
         config=dataclasses.asdict(config),
         inputs=inputs,
         seed=config.seed,
-        task=config.task,
-        backend=resolve_backend(config.backend),
+        task=f"env-from:{Path(config.env_from).name}" if config.env_from else config.task,
+        backend=resolve_backend(config.backend, config.task, config.env_from),
         n_rows=len(rollouts),
         summary=summary.to_dict(orient="records"),
         training_seeds=sorted({int(s) for s in rollouts["seed"]}),

@@ -14,6 +14,8 @@ _MODULES = {
     "square-nut": "square_nut",
     "round-nut": "round_nut",
     "hammer-drawer": "hammer_drawer",
+    "robosuite-square": "robosuite_nuts",
+    "robosuite-round": "robosuite_nuts",
 }
 
 

@@ -129,6 +129,11 @@ class Operator(abc.ABC):
         done[slipped] = False
         pos[slipped] = eef[slipped] + np.array([0.0, 0.0, 0.01])
 
+    def yaw_error(self, target: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """(B,) wrist turn still to make towards the target yaw (rad), within the joint's
+        range (override where the end effector's frame or range differs)."""
+        return np.clip(wrap(target), -YAW_LIMIT, YAW_LIMIT) - quat_yaw(obs[:, 3:7])
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(B, 7)`` in [-1, 1] for observations ``obs (B, 23)``."""
         s, cfg = self.style, self.task.config
@@ -138,7 +143,7 @@ class Operator(abc.ABC):
         self.phase_steps = np.where(advance, 0, self.phase_steps + 1)
         err = tg.pos - obs[:, 0:3]
         move = np.clip(s.gain * err / cfg.pos_scale, -s.speed, s.speed)
-        yaw_err = np.clip(wrap(tg.yaw), -YAW_LIMIT, YAW_LIMIT) - quat_yaw(obs[:, 3:7])
+        yaw_err = self.yaw_error(tg.yaw, obs)
         turn = np.clip(s.gain * yaw_err / cfg.rot_scale, -s.speed, s.speed)
         act = np.zeros((len(obs), 7))
         act[:, 0:3] = move

@@ -1,0 +1,101 @@
+"""``robosuite-square`` and ``robosuite-round``: the paper's own environments.
+
+robosuite's ``NutAssemblySquare`` / ``NutAssemblyRound`` with one Panda arm under the
+OSC_POSE controller at 20 Hz, observed through robomimic's low-dimensional keys
+(``robot0_eef_pos`` 3, ``robot0_eef_quat`` 4 (x-y-z-w, robosuite's order),
+``robot0_gripper_qpos`` 2, ``object`` 14: 23 values, the layout of the MuJoCo analogues).
+Actions: robosuite's 7 values in [-1, 1] (delta position up to 5 cm per step, delta rotation
+up to 0.5 rad as a world-frame axis-angle, gripper -1 open / +1 closed). Success is
+robosuite's own check. These tasks run on the robosuite backend only (worker processes,
+one environment each: :mod:`elicit_jax.sim.rollout_robosuite`); constructing the task does not
+import robosuite, building an environment does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, ClassVar
+
+from elicit_jax.data.demos import ObsField
+from elicit_jax.errors import ElicitError
+from elicit_jax.sim.env import OBS_FIELDS, Task, TaskConfig, register_task
+from elicit_jax.sim.robosuite_env import RobosuiteSpec, spec_for
+
+OBS_KEYS = tuple(f.name for f in OBS_FIELDS)
+
+
+@dataclasses.dataclass(frozen=True)
+class RobosuiteConfig(TaskConfig):
+    """A robosuite task's settings.
+
+    Attributes:
+      robot: robosuite robot name.
+      control_freq: control steps per second.
+      pos_scale, rot_scale: the OSC_POSE controller's largest delta per control step (m,
+        rad), for the scripted operators' gains.
+    """
+
+    robot: str = "Panda"
+    control_freq: int = 20
+    pos_scale: float = 0.05
+    rot_scale: float = 0.5
+
+
+class RobosuiteTask(Task):
+    """A task played in a robosuite environment (no MJCF of ours, no MJX)."""
+
+    backend: ClassVar[str] = "robosuite"
+    env_name: ClassVar[str] = ""
+    peg_xy: ClassVar[tuple[float, float]] = (0.0, 0.0)
+    handle_offset: ClassVar[float] = 0.0
+    """Handle's grasp point from the nut's centre, along the nut's x axis (robosuite's
+    ``handle_site``)."""
+    peg_symmetry: ClassVar[float] = 0.0
+    """Turn (rad) after which the peg looks the same (0: round, any yaw fits)."""
+
+    def __init__(self, config: TaskConfig | None = None) -> None:
+        self.config = config or self.config_cls()
+
+    @property
+    def obs_fields(self) -> tuple[ObsField, ...]:
+        return OBS_FIELDS
+
+    @property
+    def spec(self) -> RobosuiteSpec:
+        """The environment (robomimic ``env_args``) and observation keys of this task."""
+        c = self.config
+        return spec_for(self.env_name, OBS_KEYS, c.robot, c.control_freq)  # type: ignore[attr-defined]
+
+    def sample_init(self, rng: Any) -> tuple[Any, Any]:
+        raise ElicitError(f"task '{self.name}' runs on robosuite: its initial states are seeds")
+
+    def success_from_obs(self, obs: Any, xp: Any = None) -> Any:
+        raise ElicitError(f"task '{self.name}': success is robosuite's own check")
+
+
+@register_task
+class RobosuiteSquare(RobosuiteTask):
+    """robosuite NutAssemblySquare (robomimic's Square)."""
+
+    name = "robosuite-square"
+    config_cls = dataclasses.make_dataclass(
+        "SquareConfig", [("horizon", int, 500)], bases=(RobosuiteConfig,), frozen=True
+    )
+    env_name = "NutAssemblySquare"
+    peg_xy = (0.23, 0.1)
+    handle_offset = 0.054
+    peg_symmetry = math.pi / 2
+
+
+@register_task
+class RobosuiteRound(RobosuiteTask):
+    """robosuite NutAssemblyRound."""
+
+    name = "robosuite-round"
+    config_cls = dataclasses.make_dataclass(
+        "RoundConfig", [("horizon", int, 400)], bases=(RobosuiteConfig,), frozen=True
+    )
+    env_name = "NutAssemblyRound"
+    peg_xy = (0.23, -0.1)
+    handle_offset = 0.06
