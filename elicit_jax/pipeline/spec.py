@@ -42,6 +42,16 @@ SECTIONS = (
     "cupid",
     "quality",
 )
+CURATION_METHODS = (
+    "deminf",
+    "deminf-matched",
+    "demo-score",
+    "demo-score-matched",
+    "cupid",
+    "cupid-matched",
+    "quality",
+    "quality-matched",
+)
 METHODS = (
     "base",
     "naive",
@@ -53,24 +63,7 @@ METHODS = (
     "likelihood",
     "novelty",
     "filtered-valley",
-    "deminf",
-    "deminf-matched",
-    "demo-score",
-    "demo-score-matched",
-    "cupid",
-    "cupid-matched",
-    "quality",
-    "quality-matched",
-)
-CURATION_METHODS = (
-    "deminf",
-    "deminf-matched",
-    "demo-score",
-    "demo-score-matched",
-    "cupid",
-    "cupid-matched",
-    "quality",
-    "quality-matched",
+    *CURATION_METHODS,
 )
 _PROFILE_PIPELINE_KEYS = {"seeds", "models", "methods", "collect_seed"}
 _SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators", "tasks"}

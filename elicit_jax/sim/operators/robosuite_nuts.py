@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from elicit_jax.sim.operators.base import Operator, Style, Targets, wrap
+from elicit_jax.sim.operators.square_nut import rot2
 
 TABLE_Z = 0.82
 NUT_REST_Z = 0.83
@@ -51,12 +52,6 @@ def eef_yaw(quat_xyzw: np.ndarray) -> np.ndarray:
 def nut_yaw(quat_xyzw: np.ndarray) -> np.ndarray:
     """(B,) yaw of the nut (it rests flat) from its x-y-z-w quaternion."""
     return eef_yaw(quat_xyzw)
-
-
-def rot2(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate 2-D vectors ``v (B, 2)`` by ``yaw (B,)``."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=1)
 
 
 class RobosuiteNutOperator(Operator):
