@@ -131,7 +131,7 @@ def bench_mjx(task, policy, n: int, horizon: int) -> tuple[float, float]:
 
 def bench_robosuite_serial(spec, policy, seeds: np.ndarray, horizon: int) -> dict:
     """robomimic-style loop: one environment here, rollouts one after another."""
-    from elicit_jax.sim.evaluate import jitted_act
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.sim.robosuite_env import flat_obs, make_env, reset_seeded, success
 
     act = jitted_act()
@@ -158,7 +158,7 @@ def bench_robosuite_serial(spec, policy, seeds: np.ndarray, horizon: int) -> dic
 
 def bench_robosuite_pool(spec, policy, seeds: np.ndarray, horizon: int, workers: int) -> dict:
     """elicit-jax's robosuite backend: ``workers`` processes, one batched policy call."""
-    from elicit_jax.sim.evaluate import jitted_act
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.sim.rollout_robosuite import EnvPool, rollout_policy
 
     act = jitted_act()

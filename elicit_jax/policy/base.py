@@ -14,6 +14,7 @@ Example::
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import jax
@@ -274,3 +275,10 @@ def init_policy(
         dropout_last=bool(dropout_last),
         mdn_min_std=float(mdn_min_std),
     )
+
+
+@functools.cache
+def jitted_act() -> Any:
+    """The jitted ``act(policy, carry, obs) -> (carry, action)``, built once per process and
+    shared by every rollout backend."""
+    return jax.jit(lambda policy, carry, obs: policy.act(carry, obs))

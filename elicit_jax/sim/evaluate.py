@@ -13,7 +13,6 @@ best checkpoint).
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -118,19 +117,12 @@ def rollout_mujoco_policy(
       ``final_obs (B, 23)``, ``unstable (B,)`` (the physics diverged; frozen, not a success);
       with ``record_states`` also ``states (B, horizon, 23)`` and ``state_mask (B, horizon)``.
     """
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.sim.rollout_mujoco import rollout_policy
 
     return rollout_policy(
         task, jitted_act(), policy, seeds, horizon, threads or None, record_states, action_noise
     )
-
-
-@functools.cache
-def jitted_act() -> Callable:
-    """The jitted ``act(policy, carry, obs) -> (carry, action)`` (built once)."""
-    import jax
-
-    return jax.jit(lambda policy, carry, obs: policy.act(carry, obs))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -93,9 +93,9 @@ def evaluate_refs_robosuite(
     """
     import time
 
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.runtime import available_cpus
-    from elicit_jax.sim.evaluate import jitted_act
     from elicit_jax.sim.rollout_robosuite import rollout_policy, shared_pool
 
     policies = []
