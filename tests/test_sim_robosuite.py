@@ -107,8 +107,8 @@ def test_scripted_base_operator_succeeds(work):
 
 
 def test_paired_initial_states_identical_across_policies_and_workers(work, pool):
-    from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.policy.base import jitted_act
+    from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.sim.rollout_robosuite import rollout_policy
 
     policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
