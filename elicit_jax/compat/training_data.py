@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import file_sha256, read_header
+from elicit_jax.artifact import matches_recorded, read_header
 from elicit_jax.data.demo_set import Demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.dataset import episode_digests
@@ -87,7 +87,7 @@ def _recorded(rec: Mapping[str, Any], *near: Path) -> tuple[Path | None, str]:
     if not found:
         return None, f"{rec['path']} is not there"
     for t in found:
-        if not rec.get("sha256") or file_sha256(t) == rec["sha256"]:
+        if not rec.get("sha256") or matches_recorded(rec["sha256"], t):
             return t, ""
     return None, f"{found[0]} changed since it was recorded"
 
