@@ -116,6 +116,14 @@ def describe(path: str | Path) -> None:
     if is_sessions_folder(path):
         describe_sessions_folder(path)
         return
+    if path.is_dir() and not (path / "artifact.json").exists():
+        from elicit_jax.errors import ElicitError
+
+        raise ElicitError(
+            "holds no elicit-jax artifact (no artifact.json), LeRobot dataset (no meta/info.json) "
+            "or operator session (a sessions folder has none until an operator starts)",
+            path,
+        )
     header = read_header(path)
     fn = describer(str(header.get("kind", "")))
     if header.get("kind") == "episode-scores" and "method" in header:
