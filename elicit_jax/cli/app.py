@@ -48,6 +48,14 @@ COMMAND_ORDER = (
 )
 
 
+def check_seed(value: int | None) -> int | None:
+    """Callback of every ``--seed`` option: a seed is an integer >= 0 in every command (numpy's
+    generators refuse negative ones, JAX's would take them)."""
+    if value is not None and value < 0:
+        raise ElicitError(f"--seed must be an integer >= 0, got {value}")
+    return value
+
+
 def repeated_options(command: Any, args: list[str]) -> list[tuple[str, int]]:
     """Single-valued options of ``command`` that ``args`` give more than once, as
     ``(option, times)``: Click would silently keep the last value."""

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import COMPAT, app
+from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE, note_duplicates
 from elicit_jax.errors import ElicitError
 
@@ -83,7 +83,9 @@ def score(
     ),
     chunk_size: int = typer.Option(4096, "--chunk-size", help="Pairs per compiled chunk."),
     which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of a multi-seed run directory."),
+    seed: int | None = typer.Option(
+        None, "--seed", help="Seed of a multi-seed run directory.", callback=check_seed
+    ),
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Score every state-action pair: likelihood error, novelty, compatibility M.
@@ -296,7 +298,7 @@ def filter_cmd(
     thresholds: Path | None = _THRESHOLDS,
     lambda_: float | None = _LAMBDA,
     eta: float | None = _ETA,
-    seed: int = typer.Option(0, "--seed", help="Seed of the random baseline."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the random baseline.", callback=check_seed),
     export: str | None = typer.Option(
         None, "--export", help="Also export kept episodes: robomimic (mask) or lerobot."
     ),

@@ -172,6 +172,8 @@ def review_cmd(
     from elicit_jax.curation.review import Review, ReviewConfig
     from elicit_jax.web.review import serve_review
 
+    if not 0 <= port <= 65535:
+        raise ElicitError(f"--port must be in 0..65535, got {port}")
     folder = out or demos.with_name(demos.name.removesuffix(".parquet") + ".review")
     refuse_overwriting_inputs([folder], [demos, scores, quality])
     config = ReviewConfig(

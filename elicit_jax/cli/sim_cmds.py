@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed, log_path
 from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
 from elicit_jax.errors import ElicitError
 
@@ -38,7 +38,9 @@ def collect(
     task: str = typer.Option("square-nut", "--task", help="Task name (see `elicit-jax tasks`)."),
     operator: str = typer.Option("base", "--operator", help="Scripted operator name."),
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
-    seed: int = typer.Option(0, "--seed", help="Seed of initial states and operator noise."),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of initial states and operator noise.", callback=check_seed
+    ),
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
     threads: int = typer.Option(0, "--threads", help="C MuJoCo threads (0: one per CPU)."),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
@@ -85,7 +87,9 @@ def evaluate(
     ),
     task: str = typer.Option("square-nut", "--task", help="Task name."),
     rollouts: int = typer.Option(50, "--rollouts", help="Rollouts per policy."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the set of initial states."),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of the set of initial states.", callback=check_seed
+    ),
     backend: str = typer.Option("auto", "--backend", help="auto, mjx or mujoco (C MuJoCo)."),
     checkpoint: list[str] = typer.Option(
         ["best"], "--checkpoint", help="best, final, all or an epoch; repeatable."
