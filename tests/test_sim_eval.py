@@ -87,6 +87,7 @@ def test_evaluate_tiny_policy_learns_reach_pillar(work):
                   "--rollouts", "20", "--backend", "mujoco", "--checkpoint", "all",
                   "--select", "best", "-o", str(out)])  # fmt: skip
     assert "tiny" in result.output
+    assert "biased upwards" in " ".join(result.output.split())  # chosen on these rollouts
     table = pd.read_parquet(out)
     header = read_header(out)
     assert header["kind"] == "rollouts" and header["backend"] == "mujoco"

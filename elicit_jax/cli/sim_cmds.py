@@ -162,6 +162,13 @@ def evaluate(
         )
     print_summary(console, summary)
     console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
+    if select == "best" and (len(checkpoint) > 1 or "all" in checkpoint):
+        console.print(
+            "note: --select best chose each seed's checkpoint on these same rollouts, so the "
+            "success above is biased upwards; for an unbiased number evaluate the chosen "
+            "checkpoints again with another --seed (the pipelines choose on held-out rollouts: "
+            "docs/results.md)"
+        )
     unstable = int(summary["unstable"].sum())
     if unstable:
         console.print(
