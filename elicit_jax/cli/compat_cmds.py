@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import COMPAT, app, check_seed
-from elicit_jax.cli.outputs import OVERWRITE, note_duplicates
+from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
 from elicit_jax.errors import ElicitError
 
 _THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
@@ -404,9 +404,10 @@ def filter_cmd(
         )
     r = filter_demos(scores, demos, out, config, base_path=base, export=spec)
     note_duplicates(r.duplicates)
+    why = drop_reason(r.reason, r.duplicates)
     typer.echo(
         f"{out}: dropped {r.pairs_dropped}/{r.pairs_in} pairs of D_new "
-        f"({r.episodes_in} -> {r.episodes_out} episodes; {r.reason}); log: {r.log_path}"
+        f"({r.episodes_in} -> {r.episodes_out} episodes; {why}); log: {r.log_path}"
     )
     if r.export is not None:
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")
