@@ -84,6 +84,15 @@ def test_quality_needs_a_crowd():
         quality_metrics(from_episodes(eps, operators="op"))
 
 
+def test_quality_settings_errors_name_the_flag():
+    from elicit_jax.errors import ElicitError
+
+    with pytest.raises(ElicitError, match=r"z_threshold \(--z\) must be a positive .* got nan"):
+        QualityConfig(z_threshold=float("nan"))
+    with pytest.raises(ElicitError, match=r"spike_jump \(--spike-jump\) .* got -1$"):
+        QualityConfig(spike_jump=-1.0)
+
+
 def test_quality_cli_on_imported_robomimic(tmp_path):
     rng = np.random.default_rng(1)
     demos = {}
