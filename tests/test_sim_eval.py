@@ -79,6 +79,14 @@ def test_collect_bad_input(tmp_path):
     )
     assert result.exit_code != 0 and isinstance(result.exception, ElicitError)
     assert not (tmp_path / "x").exists()
+    for flag in ("--max-attempts", "--threads"):
+        args = ["collect", "--task", "reach-pillar", flag, "-1", "-o", str(tmp_path / "x")]
+        result = CliRunner().invoke(app, args)
+        assert str(result.exception) == f"{flag} must be >= 0 (0: the default), got -1"
+    assert not (tmp_path / "x").exists()
+    for field in ("horizon", "threads"):
+        with pytest.raises(ElicitError, match=f"--{field} must be >= 0"):
+            EvalConfig(**{field: -1})
 
 
 def test_evaluate_tiny_policy_learns_reach_pillar(work):
