@@ -58,9 +58,10 @@ def test_every_seed_option_is_validated_the_same_way():
         if "--seed" in getattr(p, "opts", ())
     ]
     assert {"collect", "score", "filter", "evaluate", "elicit", "serve"} <= set(seeded)
+    seed_flags = {"--seed", "--dropout-seed"}  # --policy-seed names a run's seed directory
     for path, cmd in _commands(app):
         for p in cmd.params:
-            if "--seed" in getattr(p, "opts", ()):
+            if seed_flags & set(getattr(p, "opts", ())):
                 callback = getattr(p.callback, "__wrapped__", p.callback)
                 assert callback is check_seed, " ".join(path)
 
@@ -74,6 +75,7 @@ def test_a_negative_seed_and_a_port_out_of_range_are_one_line_errors(tmp_path):
         ["make-example", "--seed", "-1", "-o", tmp_path / "x.hdf5"],
         ["train", "--demos", tmp_path / "d.parquet", "--out", tmp_path / "r", "--seeds", "0,-1"],
         ["review", tmp_path / "d.parquet", "--port", "70000"],
+        ["score", "--policy", tmp_path, "--demos", out, "-o", out, "--dropout-seed", "-1"],
     ):
         r = CliRunner().invoke(app, [str(a) for a in args])
         assert isinstance(r.exception, ElicitError), (args, r.output, r.exception)

@@ -48,11 +48,11 @@ COMMAND_ORDER = (
 )
 
 
-def check_seed(value: int | None) -> int | None:
-    """Callback of every ``--seed`` option: a seed is an integer >= 0 in every command (numpy's
-    generators refuse negative ones, JAX's would take them)."""
+def check_seed(param: typer.CallbackParam, value: int | None) -> int | None:
+    """Callback of every seed option (``--seed``, ``--dropout-seed``): a seed is an integer
+    >= 0 in every command (numpy's generators refuse negative ones, JAX's would take them)."""
     if value is not None and value < 0:
-        raise ElicitError(f"--seed must be an integer >= 0, got {value}")
+        raise ElicitError(f"{param.opts[0]} must be an integer >= 0, got {value}")
     return value
 
 

@@ -77,7 +77,9 @@ def score(
         help="MC-dropout scoring: N passes per member with dropout on (the original code "
         "scored with dropout on). 0 = deterministic members (paper).",
     ),
-    dropout_seed: int = typer.Option(0, "--dropout-seed", help="Seed of the dropout masks."),
+    dropout_seed: int = typer.Option(
+        0, "--dropout-seed", help="Seed of the dropout masks.", callback=check_seed
+    ),
     accept_fraction: float = typer.Option(
         0.05, "--accept-fraction", help="Reject a demo above this fraction incompatible."
     ),
