@@ -12,6 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from elicit_jax.artifact import read_header
 
 Describer = Callable[[Path, dict[str, Any]], None]
@@ -38,6 +40,36 @@ def describer(kind: str) -> Describer | None:
         return None
     module, name = DESCRIBERS[kind]
     return getattr(importlib.import_module(module), name)
+
+
+def describe_curation_scores(path: Path, header: dict[str, Any]) -> None:
+    """Per-operator summary of a curation method's per-demonstration scores (``filter
+    --method deminf|demo-score|cupid|quality``'s ``OUT.episode-scores.parquet``), which share
+    the kind ``episode-scores`` with ``score``'s per-episode summary."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from elicit_jax.curation.episodes import read_episode_scores
+
+    scores = read_episode_scores(path)
+    cut = scores.threshold
+    table = Table(
+        title=f"{path.name}: {scores.method} scores per operator (higher = keep"
+        + (f"; dropped at <= {cut:.4g})" if cut is not None else ")")
+    )
+    for col in ("operator", "episodes", "score min", "score mean", "score max", "at or below cut"):
+        table.add_column(col, justify="left" if col == "operator" else "right")
+    ops = np.asarray(scores.operator).astype(str)
+    for op in sorted(set(ops.tolist())):
+        s = np.asarray(scores.score, float)[ops == op]
+        low = "-" if cut is None else str(int((s <= cut).sum()))
+        stats = (f"{v + 0.0:.4g}" for v in (s.min(), s.mean(), s.max()))  # + 0.0: no "-0"
+        table.add_row(op, str(len(s)), *stats, low)
+    console = Console()
+    console.print(table)
+    if not scores.trusted:
+        why = scores.report.get("why", "no signal to rank with")
+        console.print(f"[bold red]not trustworthy[/]: {why}")
 
 
 def _describe_raw_source(path: Path) -> bool:
@@ -84,8 +116,18 @@ def describe(path: str | Path) -> None:
     if is_sessions_folder(path):
         describe_sessions_folder(path)
         return
+    if path.is_dir() and not (path / "artifact.json").exists():
+        from elicit_jax.errors import ElicitError
+
+        raise ElicitError(
+            "holds no elicit-jax artifact (no artifact.json), LeRobot dataset (no meta/info.json) "
+            "or operator session (a sessions folder has none until an operator starts)",
+            path,
+        )
     header = read_header(path)
     fn = describer(str(header.get("kind", "")))
+    if header.get("kind") == "episode-scores" and "method" in header:
+        fn = describe_curation_scores
     if fn is not None:
         fn(path, header)
         return

@@ -132,6 +132,10 @@ def test_selections():
         select_episodes(parse_selection("operator:carol"), cols)
     with pytest.raises(ElicitError, match="no episode"):
         select_episodes(parse_selection("episodes:7"), cols)
+    # missing ids as ranges, not a list of every id
+    want = r"no episode\(s\) 3-99,120 in the scores \(they hold 0-2\)"
+    with pytest.raises(ElicitError, match=want):
+        select_episodes(parse_selection("episodes:1-99,120"), cols)
     with pytest.raises(ElicitError, match="no column 'grade'"):
         select_episodes(parse_selection("label:grade=A"), cols)
 

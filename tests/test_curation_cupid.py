@@ -6,7 +6,7 @@ from fixtures_data import tiny_train_config
 
 from elicit_jax.curation.cupid import CupidConfig, cupid_scores
 from elicit_jax.curation.episodes import MatchedRule, OwnRule, select_drop
-from elicit_jax.data.demos import from_episodes
+from elicit_jax.data.demos import from_episodes, read_demos
 from elicit_jax.sim.trajectories import Trajectories
 
 W = np.random.default_rng(5).normal(0, 0.3, (23, 7))
@@ -78,6 +78,20 @@ def test_deterministic_rollouts_have_no_signal(trained):
     assert not select_drop(scores, OwnRule())[0].any()
 
 
+def test_rollouts_of_one_outcome_have_no_signal(trained):
+    """All successes (or all failures): the return does not vary, REINFORCE's estimate has
+    mean zero, and the scores are marked untrusted instead of dropping demos on noise."""
+    import dataclasses
+
+    demos, policy, _ = trained
+    steps = noisy_rollouts(policy)
+    for outcome, word in ((True, "succeeded"), (False, "failed")):
+        same = dataclasses.replace(steps, success=np.full_like(steps.success, outcome))
+        scores = cupid_scores(policy, same, demos, None, CupidConfig())
+        assert not scores.trusted and f"all 120 rollouts {word}" in scores.report["why"]
+        assert not select_drop(scores, OwnRule())[0].any()
+
+
 def test_cli_evaluate_trajectories_then_filter_cupid(trained, tmp_path):
     """evaluate --trajectories records noisy steps on C MuJoCo (same noise on a rerun); filter
     --method cupid scores every D_new demo against them and writes its own cut."""
@@ -118,9 +132,11 @@ def test_cli_evaluate_trajectories_then_filter_cupid(trained, tmp_path):
             "--checkpoint", "final", "-o", tmp_path / "kept.parquet")  # fmt: skip
     assert r.exit_code == 0, (r.output, r.exception)
     scores = read_episode_scores(tmp_path / "kept.episode-scores.parquet")
-    assert scores.method == "cupid" and scores.trusted and len(scores.score) == 9
-    dropped = int((scores.score <= 0).sum())
-    assert f"{dropped} demos of negative influence" in r.output
+    assert scores.method == "cupid" and len(scores.score) == 9
+    # 3 rollouts of 4 steps cannot reach the goal: every return is the same, so no signal
+    assert not scores.trusted and "all 3 rollouts failed" in scores.report["why"]
+    assert "warning: cupid had no signal" in r.output
+    assert read_demos(tmp_path / "kept.parquet").n_episodes == 9  # nothing dropped on noise
     mjx = [a if a != "mujoco" else "mjx" for a in ev]
     r = run(*mjx, "--trajectories", tmp_path / "c.parquet")
     assert r.exit_code != 0 and "C MuJoCo" in str(r.exception)

@@ -84,6 +84,15 @@ def test_quality_needs_a_crowd():
         quality_metrics(from_episodes(eps, operators="op"))
 
 
+def test_quality_settings_errors_name_the_flag():
+    from elicit_jax.errors import ElicitError
+
+    with pytest.raises(ElicitError, match=r"z_threshold \(--z\) must be a positive .* got nan"):
+        QualityConfig(z_threshold=float("nan"))
+    with pytest.raises(ElicitError, match=r"spike_jump \(--spike-jump\) .* got -1$"):
+        QualityConfig(spike_jump=-1.0)
+
+
 def test_quality_cli_on_imported_robomimic(tmp_path):
     rng = np.random.default_rng(1)
     demos = {}
@@ -112,6 +121,11 @@ def test_quality_cli_on_imported_robomimic(tmp_path):
     kept = read_demos(tmp_path / "kept.parquet")
     assert kept.n_episodes == 8
     assert 4 not in set(kept.extra["pre_filter_episode"].tolist())
+    # info on the per-demo scores (kind episode-scores, like score's per-episode summary)
+    out = ok("info", tmp_path / "kept.episode-scores.parquet")
+    assert "quality scores per operator" in out
+    row = next(line for line in out.splitlines() if " 9 " in line)
+    assert row.split("│")[-2].strip() == "1"  # one demo at or below the cut
     r = CliRunner().invoke(app, ["quality", str(tmp_path / "all.parquet"), "-o",
                                  str(tmp_path / "all.parquet")])  # fmt: skip
     assert r.exit_code != 0 and "refusing" in str(r.exception)

@@ -415,7 +415,8 @@ def test_cli_bad_inputs_info_and_report(nut, tmp_path, monkeypatch, capsys):
     other = tmp_path / "other"
     other.mkdir()
     write_demos(other / "x.parquet", small)
-    bad(*common, "--operator", "scripted:base", "-o", other, match="holds no elicitation session")
+    msg = f"{other}: holds no elicitation session (not an elicit-jax artifact (no artifact.json))"
+    bad(*common, "--operator", "scripted:base", "-o", other, match=msg)  # its name once
     code, stdout, err = cli(*common, "--operator", "scripted:same-style", "-o", out)
     assert code == 0, err
     bad(

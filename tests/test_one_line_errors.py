@@ -206,3 +206,10 @@ def test_the_in_sample_accuracy_quoted_is_the_one_the_report_shows(tmp_path, cap
     out = " ".join(capsys.readouterr().out.split())
     assert "in-sample accuracy of those demos │ 0.889" in out
     assert "leave-one-out accuracy │ 0.667 (9 held out)" in out
+
+
+def test_info_on_an_empty_sessions_folder_says_what_it_looked_for(tmp_path):
+    folder = tmp_path / "sessions"
+    folder.mkdir()
+    msg = _one_line(_run("info", folder), folder, "no elicit-jax artifact")
+    assert "operator session" in msg and "until an operator starts" in msg

@@ -150,6 +150,7 @@ def test_filter_base_drops_episodes_of_demos_identical_to_base(work, tmp_path):
     r = _ok("filter", "--scores", work / "s.parquet", "--demos", demos, "--base", base,
             "-o", out, "--lambda", "1e9", "--eta", "1e-9")  # keeps every pair by M  # fmt: skip
     assert "dropped 2 episode(s) of --demos identical to --base episodes" in r.output
+    assert "(6 -> 4 episodes; 2 episode(s) as duplicates of --base; the others:" in r.output
     got = read_demos(out)
     assert got.n_episodes == 6  # 2 of D_base + the 4 episodes of D_new it does not hold
     header = read_header(out)

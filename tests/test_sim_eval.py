@@ -79,6 +79,14 @@ def test_collect_bad_input(tmp_path):
     )
     assert result.exit_code != 0 and isinstance(result.exception, ElicitError)
     assert not (tmp_path / "x").exists()
+    for flag in ("--max-attempts", "--threads"):
+        args = ["collect", "--task", "reach-pillar", flag, "-1", "-o", str(tmp_path / "x")]
+        result = CliRunner().invoke(app, args)
+        assert str(result.exception) == f"{flag} must be >= 0 (0: the default), got -1"
+    assert not (tmp_path / "x").exists()
+    for field in ("horizon", "threads"):
+        with pytest.raises(ElicitError, match=f"--{field} must be >= 0"):
+            EvalConfig(**{field: -1})
 
 
 def test_evaluate_tiny_policy_learns_reach_pillar(work):
@@ -87,6 +95,7 @@ def test_evaluate_tiny_policy_learns_reach_pillar(work):
                   "--rollouts", "20", "--backend", "mujoco", "--checkpoint", "all",
                   "--select", "best", "-o", str(out)])  # fmt: skip
     assert "tiny" in result.output
+    assert "biased upwards" in " ".join(result.output.split())  # chosen on these rollouts
     table = pd.read_parquet(out)
     header = read_header(out)
     assert header["kind"] == "rollouts" and header["backend"] == "mujoco"

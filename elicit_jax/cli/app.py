@@ -6,6 +6,7 @@ inside the commands, so that ``elicit-jax --help`` starts fast.
 
 from __future__ import annotations
 
+import inspect
 import sys
 from typing import Any
 
@@ -47,6 +48,14 @@ COMMAND_ORDER = (
 )
 
 
+def check_seed(param: typer.CallbackParam, value: int | None) -> int | None:
+    """Callback of every seed option (``--seed``, ``--dropout-seed``): a seed is an integer
+    >= 0 in every command (numpy's generators refuse negative ones, JAX's would take them)."""
+    if value is not None and value < 0:
+        raise ElicitError(f"{param.opts[0]} must be an integer >= 0, got {value}")
+    return value
+
+
 def repeated_options(command: Any, args: list[str]) -> list[tuple[str, int]]:
     """Single-valued options of ``command`` that ``args`` give more than once, as
     ``(option, times)``: Click would silently keep the last value."""
@@ -65,9 +74,37 @@ def repeated_options(command: Any, args: list[str]) -> list[tuple[str, int]]:
     return [(used[0], len(used)) for used in seen.values() if len(used) > 1]
 
 
+def unwrap_help(text: str) -> str:
+    """A docstring's paragraphs each on one line: the help formatter keeps single line breaks,
+    so a docstring wrapped at 96 columns came out broken mid-sentence at 80. Paragraphs
+    (blank-line separated), lines starting with ``-``, ``*`` or ``elicit-jax`` (one example per
+    line) and paragraphs starting with ``\\b`` stay apart."""
+    paragraphs = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.splitlines()
+        if lines and lines[0].startswith("\b"):
+            paragraphs.append(para)
+            continue
+        out: list[str] = []
+        for line in lines:
+            if out and not line.lstrip().startswith(("- ", "* ", "elicit-jax ")):
+                out[-1] = f"{out[-1]} {line.strip()}"
+            else:
+                out.append(line.rstrip())
+        paragraphs.append("\n".join(out))
+    return "\n\n".join(paragraphs)
+
+
 class OrderedGroup(TyperGroup):
-    """A command group that lists commands in workflow order and refuses an option given
-    twice (e.g. ``--scores a --scores b``) instead of silently keeping the last one."""
+    """A command group that lists commands in workflow order, shows each command's help
+    unwrapped (:func:`unwrap_help`), and refuses an option given twice (e.g. ``--scores a
+    --scores b``) instead of silently keeping the last one."""
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and command.help:
+            command.help = unwrap_help(command.help)
+        return command
 
     def list_commands(self, ctx: Any) -> list[str]:
         rank = {n: i for i, n in enumerate(COMMAND_ORDER)}

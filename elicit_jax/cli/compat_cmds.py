@@ -6,8 +6,8 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import COMPAT, app
-from elicit_jax.cli.outputs import OVERWRITE, note_duplicates
+from elicit_jax.cli.app import COMPAT, app, check_seed
+from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
 from elicit_jax.errors import ElicitError
 
 _THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
@@ -77,13 +77,17 @@ def score(
         help="MC-dropout scoring: N passes per member with dropout on (the original code "
         "scored with dropout on). 0 = deterministic members (paper).",
     ),
-    dropout_seed: int = typer.Option(0, "--dropout-seed", help="Seed of the dropout masks."),
+    dropout_seed: int = typer.Option(
+        0, "--dropout-seed", help="Seed of the dropout masks.", callback=check_seed
+    ),
     accept_fraction: float = typer.Option(
         0.05, "--accept-fraction", help="Reject a demo above this fraction incompatible."
     ),
     chunk_size: int = typer.Option(4096, "--chunk-size", help="Pairs per compiled chunk."),
     which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of a multi-seed run directory."),
+    seed: int | None = typer.Option(
+        None, "--seed", help="Seed of a multi-seed run directory.", callback=check_seed
+    ),
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Score every state-action pair: likelihood error, novelty, compatibility M.
@@ -296,7 +300,7 @@ def filter_cmd(
     thresholds: Path | None = _THRESHOLDS,
     lambda_: float | None = _LAMBDA,
     eta: float | None = _ETA,
-    seed: int = typer.Option(0, "--seed", help="Seed of the random baseline."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the random baseline.", callback=check_seed),
     export: str | None = typer.Option(
         None, "--export", help="Also export kept episodes: robomimic (mask) or lerobot."
     ),
@@ -402,9 +406,10 @@ def filter_cmd(
         )
     r = filter_demos(scores, demos, out, config, base_path=base, export=spec)
     note_duplicates(r.duplicates)
+    why = drop_reason(r.reason, r.duplicates)
     typer.echo(
         f"{out}: dropped {r.pairs_dropped}/{r.pairs_in} pairs of D_new "
-        f"({r.episodes_in} -> {r.episodes_out} episodes; {r.reason}); log: {r.log_path}"
+        f"({r.episodes_in} -> {r.episodes_out} episodes; {why}); log: {r.log_path}"
     )
     if r.export is not None:
         typer.echo(f"exported {r.export.get('episodes')} episodes to {export_out}")

@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import COMPAT, app
-from elicit_jax.cli.outputs import OVERWRITE
+from elicit_jax.cli.outputs import OVERWRITE, drop_reason
 from elicit_jax.errors import ElicitError
 
 
@@ -90,9 +90,10 @@ def curate(a: CurateArgs) -> None:
             f"cupid: {r['rollouts']} rollouts ({r['rollout_successes']} successes, action "
             f"noise {r['action_noise']:g}); {r['negative_demos']} demos of negative influence"
         )
+    why = drop_reason(result.reason, result.duplicates)
     typer.echo(
         f"{a.out}: dropped {result.pairs_dropped}/{result.pairs_in} pairs of D_new "
-        f"({result.episodes_in} -> {result.episodes_out} episodes; {result.reason}); "
+        f"({result.episodes_in} -> {result.episodes_out} episodes; {why}); "
         f"log: {result.log_path}; per-demo scores: {scores_path_for(a.out)}"
     )
 
@@ -172,6 +173,8 @@ def review_cmd(
     from elicit_jax.curation.review import Review, ReviewConfig
     from elicit_jax.web.review import serve_review
 
+    if not 0 <= port <= 65535:
+        raise ElicitError(f"--port must be in 0..65535, got {port}")
     folder = out or demos.with_name(demos.name.removesuffix(".parquet") + ".review")
     refuse_overwriting_inputs([folder], [demos, scores, quality])
     config = ReviewConfig(

@@ -9,7 +9,7 @@ from typing import Any
 
 import typer
 
-from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE
 from elicit_jax.errors import ElicitError
 
@@ -229,7 +229,7 @@ def export_cmd(
         0.1, "--valid-fraction", help="New robomimic file: share of demos in mask/valid."
     ),
     seed: int = typer.Option(
-        0, "--seed", help="Seed of the new robomimic file's train/valid split."
+        0, "--seed", help="Seed of the new robomimic file's train/valid split.", callback=check_seed
     ),
 ) -> None:
     """Export selected episodes to robomimic, LeRobot or .npz.
@@ -349,7 +349,7 @@ def info(
 def make_example(
     out: Path = typer.Option(Path("example.hdf5"), "-o", "--out", help="HDF5 file to write."),
     demos_per_operator: int = typer.Option(25, "--demos-per-operator", min=1),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = typer.Option(0, "--seed", callback=check_seed),
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Generate a SYNTHETIC toy dataset (2-D point reaching, two operator styles) in

@@ -32,3 +32,11 @@ def note_duplicates(dups: dict[int, int]) -> None:
             f"{pairs}{more} (the drop log and the output header list them)",
             err=True,
         )
+
+
+def drop_reason(reason: str, dups: dict[int, int]) -> str:
+    """The filter's reason for the summary line, with the duplicates of ``--base`` counted
+    apart (they are dropped whatever the method says)."""
+    if not dups:
+        return reason
+    return f"{len(dups)} episode(s) as duplicates of --base; the others: {reason}"

@@ -109,10 +109,10 @@ def report(
     """
     from elicit_jax.artifact import check_outputs, holds_artifact, read_json
 
-    # a report is re-rendered in place; any other directory at -o is never replaced
-    # (--rebuild without -o rebuilds the report folder itself, which it checks)
+    # a report is re-rendered in place; any other directory at -o is never replaced (a
+    # rebuild in place needs no check here: rebuild_report refuses a folder without raw results)
     check_outputs(
-        [out if rebuild else out or run_dir / "report"],
+        [out or (None if rebuild else run_dir / "report")],
         overwrite=True,
         replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
     )

@@ -11,6 +11,8 @@ from typing import Any
 
 import typer
 
+from elicit_jax.cli.app import check_seed
+
 TASK = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`).")
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
@@ -42,7 +44,7 @@ LIKELIHOOD = typer.Option(
 DDOF = typer.Option(None, "--ddof", help="Novelty std convention: 0 paper, 1 code.")
 WHICH = typer.Option(None, "--which", help="Checkpoint: best (default), final, epoch.")
 POLICY_SEED = typer.Option(None, "--policy-seed", help="Seed of a multi-seed run.")
-SEED = typer.Option(None, "--seed", help="Session seed (initial states) [0].")
+SEED = typer.Option(None, "--seed", help="Session seed (initial states) [0].", callback=check_seed)
 MAX_EPISODES = typer.Option(
     None, "--max-episodes", help="Stop after N episodes [practice + 5 x demos]."
 )

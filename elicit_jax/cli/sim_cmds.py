@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, log_path
+from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed, log_path
 from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
 from elicit_jax.errors import ElicitError
 
@@ -38,7 +38,9 @@ def collect(
     task: str = typer.Option("square-nut", "--task", help="Task name (see `elicit-jax tasks`)."),
     operator: str = typer.Option("base", "--operator", help="Scripted operator name."),
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
-    seed: int = typer.Option(0, "--seed", help="Seed of initial states and operator noise."),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of initial states and operator noise.", callback=check_seed
+    ),
     max_attempts: int = typer.Option(0, "--max-attempts", help="Give up after (0: 4 x episodes)."),
     threads: int = typer.Option(
         0, "--threads", help="C MuJoCo threads or robosuite processes (0: one per CPU)."
@@ -88,7 +90,9 @@ def evaluate(
     ),
     task: str = typer.Option("square-nut", "--task", help="Task name."),
     rollouts: int = typer.Option(50, "--rollouts", help="Rollouts per policy."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the set of initial states."),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of the set of initial states.", callback=check_seed
+    ),
     backend: str = typer.Option(
         "auto", "--backend", help="auto, mjx, mujoco (C MuJoCo) or robosuite (its tasks)."
     ),
@@ -174,6 +178,13 @@ def evaluate(
         )
     print_summary(console, summary)
     console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
+    if select == "best" and (len(checkpoint) > 1 or "all" in checkpoint):
+        console.print(
+            "note: --select best chose each seed's checkpoint on these same rollouts, so the "
+            "success above is biased upwards; for an unbiased number evaluate the chosen "
+            "checkpoints again with another --seed (the pipelines choose on held-out rollouts: "
+            "docs/results.md)"
+        )
     unstable = int(summary["unstable"].sum())
     if unstable:
         console.print(

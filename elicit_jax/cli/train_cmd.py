@@ -15,9 +15,12 @@ def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
     if text is None:
         return None
     try:
-        return tuple(int(x) for x in text.split(",") if x.strip())
+        values = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError as e:
         raise ElicitError(f"{flag} expects comma-separated integers, got {text!r}") from e
+    if flag == "--seeds" and any(v < 0 for v in values):
+        raise ElicitError(f"--seeds must be integers >= 0, got {text!r}")
+    return values
 
 
 @app.command(rich_help_panel=POLICY)

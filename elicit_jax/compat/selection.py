@@ -58,6 +58,17 @@ def parse_selection(text: str) -> Selection:
     return Selection(kind, values, text)
 
 
+def id_ranges(ids: list[int]) -> str:
+    """Sorted ids as ranges, the way selections are written: ``[0, 1, 2, 5]`` -> ``0-2,5``."""
+    parts: list[str] = []
+    for i in sorted(ids):
+        if parts and i == int(parts[-1].split("-")[-1]) + 1:
+            parts[-1] = f"{parts[-1].split('-')[0]}-{i}"
+        else:
+            parts.append(str(i))
+    return ",".join(parts)
+
+
 def select_episodes(sel: Selection, columns: Mapping[str, np.ndarray]) -> np.ndarray:
     """Sorted episode ids of the pairs' ``columns`` matching ``sel``; errors when none match.
 
@@ -73,7 +84,11 @@ def select_episodes(sel: Selection, columns: Mapping[str, np.ndarray]) -> np.nda
         wanted = np.array([int(v) for v in sel.values], np.int64)
         missing = sorted(set(wanted.tolist()) - set(np.unique(episode).tolist()))
         if missing:
-            raise ElicitError(f"selection '{sel.text}': no episode(s) {missing} in the scores")
+            have = np.unique(episode)
+            raise ElicitError(
+                f"selection '{sel.text}': no episode(s) {id_ranges(missing)} in the scores "
+                f"(they hold {id_ranges(have.tolist())})"
+            )
         ids = np.unique(wanted)
     else:
         col, value = sel.values

@@ -233,13 +233,28 @@ def cupid_scores(
         "n_train_pairs": len(obs),
         "negative_demos": int((score < 0).sum()),
     }
-    if steps.action_noise <= 0 or report["rollout_grad_norm"] == 0.0:
-        why = "the rollouts carry no exploration noise, so their policy gradient is zero"
+    why = _no_signal(report, float(steps.action_noise))
+    if why:
         return EpisodeScores(
             "cupid", ids, ops, length, np.zeros(len(ids)), report={**report, "why": why},
             trusted=False,
         )  # fmt: skip
     return EpisodeScores("cupid", ids, ops, length, score, threshold=0.0, report=report)
+
+
+def _no_signal(report: dict[str, Any], action_noise: float) -> str:
+    """Why the rollouts carry no policy-gradient signal, or "" when they do."""
+    if action_noise <= 0 or report["rollout_grad_norm"] == 0.0:
+        return "the rollouts carry no exploration noise, so their policy gradient is zero"
+    m, wins = report["rollouts"], report["rollout_successes"]
+    if wins in (0, m):
+        outcome = "failed" if wins == 0 else "succeeded"
+        return (
+            f"all {m} rollouts {outcome}: with a return that does not vary the policy-gradient "
+            "estimate has mean zero, so every influence is noise; record rollouts with both "
+            "outcomes (more rollouts, or another --action-noise)"
+        )
+    return ""
 
 
 def cupid_file_scores(

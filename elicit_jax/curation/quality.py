@@ -76,10 +76,12 @@ class QualityConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        flags = {"z_threshold": "--z", "idle_eps": "--idle-eps", "spike_jump": "--spike-jump"}
         for name in ("z_threshold", "idle_eps", "spike_jump", "gripper_deadband"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise ElicitError(f"quality: {name} must be a positive number, got {v}")
+                flag = f" ({flags[name]})" if name in flags else ""
+                raise ElicitError(f"quality: {name}{flag} must be a positive number, got {v:g}")
         if self.k < 1 or self.max_reference < 2:
             raise ElicitError("quality: k must be >= 1 and max_reference >= 2")
 

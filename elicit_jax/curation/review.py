@@ -41,10 +41,15 @@ class ReviewConfig:
     quality: str | None = None
 
 
-def _scores_by_episode(path: str, demos: Any) -> dict[int, np.ndarray]:
+def _scores_by_episode(path: str, demos: Any, demos_path: str) -> dict[int, np.ndarray]:
+    from elicit_jax.artifact import matches_recorded
     from elicit_jax.compat.score_file import read_scores
 
-    _, cols = read_scores(path, ["episode", "step", "compatibility"])
+    header, cols = read_scores(path, ["episode", "step", "compatibility"])
+    recorded = ((header.get("inputs") or {}).get("demos") or {}).get("sha256")
+    if recorded and not matches_recorded(recorded, demos_path):
+        raise ElicitError(f"these scores were computed on another demos file, not {demos_path}",
+                          path)  # fmt: skip
     out: dict[int, np.ndarray] = {}
     for e, s, t in demos.episode_bounds():
         rows = np.flatnonzero(cols["episode"] == e)
@@ -65,6 +70,20 @@ def _quality_by_episode(path: str, ids: list[int]) -> dict[int, tuple[bool, str]
     return got
 
 
+def check_review_folder(path: str | Path) -> None:
+    """Error unless ``path`` can hold a review: new, empty, or an earlier review's folder
+    (it holds ``review.json``). A file or another folder is never written into."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ElicitError("is a file; the review folder (-o) is a directory", path)
+    if path.is_dir() and any(path.iterdir()) and not (path / STATE_FILE).exists():
+        raise ElicitError(
+            f"is a folder but not a review's (no {STATE_FILE}); give a new folder or an "
+            "earlier review's",
+            path,
+        )
+
+
 class Review:
     """The state of one review (the only mutable part: the reviewer's flags).
 
@@ -80,7 +99,12 @@ class Review:
         self.demos = read_demos(config.demos)
         self.bounds = {int(e): (int(s), int(t)) for e, s, t in self.demos.episode_bounds()}
         ids = list(self.bounds)
-        self.m = {} if config.scores is None else _scores_by_episode(config.scores, self.demos)
+        check_review_folder(config.out)
+        self.m = (
+            {}
+            if config.scores is None
+            else _scores_by_episode(config.scores, self.demos, config.demos)
+        )
         self.quality = {} if config.quality is None else _quality_by_episode(config.quality, ids)
         self.out = Path(config.out)
         self.flags: dict[int, str] = {}
@@ -176,7 +200,7 @@ class Review:
         keep = [e for e in self.bounds if e not in self.flags]
         if not keep:
             raise ElicitError("every episode is flagged: nothing to keep")
-        self.out.mkdir(parents=True, exist_ok=True)
+        self._save()  # the folder is a review's from its first file on (see check_review_folder)
         kept = self.out / KEPT_FILE
         spec = SubsetSpec(episodes=",".join(str(e) for e in keep))
         select_file(self.config.demos, kept, spec)

@@ -312,8 +312,9 @@ def _open_store(
         try:
             old = store.header()
         except ElicitError as e:
+            why = str(e).removeprefix(f"{e.path}: ") if e.path else str(e)
             raise ElicitError(
-                f"holds no elicitation session ({e}); choose another output directory", root
+                f"holds no elicitation session ({why}); choose another output directory", root
             ) from e
         diffs = config.differences(SessionConfig.from_dict(old.get("config", {})))
         recorded = old.get("inputs", {})

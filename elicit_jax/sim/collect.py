@@ -112,6 +112,9 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
 
     if config.episodes < 1:
         raise ElicitError(f"--episodes must be at least 1, got {config.episodes}")
+    for flag, value in (("--max-attempts", config.max_attempts), ("--threads", config.threads)):
+        if value < 0:
+            raise ElicitError(f"{flag} must be >= 0 (0: the default), got {value}")
     task = make_task(config.task)
     operator = make_operator(task, config.operator)
     rng = operator_rng(config.seed, config.operator)

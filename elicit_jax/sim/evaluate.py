@@ -64,6 +64,9 @@ class EvalConfig:
             raise ElicitError(f"--select must be 'all' or 'best', got {self.select!r}")
         if self.rollouts < 1:
             raise ElicitError(f"--rollouts must be at least 1, got {self.rollouts}")
+        for flag, value in (("--horizon", self.horizon), ("--threads", self.threads)):
+            if value < 0:
+                raise ElicitError(f"{flag} must be >= 0 (0: the default), got {value}")
 
 
 def eval_seeds(config: EvalConfig) -> np.ndarray:

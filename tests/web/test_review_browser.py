@@ -204,3 +204,34 @@ def test_review_state_persists_and_validates(imported, tmp_path):
     assert rows[2]["flagged"] and not rows[1]["flagged"] and rows[2]["m_mean"] is None
     result = again.export()
     assert (result["kept"], result["dropped"], result["export"]) == (5, 1, None)
+
+
+def test_review_folder_and_scores_must_be_the_reviews(imported, tmp_path):
+    """-o is a new, empty or earlier review folder (never a file or another folder); scores
+    that record another demos file are refused; an export alone makes a resumable folder."""
+    import pyarrow.parquet as pq
+
+    from elicit_jax.artifact import make_header, write_parquet
+    from elicit_jax.curation.review import Review, ReviewConfig
+    from elicit_jax.errors import ElicitError
+
+    demos = str(imported / "demos.parquet")
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "n.txt").write_text("mine")
+    with pytest.raises(ElicitError, match="not a review's"):
+        Review(ReviewConfig(demos=demos, out=str(tmp_path / "notes")))
+    with pytest.raises(ElicitError, match="is a file"):
+        Review(ReviewConfig(demos=demos, out=str(imported / "quality.parquet")))
+    table = pq.read_table(imported / "scores.parquet")
+    for name, of in (("other.parquet", imported / "quality.parquet"), ("own.parquet", demos)):
+        write_parquet(tmp_path / name, table, make_header("scores", 1, inputs={"demos": of}))
+    with pytest.raises(ElicitError, match="another demos file"):
+        Review(
+            ReviewConfig(
+                demos=demos, out=str(tmp_path / "a"), scores=str(tmp_path / "other.parquet")
+            )
+        )
+    cfg = ReviewConfig(demos=demos, out=str(tmp_path / "b"), scores=str(tmp_path / "own.parquet"))
+    assert Review(cfg).export()["kept"] == 6
+    assert Review(cfg).flags == {}  # the exported folder resumes
+    assert (tmp_path / "notes" / "n.txt").read_text() == "mine"
