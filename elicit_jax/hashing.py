@@ -23,14 +23,15 @@ HEADER_KEY = b"elicit_jax"
 VOLATILE_FIELDS: frozenset[str] = frozenset(
     {
         "created", "imported", "train_seconds", "seconds", "started", "elapsed", "time",
-        "provenance",
+        "provenance", "reused_from",
     }
 )  # fmt: skip
 """Header keys (at any depth) that differ between two identical runs: wall-clock times and
-durations, and the ``provenance`` block (code commit, command line, library versions: who
-made the artifact and how, not what it holds). :func:`content_sha256` leaves them out, so
-that the same seed, config, inputs, machine and thread count give the same content hash. A
-new header field of that sort is added here, and only here."""
+durations, the ``provenance`` block (code commit, command line, library versions) and a
+pipeline's ``reused_from`` (an identical training copied): who made the artifact and how, not
+what it holds. :func:`content_sha256` leaves them out, so that the same seed, config, inputs,
+machine and thread count give the same content hash. A new header field of that sort is added
+here, and only here."""
 
 
 def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
