@@ -47,12 +47,6 @@ UPWARD_EXCEPTIONS = {
 
 PRIVATE_EXCEPTIONS = {
     # (importer, imported module, name): why. Remove an entry when the import goes.
-    **{
-        (cmd, "elicit_jax.cli.compat_cmds", name): "threshold resolution is private to "
-        "compat_cmds; a public Thresholds resolver in compat/ replaces it (issue #28 item 2)"
-        for cmd in ("elicit_jax.cli.elicit_cmds", "elicit_jax.cli.serve_cmd")
-        for name in ("_ETA", "_LAMBDA", "_THRESHOLDS", "_resolve")
-    },
 }
 
 _MODULE_STRING = re.compile(r"elicit_jax(\.\w+)*")
