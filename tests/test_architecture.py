@@ -47,23 +47,6 @@ UPWARD_EXCEPTIONS = {
 
 PRIVATE_EXCEPTIONS = {
     # (importer, imported module, name): why. Remove an entry when the import goes.
-    **{
-        (cmd, "elicit_jax.cli.compat_cmds", name): "threshold resolution is private to "
-        "compat_cmds; a public Thresholds resolver in compat/ replaces it (issue #28 item 2)"
-        for cmd in ("elicit_jax.cli.elicit_cmds", "elicit_jax.cli.serve_cmd")
-        for name in ("_ETA", "_LAMBDA", "_THRESHOLDS", "_resolve")
-    },
-    **{
-        ("elicit_jax.elicit.live", "elicit_jax.compat.score", name): "the live scorer reuses "
-        "the batch scorer's internals; public scoring functions replace them (issue #28 item 2)"
-        for name in ("_score_rows", "_static")
-    },
-    **{
-        ("elicit_jax.pipeline.elicitation.spec", "elicit_jax.pipeline.spec", name): "the "
-        "elicitation spec reuses the filtering spec's parsing helpers; one spec parser "
-        "replaces both (issue #28 item 1)"
-        for name in ("_check_keys", "_table", "_task_table")
-    },
 }
 
 _MODULE_STRING = re.compile(r"elicit_jax(\.\w+)*")

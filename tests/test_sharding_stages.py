@@ -27,11 +27,11 @@ SCRIPT = textwrap.dedent(
            for t in (7, 23, 4, 13, 11)]
     demos = from_episodes(eps, operators=["a", "b", "a", "b", "a"], successes=[True] * 5)
     seen = []
-    real = score._score_rows
+    real = score.score_rows
     def spy(policy, obs, *args, **kw):
         seen.append(getattr(obs, "sharding", None))
         return real(policy, obs, *args, **kw)
-    score._score_rows = spy
+    score.score_rows = spy
     for kind in ("mlp", "mdn"):
         policy = init_policy(jax.random.key(1), kind=kind, obs_dim=5, action_dim=3,
                              n_members=1 if kind == "mdn" else 3, hidden=(16, 16))

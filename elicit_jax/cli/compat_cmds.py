@@ -8,43 +8,8 @@ import typer
 
 from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
+from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
-
-_THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
-_LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
-_ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
-
-
-def _resolve(
-    thresholds: Path | None, lam: float | None, eta: float | None, preset: str | None = None
-) -> tuple[float, float] | None:
-    """(λ, η) from exactly one of: a thresholds file, --lambda/--eta, a preset; or None."""
-    given = [thresholds is not None, lam is not None or eta is not None, preset is not None]
-    if sum(given) > 1:
-        raise ElicitError("give only one of --thresholds, --lambda/--eta, --preset")
-    if (lam is None) != (eta is None):
-        raise ElicitError("--lambda and --eta go together")
-    if thresholds is not None:
-        from elicit_jax.compat.thresholds import read_thresholds
-        from elicit_jax.compat.trust import thresholds_verdict
-
-        lam_, eta_, header = read_thresholds(thresholds)
-        verdict = thresholds_verdict(header)
-        if not verdict.clean:
-            what = "warning" if verdict.problems else "note"
-            typer.echo(f"{what}: {thresholds}: judged when fitted: {verdict.summary()}", err=True)
-        return lam_, eta_
-    if lam is not None and eta is not None:
-        from elicit_jax.compat.measures import check_thresholds
-
-        return check_thresholds(lam, eta)
-    if preset is not None:
-        from elicit_jax.compat.measures import PRESETS
-
-        if preset not in PRESETS:
-            raise ElicitError(f"unknown preset '{preset}' (choose {', '.join(sorted(PRESETS))})")
-        return PRESETS[preset]
-    return None
 
 
 @app.command(rich_help_panel=COMPAT)
@@ -52,9 +17,9 @@ def score(
     policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
     demos: Path = typer.Option(..., "--demos", help="Demonstrations to score (demos artifact)."),
     out: Path = typer.Option(..., "-o", "--out", help="Scores artifact to write (.parquet)."),
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     preset: str | None = typer.Option(
         None,
         "--preset",
@@ -133,15 +98,8 @@ def _score_thresholds(
     action_scale: str,
 ) -> tuple[tuple[float, float], str]:
     """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
-    resolved = _resolve(thresholds, lam, eta, preset)
-    _check_units(action_scale, thresholds, preset)
-    source = (
-        f"file {thresholds}"
-        if thresholds is not None
-        else f"preset {preset}"
-        if preset is not None
-        else "given"
-    )
+    given = thresholds_from_flags(thresholds, lam, eta, preset, action_scale)
+    resolved, source = (None, "") if given is None else (given.pair, given.source)
     if resolved is None:
         resolved, source = _task_preset(demos, quiet=action_scale == "std")
         if action_scale == "std":
@@ -150,23 +108,6 @@ def _score_thresholds(
         typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
         source += " (std-scaled units)"
     return resolved, source
-
-
-def _check_units(action_scale: str, thresholds: Path | None, preset: str | None) -> None:
-    """λ and η must be in the units the scores are computed in (docs/thresholds.md). The
-    paper's presets are in raw action units: ``--action-scale std`` refuses an explicit
-    ``--preset`` rather than apply it silently (no exact conversion exists: scaling weighs
-    each dim apart); a thresholds file must have been fitted on scores of the same scale."""
-    from elicit_jax.compat.thresholds import check_units
-
-    if thresholds is not None:
-        check_units(thresholds, action_scale)
-    if action_scale == "std" and preset is not None:
-        raise ElicitError(
-            f"--action-scale std: --preset {preset} is in raw action units and does not apply "
-            "to std-scaled scores; give --lambda/--eta in std-scaled units, --thresholds "
-            "fitted on std-scaled scores, or no thresholds (docs/thresholds.md)"
-        )
 
 
 def _std_placeholder(task_source: str) -> str:
@@ -297,9 +238,9 @@ def filter_cmd(
     pair_mode: str = typer.Option(
         "renumber", "--pair-mode", help="After dropping pairs: renumber steps or split episodes."
     ),
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     seed: int = typer.Option(0, "--seed", help="Seed of the random baseline.", callback=check_seed),
     export: str | None = typer.Option(
         None, "--export", help="Also export kept episodes: robomimic (mask) or lerobot."
@@ -369,9 +310,9 @@ def filter_cmd(
     """
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig, filter_demos
 
-    resolved = _resolve(thresholds, lambda_, eta)
-    if scores is not None:
-        _check_units(_scores_scale(scores), thresholds, None)
+    scale = _scores_scale(scores) if scores is not None else None
+    given = thresholds_from_flags(thresholds, lambda_, eta, action_scale=scale)
+    resolved = None if given is None else given.pair
     inputs = [scores, demos, base, policy, source, thresholds, trajectories]
     _check_filter_outputs(out, method, export_out, overwrite, inputs)
     if method in CURATORS:
@@ -437,9 +378,9 @@ CURATORS = ("deminf", "demo-score", "cupid", "quality")
 def map_cmd(
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
     out: Path = typer.Option(..., "-o", "--out", help="map.png or map.html (interactive)."),
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     axis: str = typer.Option(
         "likelihood-error", "--axis", help="likelihood-error (ℓ) or neg-likelihood-error (−ℓ)."
     ),
@@ -452,8 +393,8 @@ def map_cmd(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.maps import map_scores_file
 
-    resolved = _resolve(thresholds, lambda_, eta)
-    _check_units(_scores_scale(scores), thresholds, None)
+    given = thresholds_from_flags(thresholds, lambda_, eta, action_scale=_scores_scale(scores))
+    resolved = None if given is None else given.pair
     check_outputs([out], [scores, thresholds], overwrite=overwrite)
     lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
     typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")

@@ -10,7 +10,7 @@ import typer
 from elicit_jax.cli import data_cmds
 from elicit_jax.cli import session_options as so
 from elicit_jax.cli.app import ELICIT, app
-from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
+from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
 
 
@@ -22,15 +22,6 @@ def _stored_config(out: Path) -> dict[str, Any]:
     return dict(SessionStore(out).header().get("config", {}))
 
 
-def _raw_units(thresholds: Path | None) -> None:
-    """Live scoring is in raw action units: thresholds fitted on std-scaled scores do not
-    apply (docs/thresholds.md)."""
-    from elicit_jax.compat.thresholds import check_units
-
-    if thresholds is not None:
-        check_units(thresholds, "none")
-
-
 @app.command("elicit", rich_help_panel=ELICIT)
 def elicit_cmd(
     ctx: typer.Context,
@@ -38,9 +29,9 @@ def elicit_cmd(
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     preset: str | None = so.PRESET,
     operator: str = typer.Option(
         None,
@@ -87,8 +78,9 @@ def elicit_cmd(
     from elicit_jax.elicit.run import elicit
 
     given = so.given(ctx.params)
-    resolved = _resolve(thresholds, lambda_, eta, preset)
-    _raw_units(thresholds)
+    # live scoring is in raw action units (docs/thresholds.md)
+    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
+    resolved = None if chosen is None else chosen.pair
     if resolved is not None:
         given.update({"lambda": resolved[0], "eta": resolved[1]})
         given["thresholds_file"] = None if thresholds is None else str(thresholds)
@@ -114,9 +106,9 @@ def watch_cmd(
     inbox: Path = typer.Argument(..., help="Folder where demonstrations land."),
     policy: Path = typer.Option(..., "--policy", help="Policy to score against."),
     base_demos: Path = typer.Option(..., "--base-demos", help="D_base (for feedback)."),
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     preset: str | None = so.PRESET,
     out: Path = typer.Option(None, "-o", "--out", help="Pages and log [INBOX/verdicts]."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
@@ -156,8 +148,9 @@ def watch_cmd(
 
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
-    resolved = _resolve(thresholds, lambda_, eta, preset)
-    _raw_units(thresholds)
+    # live scoring is in raw action units (docs/thresholds.md)
+    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
+    resolved = None if chosen is None else chosen.pair
     if resolved is None:
         raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
     imp = data_cmds.import_config(

@@ -8,7 +8,7 @@ import typer
 
 from elicit_jax.cli import session_options as so
 from elicit_jax.cli.app import ELICIT, app
-from elicit_jax.cli.compat_cmds import _ETA, _LAMBDA, _THRESHOLDS, _resolve
+from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
 
 DEMO_TASK = "reach-pillar"
@@ -43,9 +43,9 @@ def serve_cmd(
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
-    thresholds: Path | None = _THRESHOLDS,
-    lambda_: float | None = _LAMBDA,
-    eta: float | None = _ETA,
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
     preset: str | None = so.PRESET,
     mode: str = so.MODE,
     demos: int = so.DEMOS,
@@ -81,7 +81,8 @@ def serve_cmd(
     from elicit_jax.web.serve import ServeConfig, serve, with_person_horizon
 
     given = so.given(ctx.params)
-    resolved = _resolve(thresholds, lambda_, eta, preset)
+    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset)
+    resolved = None if chosen is None else chosen.pair
     if demo_dir is not None and not demo:
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
@@ -98,7 +99,8 @@ def serve_cmd(
             raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
         inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
         thresholds = inputs.thresholds
-        resolved = _resolve(thresholds, None, None)
+        chosen = thresholds_from_flags(thresholds, None, None)
+        resolved = None if chosen is None else chosen.pair
         given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
         given["base_demos"] = str(inputs.base_demos)
     missing = [

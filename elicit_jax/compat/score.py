@@ -81,8 +81,16 @@ class ScoreInputs:
     seed: Any
 
 
-def _static(config: ScoreConfig) -> ScoreConfig:
-    """The part of a config that shapes the compiled function (numbers are arguments)."""
+def static_config(config: ScoreConfig) -> ScoreConfig:
+    """The part of a config that shapes the compiled function (numbers are arguments).
+
+    Args:
+      config: the full score config.
+
+    Returns:
+      A config with only the fields :func:`score_rows` compiles on, so configs differing in
+      λ, η or chunk size share one compile.
+    """
     return ScoreConfig(
         likelihood=config.likelihood,
         ddof=config.ddof,
@@ -103,13 +111,25 @@ def _pair_fn(inputs: ScoreInputs, config: ScoreConfig) -> Callable[..., Any]:
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _score_rows(
+def score_rows(
     policy: Any, obs: Any, action: Any, inputs: ScoreInputs, row0: Any, config: ScoreConfig
-):
-    """Scores of a chunk of independent pairs. obs: (C, O), action: (C, A) -> PairScores (C,).
+) -> Any:
+    """Scores of a chunk of independent pairs (jitted; ``config`` is static).
 
-    ``row0`` is the chunk's first row in the dataset: MC-dropout masks are keyed by the row,
-    so they do not depend on the chunking.
+    The batch scorer calls it per chunk and the live scorer per step, so both give the same
+    numbers for the same pair.
+
+    Args:
+      policy: the trained policy (ensemble, MDN or dropout).
+      obs: (C, O) observations.
+      action: (C, A) actions.
+      inputs: the numeric inputs from :func:`score_inputs` (λ, η, bounds, weight, seed).
+      row0: the chunk's first row in the dataset: MC-dropout masks are keyed by the row,
+        so they do not depend on the chunking.
+      config: :func:`static_config` of the score config (one compile per shape).
+
+    Returns:
+      PairScores with leading axis C.
     """
     import jax.numpy as jnp
 
@@ -253,7 +273,7 @@ def score_batches(
     import jax.numpy as jnp
 
     inputs = score_inputs(policy, config, bounds, policy_source)
-    static = _static(config)
+    static = static_config(config)
     recurrent = policy_spec(policy, "kind", "mlp") == "lstm"
     if config.dropout_samples and policy_spec(policy, "kind", "mlp") != "mlp":
         raise ElicitError("--dropout-samples applies to MLP ensembles only", policy_source)
@@ -283,7 +303,7 @@ def score_batches(
             obs, action = pad(rows["obs"], chunk), pad(rows["action"], chunk)
             if place is not None:
                 obs, action = place(obs), place(action)
-            out = _score_rows(policy, obs, action, inputs, jnp.int32(row0), static)
+            out = score_rows(policy, obs, action, inputs, jnp.int32(row0), static)
             scores = _to_numpy(out, n)
         row0 += n
         _check_scores(scores, rows, policy_source)

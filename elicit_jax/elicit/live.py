@@ -86,16 +86,16 @@ class LiveScorer:
         import jax
         import jax.numpy as jnp
 
-        from elicit_jax.compat.score import _score_rows, _static, score_inputs
+        from elicit_jax.compat.score import score_inputs, score_rows, static_config
 
         self.config = config
         self.traces = 0
         self.inputs = score_inputs(policy, config, bounds, source)
-        static = _static(config)
+        static = static_config(config)
 
         def one(policy: Any, obs: Any, action: Any, inputs: Any, step: Any) -> Any:
             self.traces += 1
-            s = _score_rows(policy, obs[None], action[None], inputs, step, static)
+            s = score_rows(policy, obs[None], action[None], inputs, step, static)
             head = jnp.stack(
                 [s.likelihood[0], s.novelty[0], s.compatibility[0], s.incompatible[0]]
             ).astype(jnp.float32)

@@ -238,33 +238,33 @@ def parse_spec(
     data: Mapping[str, Any], *, source: str = "<spec>", text: str = "", profile: str | None = None
 ) -> PipelineSpec:
     """Build a :class:`PipelineSpec` from parsed TOML ``data`` (see :func:`load_spec`)."""
-    _check_keys(data, _TOP_KEYS, "top level", source)
+    check_keys(data, _TOP_KEYS, "top level", source)
     head = data.get("pipeline")
     if not isinstance(head, Mapping):
         raise ElicitError("missing [pipeline] table", source)
-    _check_keys(head, _PIPELINE_KEYS, "[pipeline]", source)
+    check_keys(head, _PIPELINE_KEYS, "[pipeline]", source)
     profile = profile or head.get("profile", "paper")
     if profile not in PROFILES:
         raise ElicitError(
             f"unknown profile '{profile}' (choose from {', '.join(PROFILES)})", source
         )
     overrides = data.get("profiles", {}).get(profile, {})
-    _check_keys(overrides, {*SECTIONS, "task", "pipeline"}, f"[profiles.{profile}]", source)
-    head_over = _table(overrides, "pipeline", source)
-    _check_keys(head_over, _PROFILE_PIPELINE_KEYS, f"[profiles.{profile}.pipeline]", source)
+    check_keys(overrides, {*SECTIONS, "task", "pipeline"}, f"[profiles.{profile}]", source)
+    head_over = sub_table(overrides, "pipeline", source)
+    check_keys(head_over, _PROFILE_PIPELINE_KEYS, f"[profiles.{profile}.pipeline]", source)
     head = {**head, **head_over}
     for prof in data.get("profiles", {}):
         if prof not in PROFILES:
             raise ElicitError(f"[profiles.{prof}]: unknown profile name", source)
     sections = {}
     for name in SECTIONS:
-        merged = {**_table(data, name, source), **_table(overrides, name, source)}
+        merged = {**sub_table(data, name, source), **sub_table(overrides, name, source)}
         sections[name] = MappingProxyType(merged)
     tasks_raw = data.get("task", [])
     if not isinstance(tasks_raw, list) or not tasks_raw:
         raise ElicitError("needs at least one [[task]] table", source)
-    task_over = _table(overrides, "task", source)
-    tasks = tuple(_task(_task_table(t, task_over, profile, source), source) for t in tasks_raw)
+    task_over = sub_table(overrides, "task", source)
+    tasks = tuple(_task(task_table(t, task_over, profile, source), source) for t in tasks_raw)
     if len({t.name for t in tasks}) != len(tasks):
         raise ElicitError("a task is listed twice", source)
     methods = tuple(head.get("methods", ("base", "naive", "filtered")))
@@ -316,8 +316,8 @@ def _sensitivity(
     """The [sensitivity] table, validated: held-out seeds and evaluation states."""
     if "sensitivity" not in data:
         return None
-    raw = _table(data, "sensitivity", source)
-    _check_keys(raw, _SENSITIVITY_KEYS, "[sensitivity]", source)
+    raw = sub_table(data, "sensitivity", source)
+    check_keys(raw, _SENSITIVITY_KEYS, "[sensitivity]", source)
     default = SensitivitySpec()
     spec = SensitivitySpec(
         points=int(raw.get("points", default.points)),
@@ -345,7 +345,18 @@ def _sensitivity(
     return spec
 
 
-def _check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
+def check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
+    """Check that ``table`` is a table whose keys are all in ``allowed``.
+
+    Args:
+      table: the parsed TOML value.
+      allowed: the keys it may hold.
+      where: how the error names the table (``"[pipeline]"``).
+      source: the spec file, for the error.
+
+    Raises:
+      ElicitError: not a table, or an unknown key (the allowed ones are listed).
+    """
     if not isinstance(table, Mapping):
         raise ElicitError(f"{where} must be a table", source)
     unknown = sorted(set(table) - allowed)
@@ -356,17 +367,35 @@ def _check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
         )
 
 
-def _table(data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
+def sub_table(data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
+    """The table ``data[name]`` as a dict (empty when absent).
+
+    Raises:
+      ElicitError: ``data[name]`` is not a table.
+    """
     value = data.get(name, {})
     if not isinstance(value, Mapping):
         raise ElicitError(f"[{name}] must be a table", source)
     return dict(value)
 
 
-def _task_table(
+def task_table(
     raw: Any, profile_over: Mapping[str, Any], profile: str, source: str
 ) -> dict[str, Any]:
-    """A [[task]] table with the profile's overrides for every task, then its own."""
+    """A [[task]] table with the profile's overrides for every task, then its own.
+
+    Args:
+      raw: one parsed ``[[task]]`` entry.
+      profile_over: the profile's ``[profiles.<name>.task]`` overrides for every task.
+      profile: the chosen profile name.
+      source: the spec file, for the error.
+
+    Returns:
+      The task's keys, later layers winning: own keys, profile overrides, own profile block.
+
+    Raises:
+      ElicitError: not a table, or an unknown profile name in the task's ``profiles``.
+    """
     if not isinstance(raw, Mapping):
         raise ElicitError("each [[task]] must be a table", source)
     own = raw.get("profiles", {})
@@ -376,11 +405,11 @@ def _task_table(
         if prof not in PROFILES:
             raise ElicitError(f"[task.profiles.{prof}]: unknown profile name", source)
     base = {k: v for k, v in raw.items() if k != "profiles"}
-    return {**base, **profile_over, **_table(own, profile, source)}
+    return {**base, **profile_over, **sub_table(own, profile, source)}
 
 
 def _task(raw: Mapping[str, Any], source: str) -> TaskSpec:
-    _check_keys(raw, _TASK_KEYS, "[[task]]", source)
+    check_keys(raw, _TASK_KEYS, "[[task]]", source)
     for key in ("name", "operators", "incompatible_operator"):
         if key not in raw:
             raise ElicitError(f"[[task]] is missing '{key}'", source)

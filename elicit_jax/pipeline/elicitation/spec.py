@@ -29,7 +29,7 @@ from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.spec import PROFILES, _check_keys, _table, _task_table, load_spec
+from elicit_jax.pipeline.spec import PROFILES, check_keys, load_spec, sub_table, task_table
 
 KIND = "elicitation"
 CONDITIONS = ("naive", "filtered", "rejection", "informed")
@@ -155,11 +155,11 @@ def parse_study(
     data: Mapping[str, Any], *, source: str = "<spec>", text: str = "", profile: str | None = None
 ) -> StudySpec:
     """Build a :class:`StudySpec` from parsed TOML ``data`` (see :func:`load_study`)."""
-    _check_keys(data, _TOP, "top level", source)
+    check_keys(data, _TOP, "top level", source)
     head = data.get("pipeline")
     if not isinstance(head, Mapping) or head.get("kind") != KIND:
         raise ElicitError(f'an elicitation study needs [pipeline] kind = "{KIND}"', source)
-    _check_keys(head, _HEAD, "[pipeline]", source)
+    check_keys(head, _HEAD, "[pipeline]", source)
     profile = profile or head.get("profile", "paper")
     if profile not in PROFILES:
         raise ElicitError(
@@ -169,9 +169,11 @@ def parse_study(
         if prof not in PROFILES:
             raise ElicitError(f"[profiles.{prof}]: unknown profile name", source)
     overrides = data.get("profiles", {}).get(profile, {})
-    _check_keys(overrides, {*SECTIONS, "task", "people"}, f"[profiles.{profile}]", source)
+    check_keys(overrides, {*SECTIONS, "task", "people"}, f"[profiles.{profile}]", source)
     sections = {
-        name: MappingProxyType({**_table(data, name, source), **_table(overrides, name, source)})
+        name: MappingProxyType(
+            {**sub_table(data, name, source), **sub_table(overrides, name, source)}
+        )
         for name in SECTIONS
     }
     bad = sorted(set(sections["session"]) & _SESSION_FIXED)
@@ -179,14 +181,14 @@ def parse_study(
         raise ElicitError(
             f"[session] {', '.join(bad)} are set by the study, not the definition", source
         )
-    people = {**_table(data, "people", source), **_table(overrides, "people", source)}
-    _check_keys(people, _PEOPLE, "[people]", source)
+    people = {**sub_table(data, "people", source), **sub_table(overrides, "people", source)}
+    check_keys(people, _PEOPLE, "[people]", source)
     raw_tasks = data.get("task", [])
     if not isinstance(raw_tasks, list) or not raw_tasks:
         raise ElicitError("needs at least one [[task]] table", source)
-    task_over = _table(overrides, "task", source)
+    task_over = sub_table(overrides, "task", source)
     tasks = tuple(
-        _task(_task_table(t, task_over, profile, source), people, source) for t in raw_tasks
+        _task(task_table(t, task_over, profile, source), people, source) for t in raw_tasks
     )
     if len({t.name for t in tasks}) != len(tasks):
         raise ElicitError("a task is listed twice", source)
@@ -215,7 +217,7 @@ def _task(raw: Mapping[str, Any], people: Mapping[str, Any], source: str) -> Stu
     from elicit_jax.elicit.people.traits import make_population
     from elicit_jax.sim.operators import style_names
 
-    _check_keys(raw, _TASK, "[[task]]", source)
+    check_keys(raw, _TASK, "[[task]]", source)
     for key in ("name", "incompatible_operator"):
         if key not in raw:
             raise ElicitError(f"[[task]] is missing '{key}'", source)

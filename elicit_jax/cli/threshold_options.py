@@ -1,0 +1,44 @@
+"""The thresholds flags (``--thresholds``, ``--lambda``, ``--eta``) every command shares.
+
+Declared once so ``score``, ``filter``, ``map``, ``elicit``, ``serve`` and ``watch`` spell and
+document them the same way; :func:`thresholds_from_flags` resolves them through
+:func:`elicit_jax.compat.threshold_source.resolve_thresholds` and shows the file's verdict.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from elicit_jax.compat.threshold_source import Thresholds, resolve_thresholds
+
+THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
+LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
+ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
+
+
+def thresholds_from_flags(
+    thresholds: Path | None,
+    lam: float | None,
+    eta: float | None,
+    preset: str | None = None,
+    action_scale: str | None = None,
+) -> Thresholds | None:
+    """Resolve the thresholds flags; a file's recorded trust verdict goes to stderr.
+
+    Args:
+      thresholds: ``--thresholds``.
+      lam: ``--lambda``.
+      eta: ``--eta``.
+      preset: ``--preset``, for the commands that have it.
+      action_scale: the scale of the scores they apply to, to check units (None: no check).
+
+    Returns:
+      The thresholds, or None when no flag gives them.
+    """
+    resolved = resolve_thresholds(thresholds, lam, eta, preset, action_scale)
+    line = resolved.verdict_line() if resolved is not None else None
+    if line is not None:
+        typer.echo(line, err=True)
+    return resolved

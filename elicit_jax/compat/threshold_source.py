@@ -1,0 +1,104 @@
+"""The thresholds (λ, η) a command runs with, and where they came from.
+
+Every command that takes thresholds (``score``, ``filter``, ``map``, ``elicit``, ``serve``,
+``watch``) resolves them here, from exactly one of a thresholds file, an explicit pair, or a
+paper preset, so each validates them the same way and can show the user how far to trust them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from elicit_jax.compat.trust import Verdict
+from elicit_jax.errors import ElicitError
+
+
+@dataclasses.dataclass(frozen=True)
+class Thresholds:
+    """Resolved thresholds.
+
+    Attributes:
+      lam: likelihood-error threshold λ (finite, > 0).
+      eta: novelty threshold η (finite, > 0).
+      source: where they came from: ``"file PATH"``, ``"preset NAME"`` or ``"given"``.
+      file: the thresholds file, when they came from one.
+      verdict: the trust verdict recorded when the file was fitted (None unless from a file).
+    """
+
+    lam: float
+    eta: float
+    source: str
+    file: Path | None = None
+    verdict: Verdict | None = None
+
+    @property
+    def pair(self) -> tuple[float, float]:
+        """``(λ, η)``."""
+        return self.lam, self.eta
+
+    def verdict_line(self) -> str | None:
+        """The line to show the user about the file's recorded verdict, or None when clean."""
+        if self.verdict is None or self.verdict.clean:
+            return None
+        what = "warning" if self.verdict.problems else "note"
+        return f"{what}: {self.file}: judged when fitted: {self.verdict.summary()}"
+
+
+def resolve_thresholds(
+    file: Path | None,
+    lam: float | None,
+    eta: float | None,
+    preset: str | None = None,
+    action_scale: str | None = None,
+) -> Thresholds | None:
+    """Thresholds from exactly one of a thresholds file, ``lam``/``eta``, or a preset.
+
+    Args:
+      file: a thresholds.json written by ``fit-thresholds``.
+      lam: λ given by hand (goes with ``eta``).
+      eta: η given by hand (goes with ``lam``).
+      preset: the name of a paper preset (``square-nut``, ...).
+      action_scale: the action scale of the scores they will be compared with (``none``:
+        raw action units; ``std``: per-dim scaled), or None not to check units. A file must
+        have been fitted on scores of that scale; a preset (raw units) does not apply to
+        ``std`` scores.
+
+    Returns:
+      The thresholds, or None when none of the three is given.
+
+    Raises:
+      ElicitError: more than one source, λ without η (or the reverse), an unknown preset,
+        an unreadable file, λ or η not finite and > 0, or thresholds in the wrong units.
+    """
+    given = [file is not None, lam is not None or eta is not None, preset is not None]
+    if sum(given) > 1:
+        raise ElicitError("give only one of --thresholds, --lambda/--eta, --preset")
+    if (lam is None) != (eta is None):
+        raise ElicitError("--lambda and --eta go together")
+    if file is not None:
+        from elicit_jax.compat.thresholds import check_units, read_thresholds
+        from elicit_jax.compat.trust import thresholds_verdict
+
+        lam_, eta_, header = read_thresholds(file)
+        if action_scale is not None:
+            check_units(file, action_scale)
+        verdict = thresholds_verdict(header)
+        return Thresholds(lam_, eta_, f"file {file}", file=file, verdict=verdict)
+    if lam is not None and eta is not None:
+        from elicit_jax.compat.measures import check_thresholds
+
+        return Thresholds(*check_thresholds(lam, eta), "given")
+    if preset is not None:
+        from elicit_jax.compat.measures import PRESETS
+
+        if preset not in PRESETS:
+            raise ElicitError(f"unknown preset '{preset}' (choose {', '.join(sorted(PRESETS))})")
+        if action_scale == "std":
+            raise ElicitError(
+                f"--action-scale std: --preset {preset} is in raw action units and does not "
+                "apply to std-scaled scores; give --lambda/--eta in std-scaled units, "
+                "--thresholds fitted on std-scaled scores, or no thresholds (docs/thresholds.md)"
+            )
+        return Thresholds(*PRESETS[preset], f"preset {preset}")
+    return None
