@@ -340,7 +340,7 @@ def info(
 
     Example: elicit-jax info demos.parquet
     """
-    from elicit_jax.describe import describe
+    from elicit_jax.cli.info import describe
 
     describe(artifact)
 

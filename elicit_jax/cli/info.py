@@ -27,7 +27,7 @@ DESCRIBERS: dict[str, tuple[str, str]] = {
     "episode-scores": ("elicit_jax.compat.describe_compat", "describe_episode_scores"),
     "thresholds": ("elicit_jax.compat.describe_compat", "describe_thresholds"),
     "filter-log": ("elicit_jax.compat.describe_compat", "describe_filter_log"),
-    "rollouts": ("elicit_jax.sim.describe_rollouts", "describe_rollouts"),
+    "rollouts": ("elicit_jax.cli.info_rollouts", "describe_rollouts"),
     "checkpoint": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
     "training_run": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
     "elicit-session": ("elicit_jax.elicit.describe_session", "describe_session"),
