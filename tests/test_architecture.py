@@ -65,16 +65,6 @@ PRINTING_ALLOWED = {
     # Modules outside cli/ that still import ``rich`` (none calls ``print``): why. Printing
     # belongs in cli/ (issue #28 item 4); remove an entry when its module stops printing.
     # Passing a console down from cli/ as a parameter is fine; building one here is not.
-    **{
-        m: "an `elicit-jax info` describer of one artifact kind; moves to cli/info_*"
-        for m in (
-            "elicit_jax.data.describe_demos",
-            "elicit_jax.policy.describe_checkpoint",
-            "elicit_jax.compat.describe_compat",
-            "elicit_jax.elicit.describe_session",
-            "elicit_jax.elicit.sessions_folder",
-        )
-    },
     "elicit_jax.compat.episode_summary": "the per-operator table printed by `info` and "
     "`score` (its summary function is pure)",
     "elicit_jax.compat.fit": "`fit(show=True)` prints its report tables",

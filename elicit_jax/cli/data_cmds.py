@@ -40,7 +40,7 @@ def _operator_table(path: Path) -> None:
     from rich.table import Table
 
     from elicit_jax.artifact import read_header
-    from elicit_jax.data.describe_demos import operator_stats, success_recorded, success_text
+    from elicit_jax.cli.info_demos import operator_stats, success_recorded, success_text
 
     recorded = success_recorded(read_header(path))
     table = Table(title=f"wrote {path}", title_justify="left")
