@@ -65,10 +65,9 @@ PRINTING_ALLOWED = {
     # Modules outside cli/ that still import ``rich`` (none calls ``print``): why. Printing
     # belongs in cli/ (issue #28 item 4); remove an entry when its module stops printing.
     # Passing a console down from cli/ as a parameter is fine; building one here is not.
-    "elicit_jax.compat.episode_summary": "the per-operator table printed by `info` and "
-    "`score` (its summary function is pure)",
     "elicit_jax.compat.fit": "`fit(show=True)` prints its report tables",
-    "elicit_jax.compat.score_file": "a rich progress bar and a stderr warning while scoring",
+    "elicit_jax.compat.score_file": "the scoring progress bar (the pipeline's score stages "
+    "rely on it too)",
     "elicit_jax.data.robomimic": "a rich progress bar while importing",
     "elicit_jax.policy.progress": "the training progress bar and its end-of-run table",
     "elicit_jax.elicit.run": "the headless session's console reporter and summary table",

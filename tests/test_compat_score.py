@@ -177,3 +177,18 @@ def test_obs_field_mismatch_is_a_clear_error(policies, tmp_path):
     # same names in the same order: fine
     ok = policies["mlp"].replace(obs_fields=("pos", "goal"))
     score_file(ok, path, tmp_path / "s.parquet", ScoreConfig(chunk_size=64), progress=False)
+
+
+def test_a_one_member_policy_earns_the_novelty_warning():
+    from types import SimpleNamespace
+
+    from elicit_jax.compat.score_file import one_member_note
+
+    def note(n: int, kind: str = "mlp", samples: int = 0) -> str | None:
+        policy = SimpleNamespace(n_members=n, kind=kind)
+        return one_member_note(policy, ScoreConfig(dropout_samples=samples))
+
+    assert "novelty is 0 for every state" in note(1)
+    assert note(5) is None  # an ensemble's members disagree
+    assert note(1, kind="mdn") is None  # an MDN's own variance still varies
+    assert note(1, samples=8) is None  # dropout samples stand in for members

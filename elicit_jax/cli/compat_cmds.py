@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.measures import ScoreConfig
 
 _THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
 _LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
@@ -105,7 +109,6 @@ def score(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import episodes_path
-    from elicit_jax.compat.score_file import score_checkpoint
 
     (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
     check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
@@ -121,7 +124,44 @@ def score(
         dropout_seed=dropout_seed,
     )
     which_: str | int = int(which) if which.isdigit() else which
-    score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
+    _score_and_show(policy, demos, out, config, which_, seed, source)
+
+
+def _score_and_show(
+    policy: Path,
+    demos: Path,
+    out: Path,
+    config: ScoreConfig,
+    which: str | int,
+    seed: int | None,
+    source: str | None,
+) -> None:
+    """Load the checkpoint, warn about a one-member policy, score with a progress bar and
+    print a table per operator."""
+    from rich.console import Console
+
+    from elicit_jax.cli.info_compat import print_operator_table
+    from elicit_jax.compat.score_file import one_member_note, score_file
+    from elicit_jax.policy.checkpoint import load_policy
+
+    loaded = load_policy(policy, which, seed=seed)
+    note = one_member_note(loaded, config)
+    if note:
+        Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)
+    result = score_file(
+        loaded,
+        demos,
+        out,
+        config,
+        policy_path=policy,
+        policy_info={"which": which, "seed": seed},
+        thresholds_source=source,
+    )
+    print_operator_table(
+        result.episodes,
+        title=f"{demos.name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
+        f"reject > {100 * config.accept_fraction:g}% incompatible)",
+    )
 
 
 def _score_thresholds(

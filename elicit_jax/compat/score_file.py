@@ -29,7 +29,6 @@ from elicit_jax.artifact import (
 from elicit_jax.compat.episode_summary import (
     EpisodeAccumulator,
     episodes_table,
-    print_operator_table,
 )
 from elicit_jax.compat.measures import ScoreConfig, config_dict
 from elicit_jax.compat.score import (
@@ -286,54 +285,12 @@ def read_scores(
     return header, out
 
 
-def score_checkpoint(
-    policy_path: str | Path,
-    demos_path: str | Path,
-    out_path: str | Path,
-    config: ScoreConfig,
-    *,
-    which: str | int = "best",
-    seed: int | None = None,
-    show: bool = True,
-    thresholds_source: str | None = None,
-) -> ScoreResult:
-    """Load a policy checkpoint, score a demonstrations file, print a table per operator.
-
-    Args:
-      policy_path: a checkpoint (seed directory) or a one-seed run directory.
-      demos_path: the ``demos`` artifact to score.
-      out_path: the ``scores`` artifact to write.
-      config: thresholds, likelihood kind, ddof, chunk size.
-      which: ``best``, ``final`` or an epoch number.
-      seed: the seed of a multi-seed run directory.
-      show: progress bar and summary table.
-      thresholds_source: where λ and η came from, recorded in the header.
-    """
-    from elicit_jax.policy.checkpoint import load_policy
-
-    policy = load_policy(policy_path, which, seed=seed)
-    if show and policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
-        from rich.console import Console
-
-        Console(stderr=True).print(
-            "[yellow]warning:[/] the policy has one member: novelty is 0 for every state, so "
-            "every state counts as familiar and M rests on the likelihood error alone",
-            soft_wrap=True,
+def one_member_note(policy: Any, config: ScoreConfig) -> str | None:
+    """The warning a one-member policy earns (``None`` otherwise): with a single member and no
+    dropout samples, novelty is 0 everywhere (an MDN's likelihood still varies)."""
+    if policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
+        return (
+            "the policy has one member: novelty is 0 for every state, so every state counts as "
+            "familiar and M rests on the likelihood error alone"
         )
-    result = score_file(
-        policy,
-        demos_path,
-        out_path,
-        config,
-        policy_path=policy_path,
-        policy_info={"which": which, "seed": seed},
-        progress=show,
-        thresholds_source=thresholds_source,
-    )
-    if show:
-        print_operator_table(
-            result.episodes,
-            title=f"{Path(demos_path).name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
-            f"reject > {100 * config.accept_fraction:g}% incompatible)",
-        )
-    return result
+    return None
