@@ -68,7 +68,6 @@ PRINTING_ALLOWED = {
     "elicit_jax.compat.fit": "`fit(show=True)` prints its report tables",
     "elicit_jax.compat.score_file": "the scoring progress bar (the pipeline's score stages "
     "rely on it too)",
-    "elicit_jax.data.robomimic": "a rich progress bar while importing",
     "elicit_jax.policy.progress": "the training progress bar and its end-of-run table",
     "elicit_jax.elicit.run": "the headless session's console reporter and summary table",
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
