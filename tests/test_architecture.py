@@ -69,7 +69,6 @@ PRINTING_ALLOWED = {
     "elicit_jax.compat.score_file": "the scoring progress bar (the pipeline's score stages "
     "rely on it too)",
     "elicit_jax.policy.progress": "the training progress bar and its end-of-run table",
-    "elicit_jax.elicit.run": "the headless session's console reporter and summary table",
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
     "elicit_jax.pipeline.ray_runner": "the Ray driver's progress bars and messages",
     "elicit_jax.pipeline.run": "builds the default console; prints the plan and result tables",
