@@ -304,6 +304,7 @@ def fit_thresholds_cmd(
     """
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.fit_report import print_report
     from elicit_jax.compat.thresholds import FitConfig
 
     check_outputs([out], [scores], overwrite=overwrite)
@@ -316,7 +317,7 @@ def fit_thresholds_cmd(
         force=force,
         base=() if base is None else (str(base),),
     )
-    fit_scores_file(scores, out, job)
+    fit_scores_file(scores, out, job, show=print_report)
 
 
 @app.command("filter", rich_help_panel=COMPAT)

@@ -321,6 +321,7 @@ def score_stage(ctx: StageContext) -> None:
 def fit_stage(ctx: StageContext) -> None:
     """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
     from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.fit_report import print_report
     from elicit_jax.compat.thresholds import FitConfig
 
     cfg = ctx.config
@@ -332,7 +333,7 @@ def fit_stage(ctx: StageContext) -> None:
         eta=cfg.get("eta"),
         force=bool(cfg.get("force", False)),
     )
-    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job)
+    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job, show=print_report)
 
 
 def filter_stage(ctx: StageContext) -> None:

@@ -196,4 +196,4 @@ def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
     job = FitJob(
         compatible=f"operator:{r.operator}", incompatible=f"operator:{r.incompatible_operator}"
     )
-    fit_scores_file(out / SCORES_FILE, out / THRESHOLDS_FILE, job, show=False)
+    fit_scores_file(out / SCORES_FILE, out / THRESHOLDS_FILE, job)
