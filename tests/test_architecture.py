@@ -75,7 +75,6 @@ PRINTING_ALLOWED = {
     "elicit_jax.pipeline.run": "builds the default console; prints the plan and result tables",
     "elicit_jax.pipeline.stages": "nested progress bars on the console passed down",
     "elicit_jax.pipeline.elicitation.stages": "nested progress bars on the console passed down",
-    "elicit_jax.web.serve": "the server's start-up lines and the end-of-session summary table",
 }
 
 _MODULE_STRING = re.compile(r"elicit_jax(\.\w+)*")
