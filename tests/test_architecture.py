@@ -65,10 +65,9 @@ PRINTING_ALLOWED = {
     # Modules outside cli/ that still import ``rich`` (none calls ``print``): why. Printing
     # belongs in cli/ (issue #28 item 4); remove an entry when its module stops printing.
     # Passing a console down from cli/ as a parameter is fine; building one here is not.
-    "elicit_jax.compat.fit_report": "renders the fit report; the CLI and the pipeline's fit "
-    "stage pass it to fit_scores_file (which never prints), and pipeline/ cannot import cli/",
-    "elicit_jax.compat.score_file": "the scoring progress bar (the pipeline's score stages "
-    "rely on it too)",
+    "elicit_jax.compat.show": "a rendering module (the fit report's tables, the scoring bar); "
+    "the CLI and the pipeline's stages pass it to fit_scores_file and score_file (which never "
+    "print), and pipeline/ cannot import cli/",
     "elicit_jax.policy.progress": "the training progress bar and its end-of-run table",
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
     "elicit_jax.pipeline.ray_runner": "the Ray driver's progress bars and messages",

@@ -188,7 +188,7 @@ def _loo_gap_scores(path):
 
 def test_the_in_sample_accuracy_quoted_is_the_one_the_report_shows(tmp_path, capsys):
     from elicit_jax.compat.fit import FitJob, fit_scores_file
-    from elicit_jax.compat.fit_report import print_report
+    from elicit_jax.compat.show import print_report
 
     s = _loo_gap_scores(tmp_path / "s.parquet")
     job = FitJob("operator:good", "operator:bad", force=True)

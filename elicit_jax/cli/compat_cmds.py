@@ -142,6 +142,7 @@ def _score_and_show(
 
     from elicit_jax.cli.info_compat import print_operator_table
     from elicit_jax.compat.score_file import one_member_note, score_file
+    from elicit_jax.compat.show import scoring_bar
     from elicit_jax.policy.checkpoint import load_policy
 
     loaded = load_policy(policy, which, seed=seed)
@@ -155,6 +156,7 @@ def _score_and_show(
         config,
         policy_path=policy,
         policy_info={"which": which, "seed": seed},
+        progress=scoring_bar,
         thresholds_source=source,
     )
     print_operator_table(
@@ -304,7 +306,7 @@ def fit_thresholds_cmd(
     """
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
-    from elicit_jax.compat.fit_report import print_report
+    from elicit_jax.compat.show import print_report
     from elicit_jax.compat.thresholds import FitConfig
 
     check_outputs([out], [scores], overwrite=overwrite)

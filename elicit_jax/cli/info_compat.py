@@ -74,7 +74,7 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
 
 def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
     """The thresholds, how they were obtained, and their report."""
-    from elicit_jax.compat.fit_report import print_report
+    from elicit_jax.compat.show import print_report
 
     _kv(
         f"{path}: thresholds ({header.get('method')})",

@@ -209,7 +209,7 @@ def fit_scores_file(
       job: the contrast sets and settings.
       show: called with the header (``lambda``, ``eta``, ``method``, ``report``) to show the
         report, also when a meaningless fit is refused (the CLI passes
-        :func:`~elicit_jax.compat.fit_report.print_report`).
+        :func:`~elicit_jax.compat.show.print_report`).
 
     Returns:
       The written header (``lambda``, ``eta``, ``report``, ...).

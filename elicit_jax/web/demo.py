@@ -191,7 +191,6 @@ def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
         out / SCORES_FILE,
         ScoreConfig(),
         policy_path=out / POLICY_DIR,
-        progress=False,
     )
     job = FitJob(
         compatible=f"operator:{r.operator}", incompatible=f"operator:{r.incompatible_operator}"

@@ -1,12 +1,16 @@
-"""The ``fit-thresholds`` report as rich tables: the thresholds and their quality, rejections
-per operator, the contrast decisions and the trust verdict.
+"""The compatibility layer's work on a console: the ``fit-thresholds`` report as rich tables
+(the thresholds and their quality, rejections per operator, the contrast decisions and the
+trust verdict) and the scoring progress bar.
 
-A rendering module: the CLI (``fit-thresholds``, ``info``) and the pipeline's fit stage pass
-:func:`print_report` to :func:`~elicit_jax.compat.fit.fit_scores_file`, which never prints.
+A rendering module: the CLI and the pipeline's stages pass :func:`print_report` to
+:func:`~elicit_jax.compat.fit.fit_scores_file` and :func:`scoring_bar` to
+:func:`~elicit_jax.compat.score_file.score_file`, which never print themselves.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from elicit_jax.compat.trust import Verdict
@@ -106,3 +110,17 @@ def print_trust(report: dict[str, Any], console: Any) -> None:
     console.print(
         Panel(body, title=f"[bold]this fit is {verdict.headline()}{forced}", border_style="red")
     )
+
+
+@contextmanager
+def scoring_bar(total: int) -> Iterator[Callable[[int], None]]:
+    """A "scoring pairs" progress bar over ``total`` pairs, yielding ``advance(n)``."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    bar = Progress("[bold]scoring pairs", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    bar.start()
+    try:
+        task = bar.add_task("score", total=total)
+        yield lambda n: bar.advance(task, n)
+    finally:
+        bar.stop()
