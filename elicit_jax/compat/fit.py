@@ -39,6 +39,9 @@ from elicit_jax.errors import ElicitError
 if TYPE_CHECKING:
     from elicit_jax.compat.training_data import TrainingEvidence
 
+#: ``show(header)`` shows a fit report (:func:`elicit_jax.compat.show.print_report`).
+Show = Callable[[dict[str, Any]], None]
+
 
 @dataclasses.dataclass(frozen=True)
 class FitJob:
@@ -192,11 +195,7 @@ def _training_verdict(
 
 
 def fit_scores_file(
-    scores_path: str | Path,
-    out_path: str | Path,
-    job: FitJob,
-    *,
-    show: Callable[[dict[str, Any]], None] | None = None,
+    scores_path: str | Path, out_path: str | Path, job: FitJob, *, show: Show | None = None
 ) -> dict[str, Any]:
     """Fit or evaluate thresholds on a scores file and write ``thresholds.json``.
 
