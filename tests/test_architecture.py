@@ -68,7 +68,9 @@ PRINTING_ALLOWED = {
     "elicit_jax.compat.show": "a rendering module (the fit report's tables, the scoring bar); "
     "the CLI and the pipeline's stages pass it to fit_scores_file and score_file (which never "
     "print), and pipeline/ cannot import cli/",
-    "elicit_jax.policy.progress": "the training progress bar and its end-of-run table",
+    "elicit_jax.policy.progress": "a rendering module (the training bar and end-of-run table), "
+    "but train() builds it itself (quiet= silences it); its callers in cli/, pipeline/, web/ "
+    "and elicit/ should pass it in",
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
     "elicit_jax.pipeline.ray_runner": "the Ray driver's progress bars and messages",
     "elicit_jax.pipeline.run": "builds the default console; prints the plan and result tables",
