@@ -251,7 +251,7 @@ def main() -> None:
 
     def streamed() -> None:
         cfg = _cfg(stream_chunk)
-        score_file(policy, tmp / "demos.parquet", tmp / "scores.parquet", cfg, progress=False)
+        score_file(policy, tmp / "demos.parquet", tmp / "scores.parquet", cfg)
 
     streamed()
     default_threads = torch.get_num_threads()

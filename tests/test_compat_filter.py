@@ -45,13 +45,11 @@ def files(tmp_path_factory):
     # about half the episodes have an incompatible pair (all of them are >= 9 steps, so one
     # pair exceeds 5% and rejects the episode)
     probe = d / "probe.parquet"
-    score_file(policy, new, probe, ScoreConfig(chunk_size=32), progress=False)
+    score_file(policy, new, probe, ScoreConfig(chunk_size=32))
     p = read_scores(probe)[1]
     lam = float(np.median([p["likelihood"][p["episode"] == e].max() for e in range(10, 15)]))
     scores = d / "scores.parquet"
-    score_file(
-        policy, new, scores, ScoreConfig(lambda_=lam, eta=100.0, chunk_size=32), progress=False
-    )
+    score_file(policy, new, scores, ScoreConfig(lambda_=lam, eta=100.0, chunk_size=32))
     return {"new": new, "base": base, "scores": scores, "dir": d}
 
 
@@ -191,7 +189,7 @@ def test_episode_filter_exports_a_robomimic_mask(tmp_path):
         jax.random.key(0), kind="mlp", obs_dim=4, action_dim=2, n_members=3, hidden=(8,)
     )
     scores = tmp_path / "scores.parquet"
-    score_file(policy, demos_path, scores, ScoreConfig(chunk_size=64), progress=False)
+    score_file(policy, demos_path, scores, ScoreConfig(chunk_size=64))
     s = read_scores(scores)[1]
     # lambda between the per-episode largest errors: the lower half of episodes is accepted
     worst = np.array([s["likelihood"][s["episode"] == e].max() for e in range(6)])

@@ -110,7 +110,7 @@ def test_streaming_equals_in_memory_for_any_chunk_size(policies, demos_file, tmp
     memory = score_demos(policies[kind], demos, ScoreConfig(chunk_size=1000))
     for chunk in (3, 16, 85):
         out = tmp_path / f"s{chunk}.parquet"
-        score_file(policies[kind], demos_file, out, ScoreConfig(chunk_size=chunk), progress=False)
+        score_file(policies[kind], demos_file, out, ScoreConfig(chunk_size=chunk))
         _, got = read_scores(out)
         for k in ("likelihood", "novelty", "compatibility", "prediction"):
             np.testing.assert_allclose(got[k], memory[k], rtol=1e-5, atol=1e-6, err_msg=k)
@@ -124,7 +124,7 @@ def test_streaming_equals_in_memory_for_any_chunk_size(policies, demos_file, tmp
 def test_headers_and_episode_summary(policies, demos_file, tmp_path):
     out = tmp_path / "scores.parquet"
     cfg = ScoreConfig(lambda_=0.05, eta=10.0, chunk_size=8)  # eta huge: every state familiar
-    result = score_file(policies["mlp"], demos_file, out, cfg, progress=False)
+    result = score_file(policies["mlp"], demos_file, out, cfg)
     header = read_header(out)
     assert header["kind"] == "scores"
     assert header["thresholds"] == {"lambda": 0.05, "eta": 10.0}
@@ -153,15 +153,15 @@ def test_dimension_mismatch_is_a_clear_error(policies, tmp_path):
     path = tmp_path / "d.parquet"
     write_demos(path, _demos(obs_dim=OBS + 1))
     with pytest.raises(ElicitError, match="obs_dim=6 but the policy expects obs_dim=5"):
-        score_file(policies["mlp"], path, tmp_path / "s.parquet", ScoreConfig(), progress=False)
+        score_file(policies["mlp"], path, tmp_path / "s.parquet", ScoreConfig())
     assert not (tmp_path / "s.parquet").exists()
 
 
 def test_scoring_non_demos_artifact_fails(policies, tmp_path, demos_file):
     out = tmp_path / "s.parquet"
-    score_file(policies["mlp"], demos_file, out, ScoreConfig(chunk_size=64), progress=False)
+    score_file(policies["mlp"], demos_file, out, ScoreConfig(chunk_size=64))
     with pytest.raises(ElicitError, match="expected demonstrations"):
-        score_file(policies["mlp"], out, tmp_path / "t.parquet", ScoreConfig(), progress=False)
+        score_file(policies["mlp"], out, tmp_path / "t.parquet", ScoreConfig())
 
 
 def test_obs_field_mismatch_is_a_clear_error(policies, tmp_path):
@@ -173,7 +173,45 @@ def test_obs_field_mismatch_is_a_clear_error(policies, tmp_path):
     write_demos(path, demos)
     policy = policies["mlp"].replace(obs_fields=("pos", "vel"))
     with pytest.raises(ElicitError, match=r"obs fields \['pos', 'goal'\] but the policy"):
-        score_file(policy, path, tmp_path / "s.parquet", ScoreConfig(), progress=False)
+        score_file(policy, path, tmp_path / "s.parquet", ScoreConfig())
     # same names in the same order: fine
     ok = policies["mlp"].replace(obs_fields=("pos", "goal"))
-    score_file(ok, path, tmp_path / "s.parquet", ScoreConfig(chunk_size=64), progress=False)
+    score_file(ok, path, tmp_path / "s.parquet", ScoreConfig(chunk_size=64))
+
+
+def test_a_one_member_policy_earns_the_novelty_warning():
+    from types import SimpleNamespace
+
+    from elicit_jax.compat.score_file import one_member_note
+
+    def note(n: int, kind: str = "mlp", samples: int = 0) -> str | None:
+        policy = SimpleNamespace(n_members=n, kind=kind)
+        return one_member_note(policy, ScoreConfig(dropout_samples=samples))
+
+    assert "novelty is 0 for every state" in note(1)
+    assert note(5) is None  # an ensemble's members disagree
+    assert note(1, kind="mdn") is None  # an MDN's own variance still varies
+    assert note(1, samples=8) is None  # dropout samples stand in for members
+
+
+def test_progress_is_told_the_pairs_and_advanced_through_all_of_them(
+    policies, demos_file, tmp_path
+):
+    import contextlib
+
+    import pyarrow.parquet as pq
+
+    seen = []
+
+    @contextlib.contextmanager
+    def progress(total):
+        seen.append(("total", total))
+        yield lambda n: seen.append(("advance", n))
+        seen.append(("closed", None))
+
+    out = tmp_path / "s.parquet"
+    score_file(policies["mlp"], demos_file, out, ScoreConfig(chunk_size=64), progress=progress)
+    rows = pq.ParquetFile(demos_file).metadata.num_rows
+    steps = [n for what, n in seen if what == "advance"]
+    assert seen[0] == ("total", rows) and seen[-1] == ("closed", None)
+    assert sum(steps) == rows and len(steps) == -(-rows // 64)

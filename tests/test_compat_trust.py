@@ -141,7 +141,7 @@ def test_a_clean_fit_is_trustworthy(tmp_path):
     ell, nu, ep, ops = _separable(np.random.default_rng(0))
     f = _scores_file(tmp_path / "s.parquet", ell, nu, ep, ops)
     job = FitJob(compatible="episodes:0-3", incompatible="operator:bad")
-    h = fit_scores_file(f, tmp_path / "t.json", job, show=False)
+    h = fit_scores_file(f, tmp_path / "t.json", job)
     trust = h["report"]["trust"]
     assert trust == {
         "trustworthy": True,
@@ -165,10 +165,10 @@ def test_one_operator_split_in_two_is_refused_then_forced(tmp_path):
     f = _scores_file(tmp_path / "s.parquet", ell, nu, ep, ops)
     job = FitJob(compatible="episodes:0-9", incompatible="episodes:10-19")
     with pytest.raises(ElicitError, match=r"meaningless.*--force"):
-        fit_scores_file(f, tmp_path / "t.json", job, show=False)
+        fit_scores_file(f, tmp_path / "t.json", job)
     assert not (tmp_path / "t.json").exists()
     forced = FitJob(compatible="episodes:0-9", incompatible="episodes:10-19", force=True)
-    h = fit_scores_file(f, tmp_path / "t.json", forced, show=False)
+    h = fit_scores_file(f, tmp_path / "t.json", forced)
     trust = json.loads((tmp_path / "t.json").read_text())["report"]["trust"]
     assert trust["trustworthy"] is False and trust["meaningless"] and trust["forced"]
     assert h["report"]["trust"]["severe"]
@@ -192,14 +192,14 @@ def test_thresholds_that_reject_the_base_operator_are_refused(tmp_path):
     f = _scores_file(tmp_path / "s.parquet", ell, nu, ep, ops)
     job = FitJob(compatible="episodes:0,1", incompatible="operator:lookalike")
     with pytest.raises(ElicitError, match=r"reject \d+ of 10 demonstrations of operator 'base'"):
-        fit_scores_file(f, tmp_path / "t.json", job, show=False)
+        fit_scores_file(f, tmp_path / "t.json", job)
 
 
 def test_problems_short_of_meaningless_are_written_and_flagged(tmp_path):
     # one demo per set, few pairs: written, but marked not trustworthy
     ell, nu, ep, ops = _separable(np.random.default_rng(3), n_base=1, n_bad=1, length=30)
     f = _scores_file(tmp_path / "s.parquet", ell, nu, ep, ops)
-    h = fit_scores_file(f, tmp_path / "t.json", FitJob("operator:base", "operator:bad"), show=False)
+    h = fit_scores_file(f, tmp_path / "t.json", FitJob("operator:base", "operator:bad"))
     trust = h["report"]["trust"]
     assert trust["trustworthy"] is False and not trust["meaningless"]
     text = " ".join(trust["problems"])

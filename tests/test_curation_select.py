@@ -183,7 +183,7 @@ def test_cli_deminf_own_cut_and_matched_to_the_m_filter(files):
     policy = init_policy(jax.random.key(0), kind="mlp", obs_dim=3, action_dim=2, n_members=3,
                          hidden=(8,))  # fmt: skip
     scores = files / "m-scores.parquet"
-    score_file(policy, files / "new.parquet", scores, ScoreConfig(chunk_size=32), progress=False)
+    score_file(policy, files / "new.parquet", scores, ScoreConfig(chunk_size=32))
     ell = read_scores(scores)[1]["likelihood"]
     lam = float(np.quantile(ell, 0.8))  # with η huge: the top 20% of pairs are M = 0
     n_inc = int((ell > lam).sum())  # the incompatible test is strict: ℓ > λ

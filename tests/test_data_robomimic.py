@@ -56,6 +56,19 @@ def test_import_default_low_dim_keys_in_numeric_demo_order(mh_file):
     assert demos.provenance["importer"] == "robomimic"
 
 
+def test_progress_wraps_the_demos_read_and_is_told_the_file(mh_file):
+    path, _ = mh_file
+    calls = []
+
+    def progress(items, what):
+        calls.append((list(items), what))
+        yield from items
+
+    demos = import_robomimic(path, filter_key="better", progress=progress)
+    assert calls == [(["demo_0", "demo_1", "demo_10", "demo_11"], "reading low_dim.hdf5")]
+    assert demos.n_episodes == 4
+
+
 def test_operators_from_mask_glob_and_filter_key(mh_file):
     path, _ = mh_file
     demos = import_robomimic(path, obs_keys=["object"], operators_from_masks="*_operator_*")

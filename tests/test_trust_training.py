@@ -74,7 +74,7 @@ def _scores(d, name, demos_file, dirty=(), incompatible=()):
 
 
 def _fit(scores, out, comp, inc, **kw):
-    return fit_scores_file(scores, out, FitJob(comp, inc, **kw), show=False)
+    return fit_scores_file(scores, out, FitJob(comp, inc, **kw))
 
 
 def test_one_operator_split_in_two_that_rejects_its_training_demos_is_refused(d, tmp_path):

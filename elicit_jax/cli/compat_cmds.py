@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -10,6 +11,9 @@ from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
 from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.measures import ScoreConfig
 
 
 @app.command(rich_help_panel=COMPAT)
@@ -70,7 +74,6 @@ def score(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import episodes_path
-    from elicit_jax.compat.score_file import score_checkpoint
 
     (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
     check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
@@ -86,7 +89,46 @@ def score(
         dropout_seed=dropout_seed,
     )
     which_: str | int = int(which) if which.isdigit() else which
-    score_checkpoint(policy, demos, out, config, which=which_, seed=seed, thresholds_source=source)
+    _score_and_show(policy, demos, out, config, which_, seed, source)
+
+
+def _score_and_show(
+    policy: Path,
+    demos: Path,
+    out: Path,
+    config: ScoreConfig,
+    which: str | int,
+    seed: int | None,
+    source: str | None,
+) -> None:
+    """Load the checkpoint, warn about a one-member policy, score with a progress bar and
+    print a table per operator."""
+    from rich.console import Console
+
+    from elicit_jax.cli.info_compat import print_operator_table
+    from elicit_jax.compat.score_file import one_member_note, score_file
+    from elicit_jax.compat.show import scoring_bar
+    from elicit_jax.policy.checkpoint import load_policy
+
+    loaded = load_policy(policy, which, seed=seed)
+    note = one_member_note(loaded, config)
+    if note:
+        Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)
+    result = score_file(
+        loaded,
+        demos,
+        out,
+        config,
+        policy_path=policy,
+        policy_info={"which": which, "seed": seed},
+        progress=scoring_bar,
+        thresholds_source=source,
+    )
+    print_operator_table(
+        result.episodes,
+        title=f"{demos.name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
+        f"reject > {100 * config.accept_fraction:g}% incompatible)",
+    )
 
 
 def _score_thresholds(
@@ -205,6 +247,7 @@ def fit_thresholds_cmd(
     """
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.show import print_report
     from elicit_jax.compat.thresholds import FitConfig
 
     check_outputs([out], [scores], overwrite=overwrite)
@@ -217,7 +260,7 @@ def fit_thresholds_cmd(
         force=force,
         base=() if base is None else (str(base),),
     )
-    fit_scores_file(scores, out, job)
+    fit_scores_file(scores, out, job, show=print_report)
 
 
 @app.command("filter", rich_help_panel=COMPAT)

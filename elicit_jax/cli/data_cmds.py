@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ def _operator_table(path: Path) -> None:
     from rich.table import Table
 
     from elicit_jax.artifact import read_header
-    from elicit_jax.data.describe_demos import operator_stats, success_recorded, success_text
+    from elicit_jax.cli.info_demos import operator_stats, success_recorded, success_text
 
     recorded = success_recorded(read_header(path))
     table = Table(title=f"wrote {path}", title_justify="left")
@@ -171,8 +171,15 @@ def import_cmd(
         action_bounds=action_bounds,
         skip_bad_episodes=skip_bad_episodes,
     )
-    _echo_warnings(lambda: import_dataset(cfg, progress=True))
+    _echo_warnings(lambda: import_dataset(cfg, progress=_track))
     _operator_table(out)
+
+
+def _track(items: Sequence[str], what: str) -> Iterable[str]:
+    """A transient progress bar over ``items``."""
+    from rich.progress import track
+
+    return track(items, description=what, transient=True)
 
 
 @app.command("export", rich_help_panel=HAND_BACK)
@@ -340,7 +347,7 @@ def info(
 
     Example: elicit-jax info demos.parquet
     """
-    from elicit_jax.describe import describe
+    from elicit_jax.cli.info import describe
 
     describe(artifact)
 

@@ -74,8 +74,8 @@ def elicit_cmd(
     --thresholds thresholds.json --operator scripted:conflict-flip-pause --mode informed
     --demos 10 --batch 5 -o sessions/op4
     """
+    from elicit_jax.cli.session_console import elicit
     from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.elicit.run import elicit
 
     given = so.given(ctx.params)
     # live scoring is in raw action units (docs/thresholds.md)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -10,6 +11,9 @@ from elicit_jax.cli import session_options as so
 from elicit_jax.cli.app import ELICIT, app
 from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.web.hub import OperatorHub
 
 DEMO_TASK = "reach-pillar"
 
@@ -124,4 +128,29 @@ def serve_cmd(
         admin_token=admin_token,
         allow_hosts=tuple(allow_host),
     )
-    serve(config, echo=typer.echo)
+    serve(config, echo=typer.echo, summary=_print_summary)
+
+
+def _print_summary(hub: OperatorHub) -> None:
+    """The table of operators served, once the server stopped."""
+    from rich.console import Console
+
+    Console(highlight=False).print(summary_table(hub))
+
+
+def summary_table(hub: OperatorHub) -> Any:
+    """Per operator served: state, counts."""
+    from rich.table import Table
+
+    table = Table(title=f"operators served ({hub.root})", title_justify="left")
+    for col in ("operator", "state", "accepted", "rejected", "failed", "episodes", "steps"):
+        table.add_column(col, justify="left" if col in ("operator", "state") else "right")
+    for name, d in sorted(hub.drivers.items()):
+        c = d.session.progress.counts if d.session is not None else None
+        cells = (
+            ["-"] * 4
+            if c is None
+            else [f"{c.accepted}/{c.wanted}", c.rejected, c.failed, c.episodes]
+        )
+        table.add_row(name, d.state, *[str(v) for v in cells], str(d.steps))
+    return table

@@ -1,4 +1,4 @@
-"""Per-episode summary of per-pair scores: the 5% rule's decisions, streamed and printed.
+"""Per-episode summary of per-pair scores: the 5% rule's decisions, streamed.
 
 The summary has one row per episode — operator, length, incompatible pairs, fraction
 incompatible, mean M, ℓ and ν, the accept/reject decision and, when the scored demos carry it,
@@ -90,38 +90,3 @@ def episodes_table(episodes: Mapping[str, np.ndarray]) -> Any:
         for k, v in episodes.items()
     }
     return pa.table(cols)
-
-
-def print_operator_table(episodes: Mapping[str, np.ndarray], title: str = "scores") -> None:
-    """Rich table per operator: episodes, pairs, % incompatible, mean M, accepted/rejected."""
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=title)
-    for col in (
-        "operator",
-        "episodes",
-        "pairs",
-        "incompatible %",
-        "mean M",
-        "accepted",
-        "rejected",
-    ):
-        table.add_column(col, justify="left" if col == "operator" else "right")
-    ops = np.asarray(episodes["operator"]).astype(str)
-    for op in sorted(set(ops.tolist())):
-        sel = ops == op
-        n = int(episodes["length"][sel].sum())
-        inc = int(episodes["n_incompatible"][sel].sum())
-        mean_m = float((episodes["mean_compatibility"][sel] * episodes["length"][sel]).sum() / n)
-        acc = int(episodes["accepted"][sel].sum())
-        table.add_row(
-            op,
-            str(int(sel.sum())),
-            str(n),
-            f"{100 * inc / n:.1f}",
-            f"{mean_m:.3f}",
-            str(acc),
-            str(int(sel.sum()) - acc),
-        )
-    Console().print(table)

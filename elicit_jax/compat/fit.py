@@ -10,6 +10,7 @@ The objective is explained in :mod:`elicit_jax.compat.thresholds` and ``docs/thr
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +38,9 @@ from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.compat.training_data import TrainingEvidence
+
+#: ``show(header)`` shows a fit report (:func:`elicit_jax.compat.show.print_report`).
+Show = Callable[[dict[str, Any]], None]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,18 +195,20 @@ def _training_verdict(
 
 
 def fit_scores_file(
-    scores_path: str | Path, out_path: str | Path, job: FitJob, *, show: bool = True
+    scores_path: str | Path, out_path: str | Path, job: FitJob, *, show: Show | None = None
 ) -> dict[str, Any]:
     """Fit or evaluate thresholds on a scores file and write ``thresholds.json``.
 
     The fit's trustworthiness is assessed (:mod:`elicit_jax.compat.trust`), recorded under
-    ``report.trust`` and printed; a meaningless fit is refused unless ``job.force``.
+    ``report.trust`` and shown; a meaningless fit is refused unless ``job.force``.
 
     Args:
       scores_path: a ``scores`` artifact.
       out_path: the ``thresholds`` artifact to write.
       job: the contrast sets and settings.
-      show: print the report as rich tables.
+      show: called with the header (``lambda``, ``eta``, ``method``, ``report``) to show the
+        report, also when a meaningless fit is refused (the CLI passes
+        :func:`~elicit_jax.compat.show.print_report`).
 
     Returns:
       The written header (``lambda``, ``eta``, ``report``, ...).
@@ -249,8 +255,8 @@ def fit_scores_file(
     }
     header = {"lambda": out["lambda"], "eta": out["eta"], "method": out["method"]}
     if verdict.meaningless and out["method"] == "fit" and not job.force:
-        if show:
-            print_report({**header, "report": report})
+        if show is not None:
+            show({**header, "report": report})
         raise ElicitError(
             "the threshold fit is meaningless (" + "; ".join(verdict.severe) + "); nothing "
             "written — use other contrast sets, or pass --force to write it marked untrustworthy",
@@ -265,8 +271,8 @@ def fit_scores_file(
         config=config,
         report=report,
     )
-    if show:
-        print_report(header)
+    if show is not None:
+        show(header)
     return header
 
 
@@ -279,99 +285,3 @@ def _needed(job: FitJob) -> list[str]:
         if sel.kind == "label":
             out.append(sel.values[0])
     return out
-
-
-def print_report(header: dict[str, Any]) -> None:
-    """Rich tables: the thresholds and their quality, then rejections per operator."""
-    from rich.console import Console
-    from rich.table import Table
-
-    rep = header["report"]
-    console = Console()
-    t = Table(title=f"thresholds ({header['method']})")
-    t.add_column("quantity")
-    t.add_column("value", justify="right")
-    t.add_row("lambda", f"{header['lambda']:.4g}")
-    t.add_row("eta", f"{header['eta']:.4g}")
-    if rep.get("balanced_accuracy") is not None:
-        t.add_row("balanced accuracy", f"{rep['balanced_accuracy']:.3f}")
-    if "margin_steps" in rep:
-        quantile = rep.get("margin_quantile", rep.get("margin"))
-        t.add_row("margin (grid steps / quantile)", f"{rep['margin_steps']} / {quantile:.3f}")
-    for key, label in (("lambda_range", "lambda"), ("eta_range", "eta")):
-        if rep.get(key):
-            lo, hi = rep[key]
-            t.add_row(f"{label} range in margin", f"{lo:.4g} .. {hi:.4g}")
-    if "loo_accuracy" in rep:
-        loo = rep["loo_accuracy"]
-        t.add_row(
-            "leave-one-out accuracy",
-            "n/a (one demo per set)" if loo is None else f"{loo:.3f} ({rep['n_loo']} held out)",
-        )
-    if rep.get("in_sample_accuracy") is not None:
-        t.add_row("in-sample accuracy of those demos", f"{rep['in_sample_accuracy']:.3f}")
-    check = rep.get("training_check") or {}
-    if check.get("demos"):
-        t.add_row(
-            "base policy's training demos rejected",
-            f"{check['rejected']} / {check['demos']} ({check['source']})",
-        )
-    if "n_compatible" in rep:
-        t.add_row(
-            "contrast demos (compatible / incompatible)",
-            f"{rep['n_compatible']} / {rep['n_incompatible']}",
-        )
-    console.print(t)
-    ops = Table(title="rejections under these thresholds")
-    for col in ("operator", "pairs", "incompatible pairs", "episodes", "rejected episodes"):
-        ops.add_column(col, justify="left" if col == "operator" else "right")
-    for op, r in rep.get("per_operator", {}).items():
-        share = 100 * r["incompatible_pairs"] / max(r["pairs"], 1)
-        ops.add_row(
-            op,
-            str(r["pairs"]),
-            f"{r['incompatible_pairs']} ({share:.1f}%)",
-            str(r["episodes"]),
-            str(r["rejected_episodes"]),
-        )
-    console.print(ops)
-    print_trust(rep, console)
-
-
-def print_trust(report: dict[str, Any], console: Any) -> None:
-    """The contrast decisions (with source names) and the trust verdict, loudly when bad."""
-    from rich.panel import Panel
-    from rich.table import Table
-
-    contrast = report.get("contrast", [])
-    if 0 < len(contrast) <= 30:
-        t = Table(title="contrast demonstrations")
-        for col in ("episode", "source episode", "set", "incompatible %", "decision"):
-            t.add_column(col, justify="left" if col in ("set", "decision") else "right")
-        for c in contrast:
-            ok = c["rejected"] != c["compatible"]
-            t.add_row(
-                str(c["episode"]),
-                str(c.get("source_episode", "-")),
-                "compatible" if c["compatible"] else "incompatible",
-                f"{100 * c['fraction_incompatible']:.1f}",
-                ("rejected" if c["rejected"] else "accepted") + ("" if ok else " (wrong)"),
-            )
-        console.print(t)
-    if not report.get("trust"):
-        return
-    verdict = Verdict.from_dict(report["trust"])
-    unchecked = "\n".join(f"• not checked: {u}" for u in verdict.unchecked)
-    if verdict.trustworthy:
-        console.print(
-            "[green]trust: no problems found[/] (margin, held-out check, pair counts, operators, "
-            "the base policy's training demos)" + ("" if verdict.clean else ", but:")
-        )
-        if unchecked:
-            console.print(f"[yellow]{unchecked}[/]")
-        return
-    forced = " (written because of --force)" if verdict.forced else ""
-    body = "\n".join([*(f"• {p}" for p in verdict.problems), unchecked]).strip()
-    console.print(
-        Panel(body, title=f"[bold]this fit is {verdict.headline()}{forced}", border_style="red")
-    )

@@ -10,8 +10,10 @@ writes ``scores.parquet`` (per pair) and ``scores.episodes.parquet`` (per episod
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +31,6 @@ from elicit_jax.artifact import (
 from elicit_jax.compat.episode_summary import (
     EpisodeAccumulator,
     episodes_table,
-    print_operator_table,
 )
 from elicit_jax.compat.measures import ScoreConfig, config_dict
 from elicit_jax.compat.score import (
@@ -45,6 +46,12 @@ from elicit_jax.errors import ElicitError
 
 _CORE = ("episode", "operator", "step", "obs", "action")
 ROW_GROUP = 1 << 17  # rows per written Parquet row group (bounds the writer's buffer)
+#: ``progress(total)`` -> a context yielding ``advance(n)`` (n more pairs scored).
+ScoreProgress = Callable[[int], AbstractContextManager[Callable[[int], None]]]
+
+
+def _no_op(n: int) -> None:
+    """``advance`` when nothing shows progress."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,7 +140,7 @@ def score_file(
     *,
     policy_path: str | Path | None = None,
     policy_info: Mapping[str, Any] | None = None,
-    progress: bool = True,
+    progress: ScoreProgress | None = None,
     thresholds_source: str | None = None,
 ) -> ScoreResult:
     """Score every pair of a demonstrations artifact, streaming; write scores + episode summary.
@@ -146,7 +153,8 @@ def score_file(
       config: scoring config (thresholds, likelihood kind, ddof, chunk size).
       policy_path: the checkpoint the policy was loaded from (its hash goes in the header).
       policy_info: how it was loaded (e.g. ``{"which": "best", "seed": 0}``), recorded too.
-      progress: show a rich progress bar.
+      progress: ``progress(total_pairs)`` opens a context yielding ``advance(n)``, called as
+        pairs are scored (:func:`elicit_jax.compat.show.scoring_bar` draws a bar).
       thresholds_source: where λ and η came from (recorded as ``thresholds_source``).
 
     Returns:
@@ -196,7 +204,8 @@ def score_file(
     batches = read_demo_batches(demos_path, config.chunk_size, (*_CORE, *passthrough))
     n_total = pf.metadata.num_rows
     ep_path = episodes_path(out_path)
-    with atomic_path(out_path) as tmp, _Progress(progress, n_total) as advance:
+    shown = progress(n_total) if progress is not None else contextlib.nullcontext(_no_op)
+    with atomic_path(out_path) as tmp, shown as advance:
         with pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
             pending: list[Any] = []
             scored = score_batches(
@@ -227,29 +236,6 @@ def score_file(
         )
         write_parquet(ep_path, episodes_table(episodes), ep_header)
     return ScoreResult(out_path, ep_path, n_total, episodes)
-
-
-class _Progress:
-    """Context manager yielding an ``advance(n)`` callback (a rich bar, or a no-op)."""
-
-    def __init__(self, enabled: bool, total: int) -> None:
-        self.enabled, self.total, self._bar = enabled, total, None
-
-    def __enter__(self) -> Any:
-        if not self.enabled:
-            return lambda n: None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-        self._bar = Progress(
-            "[bold]scoring pairs", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
-        )
-        self._bar.start()
-        task = self._bar.add_task("score", total=self.total)
-        return lambda n: self._bar.advance(task, n)
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
 
 
 def read_scores(
@@ -286,54 +272,12 @@ def read_scores(
     return header, out
 
 
-def score_checkpoint(
-    policy_path: str | Path,
-    demos_path: str | Path,
-    out_path: str | Path,
-    config: ScoreConfig,
-    *,
-    which: str | int = "best",
-    seed: int | None = None,
-    show: bool = True,
-    thresholds_source: str | None = None,
-) -> ScoreResult:
-    """Load a policy checkpoint, score a demonstrations file, print a table per operator.
-
-    Args:
-      policy_path: a checkpoint (seed directory) or a one-seed run directory.
-      demos_path: the ``demos`` artifact to score.
-      out_path: the ``scores`` artifact to write.
-      config: thresholds, likelihood kind, ddof, chunk size.
-      which: ``best``, ``final`` or an epoch number.
-      seed: the seed of a multi-seed run directory.
-      show: progress bar and summary table.
-      thresholds_source: where λ and η came from, recorded in the header.
-    """
-    from elicit_jax.policy.checkpoint import load_policy
-
-    policy = load_policy(policy_path, which, seed=seed)
-    if show and policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
-        from rich.console import Console
-
-        Console(stderr=True).print(
-            "[yellow]warning:[/] the policy has one member: novelty is 0 for every state, so "
-            "every state counts as familiar and M rests on the likelihood error alone",
-            soft_wrap=True,
+def one_member_note(policy: Any, config: ScoreConfig) -> str | None:
+    """The warning a one-member policy earns (``None`` otherwise): with a single member and no
+    dropout samples, novelty is 0 everywhere (an MDN's likelihood still varies)."""
+    if policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
+        return (
+            "the policy has one member: novelty is 0 for every state, so every state counts as "
+            "familiar and M rests on the likelihood error alone"
         )
-    result = score_file(
-        policy,
-        demos_path,
-        out_path,
-        config,
-        policy_path=policy_path,
-        policy_info={"which": which, "seed": seed},
-        progress=show,
-        thresholds_source=thresholds_source,
-    )
-    if show:
-        print_operator_table(
-            result.episodes,
-            title=f"{Path(demos_path).name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
-            f"reject > {100 * config.accept_fraction:g}% incompatible)",
-        )
-    return result
+    return None

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from elicit_jax.data.demos import (
 )
 from elicit_jax.data.validation import action_dim_warnings, bad_episodes
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.data.robomimic import Progress
 
 Format = Literal["robomimic", "lerobot", "npz"]
 FORMATS = ("robomimic", "lerobot", "npz")
@@ -90,8 +93,9 @@ def _data_bounds(demos: Demos, mode: str | None) -> Demos:
     )
 
 
-def load_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
-    """Read ``cfg.source`` into :class:`Demos` (action bounds not yet checked)."""
+def load_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
+    """Read ``cfg.source`` into :class:`Demos` (action bounds not yet checked); ``progress``
+    wraps the episodes read (robomimic files; see :data:`~elicit_jax.data.robomimic.Progress`)."""
     fmt = cfg.format or infer_format(cfg.source)
     if fmt not in FORMATS:
         raise ElicitError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
@@ -141,7 +145,7 @@ def load_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
     return _data_bounds(demos, cfg.action_bounds)
 
 
-def import_dataset(cfg: ImportConfig, progress: bool = False) -> Demos:
+def import_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
     """Import ``cfg.source`` and write the demonstrations artifact ``cfg.out``.
 
     Returns:

@@ -13,7 +13,7 @@ import fnmatch
 import json
 import re
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,9 @@ from elicit_jax.errors import ElicitError
 
 DEFAULT_OBS_KEYS = ("robot0_eef_pos", "robot0_eef_quat", "robot0_gripper_qpos", "object")
 _DEMO_RE = re.compile(r"demo_(\d+)\Z")
+
+#: ``progress(items, description)`` -> the same items, iterated while showing progress.
+Progress = Callable[[Sequence[str], str], Iterable[str]]
 
 
 @contextlib.contextmanager
@@ -176,7 +179,7 @@ def import_robomimic(
     filter_key: str | None = None,
     task: str | None = None,
     action_bounds: tuple[float, float] = (-1.0, 1.0),
-    progress: bool = False,
+    progress: Progress | None = None,
     finite: bool = True,
 ) -> Demos:
     """Read a robomimic HDF5 file into :class:`Demos` (episodes 0..E-1 in demo_N order).
@@ -192,7 +195,8 @@ def import_robomimic(
       filter_key: import only the demos listed by ``mask/<filter_key>``.
       task: task name; default the ``env_name`` in ``data.attrs['env_args']``.
       action_bounds: declared action bounds (robomimic actions lie in [-1, 1]).
-      progress: show a progress bar.
+      progress: wraps the demo names to show progress (``progress(names, description)``
+        returns an iterable over them; the CLI passes a progress bar).
       finite: reject non-finite values here (False: the caller skips such episodes).
 
     The episode outcome is ``max(rewards) >= 1`` (robosuite's sparse success reward), or
@@ -214,11 +218,9 @@ def import_robomimic(
             if operators_from_masks
             else [operator] * len(names)
         )
-        iterator: Any = names
-        if progress:
-            from rich.progress import track
-
-            iterator = track(names, description=f"reading {Path(path).name}", transient=True)
+        iterator: Iterable[str] = names
+        if progress is not None:
+            iterator = progress(names, f"reading {Path(path).name}")
         episodes, sizes, digests = [], None, {}
         for name in iterator:
             ep, widths = read_demo(f, path, name, obs_keys)

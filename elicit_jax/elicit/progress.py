@@ -53,6 +53,18 @@ def summary_row(header: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def session_phase(config: Any, progress: Any) -> str:
+    """Where a (possibly interrupted) session stands."""
+    c = progress.counts
+    if c.accepted >= config.demos:
+        return "done (all demonstrations accepted)"
+    if c.episodes >= config.episode_limit:
+        return f"done (episode limit {config.episode_limit} reached)"
+    if c.practice < config.practice:
+        return f"practice ({c.practice} of {config.practice} done)"
+    return "demonstrate"
+
+
 @dataclasses.dataclass(frozen=True)
 class Progress:
     """Where a session stands.

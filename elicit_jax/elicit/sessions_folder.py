@@ -41,8 +41,7 @@ def session_summary(path: str | Path) -> dict[str, Any]:
       ElicitError: ``path`` is no readable session.
     """
     from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.elicit.describe_session import session_phase
-    from elicit_jax.elicit.progress import Progress
+    from elicit_jax.elicit.progress import Progress, session_phase
     from elicit_jax.elicit.store import DEMOS_FILE, SessionStore
 
     store = SessionStore(path)
@@ -90,36 +89,3 @@ def merge_accepted(root: str | Path, out: str | Path, names: Sequence[str] | Non
         config={"merged_sessions": merged},
         inputs={p.parent.name: p for p in paths},
     )
-
-
-def describe_sessions_folder(path: Path) -> None:
-    """Print one row per operator session under ``path`` and the totals."""
-    from rich.console import Console
-    from rich.table import Table
-
-    console = Console(highlight=False)
-    table = Table(title=f"{path}: sessions of several operators", title_justify="left")
-    cols = ("operator", "task", "mode", "phase", "episodes", "accepted", "rejected", "failed")
-    for col in (*cols, "last verdict"):
-        table.add_column(col, justify="right" if col in cols[4:] else "left")
-    total, operators, broken = 0, 0, []
-    for d in session_dirs(path):
-        try:
-            s = session_summary(d)
-        except ElicitError as e:
-            broken.append(str(e))
-            continue
-        c = s["counts"]
-        operators += 1
-        total += c.accepted
-        table.add_row(
-            s["name"], s["task"], s["mode"], s["phase"], str(c.episodes),
-            f"{c.accepted}/{c.wanted}", str(c.rejected), str(c.failed), s["last_verdict"] or "-",
-        )  # fmt: skip
-    console.print(table)
-    console.print(f"{operators} operator(s), {total} accepted demonstration(s) in all")
-    for line in broken:
-        console.print(f"[red]unreadable session[/]: {line}")
-    removed = path / ".removed"
-    if removed.is_dir() and session_dirs(removed):
-        console.print(f"removed from the study (not counted): {len(session_dirs(removed))}")

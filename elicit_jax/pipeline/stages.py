@@ -279,6 +279,7 @@ def score_stage(ctx: StageContext) -> None:
     """Score the ``demos*`` inputs (concatenated) with the base policy of ``policy_seed``."""
     from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score_file import score_file
+    from elicit_jax.compat.show import scoring_bar
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
     from elicit_jax.policy.checkpoint import load_policy
 
@@ -302,6 +303,7 @@ def score_stage(ctx: StageContext) -> None:
             config_from_dict(cfg["score"]),
             policy_path=ctx.inputs["policy"],
             policy_info={"which": which, "seed": cfg["policy_seed"]},
+            progress=scoring_bar,
             thresholds_source=(
                 "provisional: the [score] settings' λ and η; the pipeline fits (λ, η) after "
                 "scoring, and its filters and maps use the fitted values"
@@ -321,6 +323,7 @@ def score_stage(ctx: StageContext) -> None:
 def fit_stage(ctx: StageContext) -> None:
     """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
     from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.show import print_report
     from elicit_jax.compat.thresholds import FitConfig
 
     cfg = ctx.config
@@ -332,7 +335,7 @@ def fit_stage(ctx: StageContext) -> None:
         eta=cfg.get("eta"),
         force=bool(cfg.get("force", False)),
     )
-    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job)
+    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job, show=print_report)
 
 
 def filter_stage(ctx: StageContext) -> None:

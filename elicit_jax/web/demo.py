@@ -191,9 +191,8 @@ def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
         out / SCORES_FILE,
         ScoreConfig(),
         policy_path=out / POLICY_DIR,
-        progress=False,
     )
     job = FitJob(
         compatible=f"operator:{r.operator}", incompatible=f"operator:{r.incompatible_operator}"
     )
-    fit_scores_file(out / SCORES_FILE, out / THRESHOLDS_FILE, job, show=False)
+    fit_scores_file(out / SCORES_FILE, out / THRESHOLDS_FILE, job)

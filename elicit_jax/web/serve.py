@@ -21,7 +21,6 @@ import socket
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.errors import ElicitError
@@ -128,24 +127,6 @@ def url_of(host: str, port: int, token: str | None, path: str = "/") -> str:
     return f"http://{shown}:{port}{path}" + (f"?token={token}" if token else "")
 
 
-def summary_table(hub: OperatorHub) -> Any:
-    """Per operator served: state, counts."""
-    from rich.table import Table
-
-    table = Table(title=f"operators served ({hub.root})", title_justify="left")
-    for col in ("operator", "state", "accepted", "rejected", "failed", "episodes", "steps"):
-        table.add_column(col, justify="left" if col in ("operator", "state") else "right")
-    for name, d in sorted(hub.drivers.items()):
-        c = d.session.progress.counts if d.session is not None else None
-        cells = (
-            ["-"] * 4
-            if c is None
-            else [f"{c.accepted}/{c.wanted}", c.rejected, c.failed, c.episodes]
-        )
-        table.add_row(name, d.state, *[str(v) for v in cells], str(d.steps))
-    return table
-
-
 class _DenialNoise(logging.Filter):
     """Drops uvicorn's spurious error after a WebSocket denial response (the 400 of the Host
     check): its websockets-sansio protocol never marks such a handshake complete (uvicorn
@@ -155,12 +136,21 @@ class _DenialNoise(logging.Filter):
         return record.getMessage() != "ASGI callable returned without completing handshake."
 
 
-def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any = None) -> None:
-    """Serve operators until interrupted (see the module docstring)."""
-    import uvicorn
-    from rich.console import Console
+def serve(
+    config: ServeConfig,
+    echo: Callable[[str], None],
+    summary: Callable[[OperatorHub], None] | None = None,
+) -> None:
+    """Serve operators until interrupted (see the module docstring).
 
-    console = console or Console(highlight=False)
+    Args:
+      config: what to serve, where.
+      echo: shows one line (the start-up lines, the hub's log).
+      summary: called with the hub after the server stopped, when it served anyone (the CLI
+        prints a table per operator).
+    """
+    import uvicorn
+
     root = Path(config.sessions)
     token = config.token
     if token is None and not is_loopback(config.host):
@@ -199,5 +189,5 @@ def serve(config: ServeConfig, echo: Callable[[str], None] = print, console: Any
         logging.getLogger("uvicorn.error").removeFilter(noise)
         sock.close()
         hub.shutdown()
-        if hub.drivers:
-            console.print(summary_table(hub))
+        if hub.drivers and summary is not None:
+            summary(hub)

@@ -202,3 +202,33 @@ def test_the_demo_cache_key_covers_the_version_and_the_training_config(monkeypat
         m.setattr(demo, "train_config", lambda r: dataclasses.replace(trained(r), lr=0.002))
         assert demo.recipe_hash(recipe) != key
     assert demo.recipe_hash(recipe) == key
+
+
+def test_serve_summary_table_lists_each_operator_served():
+    from types import SimpleNamespace
+
+    from rich.console import Console
+
+    from elicit_jax.cli.serve_cmd import summary_table
+    from elicit_jax.elicit.events import Counts
+
+    counts = Counts(practice=1, accepted=2, rejected=1, failed=0, episodes=4, wanted=5)
+    hub = SimpleNamespace(
+        root="sessions",
+        drivers={
+            "op2": SimpleNamespace(session=None, state="waiting", steps=0),
+            "op1": SimpleNamespace(
+                session=SimpleNamespace(progress=SimpleNamespace(counts=counts)),
+                state="done",
+                steps=321,
+            ),
+        },
+    )
+    console = Console(record=True, width=120)
+    console.print(summary_table(hub))
+    rows = [line.split("│") for line in console.export_text().splitlines() if "│ op" in line]
+    cells = [[c.strip() for c in row if c.strip()] for row in rows]
+    assert cells == [
+        ["op1", "done", "2/5", "1", "0", "4", "321"],
+        ["op2", "waiting", "-", "-", "-", "-", "0"],
+    ]

@@ -119,6 +119,7 @@ def filter_session_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
     from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score_file import read_scores, score_file
+    from elicit_jax.compat.show import scoring_bar
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.pipeline.stages import DEMOS_FILE, SCORES_FILE
     from elicit_jax.policy.checkpoint import load_policy
@@ -142,6 +143,7 @@ def filter_session_stage(ctx: StageContext) -> None:
                 tmp / SCORES_FILE,
                 config_from_dict(score_cfg["score"]),
                 policy_path=ctx.inputs["policy"],
+                progress=scoring_bar,
             )
             _, scores = read_scores(tmp / SCORES_FILE)
             drop, reason = drop_mask(scores, cfg)

@@ -1,21 +1,10 @@
-"""``elicit-jax info SESSION``: phase, counts, accept rate and per-demonstration verdicts."""
+"""``elicit-jax info SESSION``: phase, counts, accept rate and per-demonstration verdicts;
+``elicit-jax info FOLDER``: one row per operator session of a ``serve`` folder."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
-
-
-def session_phase(config: Any, progress: Any) -> str:
-    """Where a (possibly interrupted) session stands."""
-    c = progress.counts
-    if c.accepted >= config.demos:
-        return "done (all demonstrations accepted)"
-    if c.episodes >= config.episode_limit:
-        return f"done (episode limit {config.episode_limit} reached)"
-    if c.practice < config.practice:
-        return f"practice ({c.practice} of {config.practice} done)"
-    return "demonstrate"
 
 
 def describe_session(path: Path, header: dict[str, Any]) -> None:
@@ -24,7 +13,7 @@ def describe_session(path: Path, header: dict[str, Any]) -> None:
     from rich.table import Table
 
     from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.elicit.progress import Progress
+    from elicit_jax.elicit.progress import Progress, session_phase
     from elicit_jax.elicit.store import SessionStore
 
     config = SessionConfig.from_dict(header["config"])
@@ -64,3 +53,39 @@ def describe_session(path: Path, header: dict[str, Any]) -> None:
             str(r["batch"]),
         )
     console.print(table)
+
+
+def describe_sessions_folder(path: Path) -> None:
+    """Print one row per operator session under ``path`` and the totals."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from elicit_jax.elicit.sessions_folder import session_dirs, session_summary
+    from elicit_jax.errors import ElicitError
+
+    console = Console(highlight=False)
+    table = Table(title=f"{path}: sessions of several operators", title_justify="left")
+    cols = ("operator", "task", "mode", "phase", "episodes", "accepted", "rejected", "failed")
+    for col in (*cols, "last verdict"):
+        table.add_column(col, justify="right" if col in cols[4:] else "left")
+    total, operators, broken = 0, 0, []
+    for d in session_dirs(path):
+        try:
+            s = session_summary(d)
+        except ElicitError as e:
+            broken.append(str(e))
+            continue
+        c = s["counts"]
+        operators += 1
+        total += c.accepted
+        table.add_row(
+            s["name"], s["task"], s["mode"], s["phase"], str(c.episodes),
+            f"{c.accepted}/{c.wanted}", str(c.rejected), str(c.failed), s["last_verdict"] or "-",
+        )  # fmt: skip
+    console.print(table)
+    console.print(f"{operators} operator(s), {total} accepted demonstration(s) in all")
+    for line in broken:
+        console.print(f"[red]unreadable session[/]: {line}")
+    removed = path / ".removed"
+    if removed.is_dir() and session_dirs(removed):
+        console.print(f"removed from the study (not counted): {len(session_dirs(removed))}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -59,8 +60,6 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
     """Per-operator summary of the per-episode scores."""
     import pyarrow.parquet as pq
 
-    from elicit_jax.compat.episode_summary import print_operator_table
-
     table = pq.read_table(path)
     cols = {
         n: (
@@ -75,7 +74,7 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
 
 def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
     """The thresholds, how they were obtained, and their report."""
-    from elicit_jax.compat.fit import print_report
+    from elicit_jax.compat.show import print_report
 
     _kv(
         f"{path}: thresholds ({header.get('method')})",
@@ -105,3 +104,38 @@ def describe_filter_log(path: Path, header: dict[str, Any]) -> None:
     reasons = sorted(set(table.column("reason").to_pylist()))
     rows += [("reason", r) for r in reasons] + _inputs(header)
     _kv(f"{path}: filter log", rows)
+
+
+def print_operator_table(episodes: Mapping[str, np.ndarray], title: str = "scores") -> None:
+    """Rich table per operator: episodes, pairs, % incompatible, mean M, accepted/rejected."""
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in (
+        "operator",
+        "episodes",
+        "pairs",
+        "incompatible %",
+        "mean M",
+        "accepted",
+        "rejected",
+    ):
+        table.add_column(col, justify="left" if col == "operator" else "right")
+    ops = np.asarray(episodes["operator"]).astype(str)
+    for op in sorted(set(ops.tolist())):
+        sel = ops == op
+        n = int(episodes["length"][sel].sum())
+        inc = int(episodes["n_incompatible"][sel].sum())
+        mean_m = float((episodes["mean_compatibility"][sel] * episodes["length"][sel]).sum() / n)
+        acc = int(episodes["accepted"][sel].sum())
+        table.add_row(
+            op,
+            str(int(sel.sum())),
+            str(n),
+            f"{100 * inc / n:.1f}",
+            f"{mean_m:.3f}",
+            str(acc),
+            str(int(sel.sum()) - acc),
+        )
+    Console().print(table)

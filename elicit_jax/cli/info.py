@@ -1,8 +1,9 @@
 """``elicit-jax info``: describe any artifact by its header's ``kind``.
 
-Each artifact kind maps to a describer ``fn(path, header)`` in the module that knows the
-kind (:data:`DESCRIBERS`), imported only when needed, so describers never import this module
-(no import cycle); unknown kinds fall back to printing the header.
+Each artifact kind maps to a describer ``fn(path, header)`` in a ``cli/info_*`` module
+(:data:`DESCRIBERS`), imported only when needed, so describers never import this module (no
+import cycle); unknown kinds fall back to printing the header. Describers print; the library
+layers they read from do not.
 """
 
 from __future__ import annotations
@@ -20,17 +21,17 @@ Describer = Callable[[Path, dict[str, Any]], None]
 
 # kind -> (module, function) of its describer.
 DESCRIBERS: dict[str, tuple[str, str]] = {
-    "demos": ("elicit_jax.data.describe_demos", "describe_demos"),
-    "episode-list": ("elicit_jax.data.describe_demos", "describe_episode_list"),
-    "export": ("elicit_jax.data.describe_demos", "describe_export"),
-    "scores": ("elicit_jax.compat.describe_compat", "describe_scores"),
-    "episode-scores": ("elicit_jax.compat.describe_compat", "describe_episode_scores"),
-    "thresholds": ("elicit_jax.compat.describe_compat", "describe_thresholds"),
-    "filter-log": ("elicit_jax.compat.describe_compat", "describe_filter_log"),
-    "rollouts": ("elicit_jax.sim.describe_rollouts", "describe_rollouts"),
-    "checkpoint": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
-    "training_run": ("elicit_jax.policy.describe_checkpoint", "describe_run"),
-    "elicit-session": ("elicit_jax.elicit.describe_session", "describe_session"),
+    "demos": ("elicit_jax.cli.info_demos", "describe_demos"),
+    "episode-list": ("elicit_jax.cli.info_demos", "describe_episode_list"),
+    "export": ("elicit_jax.cli.info_demos", "describe_export"),
+    "scores": ("elicit_jax.cli.info_compat", "describe_scores"),
+    "episode-scores": ("elicit_jax.cli.info_compat", "describe_episode_scores"),
+    "thresholds": ("elicit_jax.cli.info_compat", "describe_thresholds"),
+    "filter-log": ("elicit_jax.cli.info_compat", "describe_filter_log"),
+    "rollouts": ("elicit_jax.cli.info_rollouts", "describe_rollouts"),
+    "checkpoint": ("elicit_jax.cli.info_checkpoint", "describe_run"),
+    "training_run": ("elicit_jax.cli.info_checkpoint", "describe_run"),
+    "elicit-session": ("elicit_jax.cli.info_session", "describe_session"),
 }
 
 
@@ -75,7 +76,7 @@ def describe_curation_scores(path: Path, header: dict[str, Any]) -> None:
 def _describe_raw_source(path: Path) -> bool:
     """Describe a not-yet-imported robomimic file or LeRobot folder; False if neither."""
     if path.is_file() and path.suffix.lower() in (".hdf5", ".h5", ".he5"):
-        from elicit_jax.data.describe_demos import describe_robomimic_file
+        from elicit_jax.cli.info_demos import describe_robomimic_file
 
         describe_robomimic_file(path)
         return True
@@ -84,7 +85,7 @@ def _describe_raw_source(path: Path) -> bool:
         and not (path / "artifact.json").exists()
         and (path / "meta/info.json").exists()
     ):
-        from elicit_jax.data.describe_demos import describe_lerobot_folder
+        from elicit_jax.cli.info_demos import describe_lerobot_folder
 
         describe_lerobot_folder(path)
         return True
@@ -111,7 +112,8 @@ def describe(path: str | Path) -> None:
     path = Path(path)
     if _describe_raw_source(path):
         return
-    from elicit_jax.elicit.sessions_folder import describe_sessions_folder, is_sessions_folder
+    from elicit_jax.cli.info_session import describe_sessions_folder
+    from elicit_jax.elicit.sessions_folder import is_sessions_folder
 
     if is_sessions_folder(path):
         describe_sessions_folder(path)
