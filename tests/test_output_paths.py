@@ -189,5 +189,10 @@ def test_std_scaled_scores_refuse_raw_unit_thresholds(work, tmp_path):
     r = _invoke("watch", tmp_path, "--policy", run, "--base-demos", demos,
                 "--thresholds", tmp_path / "std.json", "--once")  # fmt: skip
     assert "do not apply to --action-scale none" in str(r.exception)
+    r = _invoke("serve", "--task", "reach-pillar", "--policy", run, "--base-demos", demos,
+                "--thresholds", tmp_path / "std.json", "--sessions", tmp_path / "sessions",
+                "--port", "0")  # fmt: skip
+    assert "do not apply to --action-scale none" in str(r.exception)
+    assert not (tmp_path / "sessions").exists()
     r = _ok(*score, "-o", tmp_path / "c.parquet", "--lambda", "2", "--eta", "1")
     assert "std-scaled units" in r.output

@@ -85,7 +85,7 @@ def serve_cmd(
     from elicit_jax.web.serve import ServeConfig, serve, with_person_horizon
 
     given = so.given(ctx.params)
-    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset)
+    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
     resolved = None if chosen is None else chosen.pair
     if demo_dir is not None and not demo:
         raise ElicitError("--demo-dir goes with --demo")
