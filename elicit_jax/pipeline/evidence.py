@@ -61,6 +61,20 @@ SELECTION_TEXT = {
     "ignore it",
 }
 
+ROLLOUT_COLUMNS = [
+    *CELL_KEYS,
+    "selection",
+    "training_seed",
+    "checkpoint",
+    "eval_seed",
+    "role",
+    "rollout",
+    "init_seed",
+    "success",
+    "length",
+]
+"""The columns of a report's ``rollouts.parquet``, in order."""
+
 
 def run_provenance(manifest: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
     """The run's provenance (its manifest's, i.e. the last ``pipeline run``), plus the code
@@ -120,20 +134,7 @@ def cell_frame(config: Mapping[str, Any], path: str | Path) -> Any:
         training_seed=frame["seed"].astype(np.int32),
         eval_seed=frame["eval_seed"].astype(np.int32),
         length=frame["length"].astype(np.int32),
-    )[
-        [
-            *CELL_KEYS,
-            "selection",
-            "training_seed",
-            "checkpoint",
-            "eval_seed",
-            "role",
-            "rollout",
-            "init_seed",
-            "success",
-            "length",
-        ]
-    ]
+    )[ROLLOUT_COLUMNS]
 
 
 def empty_rollouts() -> Any:
@@ -154,20 +155,7 @@ def empty_rollouts() -> Any:
             "success": pd.Series(dtype=bool),
             "length": pd.Series(dtype=np.int32),
         }
-    )[
-        [
-            *CELL_KEYS,
-            "selection",
-            "training_seed",
-            "checkpoint",
-            "eval_seed",
-            "role",
-            "rollout",
-            "init_seed",
-            "success",
-            "length",
-        ]
-    ]
+    )[ROLLOUT_COLUMNS]
 
 
 def init_states_id(init_seeds: np.ndarray) -> str:
