@@ -39,6 +39,7 @@ from flax import struct
 from elicit_jax.compat.chunks import balanced_chunk, concat, episode_groups, pad, row_chunks
 from elicit_jax.compat.measures import ScoreConfig, score_pair
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.kinds import model_kind
 from elicit_jax.sharding import device_count, round_up, row_placer
 
 SCORES_KIND = "scores"
@@ -274,8 +275,9 @@ def score_batches(
 
     inputs = score_inputs(policy, config, bounds, policy_source)
     static = static_config(config)
-    recurrent = policy_spec(policy, "kind", "mlp") == "lstm"
-    if config.dropout_samples and policy_spec(policy, "kind", "mlp") != "mlp":
+    kind = model_kind(policy_spec(policy, "kind", "mlp"))
+    recurrent = kind.recurrent
+    if config.dropout_samples and not kind.mc_dropout:
         raise ElicitError("--dropout-samples applies to MLP ensembles only", policy_source)
     if config.dropout_samples and not policy_spec(policy, "dropout", 0.0):
         raise ElicitError(

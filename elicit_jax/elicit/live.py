@@ -50,12 +50,16 @@ class StepScore:
 
 
 def check_live_policy(policy: Any, source: str = "<policy>") -> None:
-    """Raise unless ``policy`` can be scored one state at a time (feed-forward)."""
-    kind = getattr(policy, "kind", "mlp")
-    if kind == "lstm":
+    """Raise unless ``policy`` can be scored one state at a time (a feed-forward kind)."""
+    from elicit_jax.policy.kinds import MODEL_KINDS, model_kind
+
+    kind = model_kind(getattr(policy, "kind", "mlp"))
+    if kind.recurrent:
+        feed_forward = " or ".join(k.name for k in MODEL_KINDS.values() if not k.recurrent)
         raise ElicitError(
-            "live scoring needs a feed-forward policy (mlp or mdn); this one is an lstm, whose "
-            "scores depend on the whole episode (score its demonstrations with `score`)",
+            f"live scoring needs a feed-forward policy ({feed_forward}); this one is an "
+            f"{kind.name}, whose scores depend on the whole episode (score its demonstrations "
+            "with `score`)",
             source,
         )
 

@@ -36,6 +36,7 @@ from elicit_jax.policy.dataset import (
     demos_sha256,
     prepare,
 )
+from elicit_jax.policy.kinds import model_kind
 
 
 def chunk_epochs(config: TrainConfig) -> int:
@@ -46,10 +47,10 @@ def chunk_epochs(config: TrainConfig) -> int:
 
 
 def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: int) -> Any:
-    from elicit_jax.policy import models
+    from elicit_jax.policy.kinds import make_module
     from elicit_jax.policy.loop import LoopSpec
 
-    module = models.make_module(
+    module = make_module(
         config.model,
         config.hidden,
         action_dim,
@@ -88,7 +89,7 @@ def _template(config: TrainConfig, demos: Demos, data: TrainData, params: Any) -
         hidden=config.hidden,
         dropout=config.dropout,
         n_components=config.n_components,
-        reset_every=config.seq_len if config.model == "lstm" else 0,
+        reset_every=config.seq_len if model_kind(config.model).recurrent else 0,
         obs_fields=tuple(f.name for f in demos.obs_fields),
         layer_norm_eps=config.layer_norm_eps,
         dropout_last=config.dropout_last,
@@ -172,7 +173,7 @@ def training_warnings(
     one the best epoch is picked by training loss, which almost always falls to the end),
     action dims that distort ℓ."""
     out = []
-    if config.ensemble_size == 1 and config.model != "mdn":
+    if config.ensemble_size == 1 and not model_kind(config.model).own_spread:
         out.append(
             "one ensemble member: novelty is 0 for every state, so every state counts as "
             "familiar and compatibility rests on the likelihood error alone (the paper uses 5)"
@@ -260,69 +261,93 @@ def train_policy(
     refuse_overwriting_inputs([out_dir], (inputs or {}).values())
     data_hash = demos_sha256(demos)
     check_destination(out_dir, config, data_hash, overwrite)
-    data = prepare(demos, config.val_fraction, config.seq_len if config.model == "lstm" else 1)
-    digests = {str(e): d for e, d in episode_digests(demos).items()}
-    template = _template(config, demos, data, params=None)
-    groups = [config.seeds] if config.vmap_seeds else [(s,) for s in config.seeds]
+    window = config.seq_len if model_kind(config.model).recurrent else 1
+    data = prepare(demos, config.val_fraction, window)
     with atomic_path(out_dir) as tmp, TrainProgress(config, data.n_train, quiet) as progress:
-        results = {}
-        for seeds in groups:
-            progress.start_group(seeds)
-            t0 = time.perf_counter()
-
-            def on_chunk(done: int, states: Any, tl: Any, vl: Any, dt: float, seeds=seeds):
-                progress.update(done, tl, vl, dt)
-                if done % config.checkpoint_every == 0 or done == config.epochs:
-                    for i, s in enumerate(seeds):
-                        params = _seed_slice(states.params, i)
-                        ckpt.save_params(
-                            tmp / f"seed{s}" / "params" / ckpt.epoch_file(done), params
-                        )
-
-            states, train, val = train_states(
-                config, data, demos.obs_dim, demos.action_dim, seeds, on_chunk
-            )
-            seconds = time.perf_counter() - t0
-            for i, s in enumerate(seeds):
-                results[s] = (train[i], val[i], int(states.best_epoch[i]), seconds)
-                ckpt.save_params(
-                    tmp / f"seed{s}" / "params" / "best.npz", _seed_slice(states.best_params, i)
-                )
-        for s, (train, val, best_epoch, seconds) in results.items():
-            _write_seed(
-                tmp / f"seed{s}",
-                config,
-                template,
-                data,
-                data_hash,
-                inputs,
-                s,
-                train,
-                val,
-                best_epoch,
-                seconds,
-                digests,
-            )
-        notes = training_warnings(config, demos.action, results)
-        write_json(
-            tmp / "artifact.json",
-            make_header(
-                ckpt.RUN_KIND,
-                ckpt.SCHEMA_VERSION,
-                config=config.to_dict(),
-                inputs=inputs,
-                seed=list(config.seeds),
-                seeds=list(config.seeds),
-                seed_dirs={str(s): f"seed{s}" for s in config.seeds},
-                model=ckpt.policy_spec(template),
-                data_sha256=data_hash,
-                task=demos.task,
-                warnings=notes,
-            ),
-        )
+        results = _train_groups(tmp, config, demos, data, progress)
+        notes = _write_run(tmp, config, demos, data, data_hash, inputs, results)
         progress.summary(results)
         progress.warn(notes)
     return out_dir
+
+
+def _train_groups(
+    tmp: Path, config: TrainConfig, demos: Demos, data: TrainData, progress: Any
+) -> dict[int, tuple[np.ndarray, np.ndarray, int, float]]:
+    """Train every seed (all at once, or one after another without ``vmap_seeds``), saving
+    the periodic and best parameters under ``tmp``; seed -> (train loss, val loss, best
+    epoch, seconds)."""
+    groups = [config.seeds] if config.vmap_seeds else [(s,) for s in config.seeds]
+    results = {}
+    for seeds in groups:
+        progress.start_group(seeds)
+        t0 = time.perf_counter()
+
+        def on_chunk(done: int, states: Any, tl: Any, vl: Any, dt: float, seeds=seeds):
+            progress.update(done, tl, vl, dt)
+            if done % config.checkpoint_every == 0 or done == config.epochs:
+                for i, s in enumerate(seeds):
+                    params = _seed_slice(states.params, i)
+                    ckpt.save_params(tmp / f"seed{s}" / "params" / ckpt.epoch_file(done), params)
+
+        states, train, val = train_states(
+            config, data, demos.obs_dim, demos.action_dim, seeds, on_chunk
+        )
+        seconds = time.perf_counter() - t0
+        for i, s in enumerate(seeds):
+            results[s] = (train[i], val[i], int(states.best_epoch[i]), seconds)
+            ckpt.save_params(
+                tmp / f"seed{s}" / "params" / "best.npz", _seed_slice(states.best_params, i)
+            )
+    return results
+
+
+def _write_run(
+    tmp: Path,
+    config: TrainConfig,
+    demos: Demos,
+    data: TrainData,
+    data_hash: str,
+    inputs: Mapping[str, str | Path] | None,
+    results: Mapping[int, tuple[np.ndarray, np.ndarray, int, float]],
+) -> list[str]:
+    """Write every seed's files and the run's header into ``tmp``; returns the run's
+    warnings (:func:`training_warnings`)."""
+    template = _template(config, demos, data, params=None)
+    digests = {str(e): d for e, d in episode_digests(demos).items()}
+    for s, (train, val, best_epoch, seconds) in results.items():
+        _write_seed(
+            tmp / f"seed{s}",
+            config,
+            template,
+            data,
+            data_hash,
+            inputs,
+            s,
+            train,
+            val,
+            best_epoch,
+            seconds,
+            digests,
+        )
+    notes = training_warnings(config, demos.action, results)
+    write_json(
+        tmp / "artifact.json",
+        make_header(
+            ckpt.RUN_KIND,
+            ckpt.SCHEMA_VERSION,
+            config=config.to_dict(),
+            inputs=inputs,
+            seed=list(config.seeds),
+            seeds=list(config.seeds),
+            seed_dirs={str(s): f"seed{s}" for s in config.seeds},
+            model=ckpt.policy_spec(template),
+            data_sha256=data_hash,
+            task=demos.task,
+            warnings=notes,
+        ),
+    )
+    return notes
 
 
 def _write_seed(
