@@ -2,7 +2,7 @@
 
 :class:`LiveScorer` jits, once, a function of ``(policy, obs (O,), action (A,), inputs,
 step)`` that runs the batch scorer's own per-chunk function
-(:mod:`elicit_jax.compat.score`: the policy's members, then
+(:func:`elicit_jax.compat.scorer.score_rows`: the policy's members, then
 :func:`elicit_jax.compat.measures.score_pair`) on a chunk of ONE pair — so a live score is
 ``elicit-jax score``'s score, with the same definitions and options (likelihood kind, ddof,
 clipping bounds, action scaling, MC-dropout). The policy and the numbers (thresholds,
@@ -90,7 +90,7 @@ class LiveScorer:
         import jax
         import jax.numpy as jnp
 
-        from elicit_jax.compat.score import score_inputs, score_rows, static_config
+        from elicit_jax.compat.scorer import score_inputs, score_rows, static_config
 
         self.config = config
         self.traces = 0
