@@ -76,14 +76,14 @@ def jax_epoch(s: dict):
     import jax.numpy as jnp
     import numpy as np
 
-    from elicit_jax.policy import models
+    from elicit_jax.policy.kinds import make_module
     from elicit_jax.policy.loop import LoopSpec, init_states, make_chunk_fn
 
     obs, act = make_data(s)
     n = s["n"]
     spec = LoopSpec(
         kind="mlp",
-        module=models.make_module("mlp", s["hidden"], s["act"], 0.5, 2),
+        module=make_module("mlp", s["hidden"], s["act"], 0.5, 2),
         n_members=s["members"],
         obs_dim=s["obs"],
         batch_size=s["batch"],

@@ -13,6 +13,7 @@ from elicit_jax.cli import app
 from elicit_jax.data.demos import from_episodes, write_demos
 from elicit_jax.policy import models
 from elicit_jax.policy.config import TrainConfig
+from elicit_jax.policy.kinds import make_module
 
 
 def test_original_code_profile():
@@ -29,18 +30,18 @@ def test_dropout_placement_and_layer_norm_epsilon():
     # one hidden layer: the paper's placement has no dropout at all, the original's has one
     # after the hidden layer, so training-mode outputs differ from eval only for the latter
     for last, differs in ((False, False), (True, True)):
-        m = models.make_module("mlp", (64,), 2, 0.5, 2, dropout_last=last)
+        m = make_module("mlp", (64,), 2, 0.5, 2, dropout_last=last)
         params = m.init(jax.random.key(0), x, False)["params"]
         train = m.apply({"params": params}, x, True, rngs={"dropout": jax.random.key(1)})
         assert bool(jnp.any(train != m.apply({"params": params}, x, False))) == differs
-    m = models.make_module("mlp", (8,), 2, 0.0, 2, layer_norm_eps=1e-5)
+    m = make_module("mlp", (8,), 2, 0.0, 2, layer_norm_eps=1e-5)
     assert m.layer_norm_eps == 1e-5
 
 
 def test_loss_summed_over_action_dims_by_hand():
     from elicit_jax.policy.loop import LoopSpec, member_loss
 
-    module = models.make_module("mlp", (4,), 3, 0.0, 2)
+    module = make_module("mlp", (4,), 3, 0.0, 2)
     params = jax.tree.map(
         jnp.zeros_like, module.init(jax.random.key(0), jnp.zeros((1, 2)), False)["params"]
     )  # predicts exactly 0
@@ -180,7 +181,7 @@ def test_mdn_std_floor_setting():
     assert (paper.mdn_min_std, paper.lr, paper.epochs) == (1e-4, 1e-4, 1000)
     assert TrainConfig.from_dict(cpu.to_dict()) == cpu
     assert "mdn_min_std" not in TrainConfig.from_profile("cpu").to_dict()  # MLP: unchanged
-    module = models.make_module("mdn", (4,), 2, 0.0, 2, mdn_min_std=0.01)
+    module = make_module("mdn", (4,), 2, 0.0, 2, mdn_min_std=0.01)
     params = module.init(jax.random.key(0), jnp.zeros((1, 3)), False)["params"]
     _, _, std = module.apply({"params": jax.tree.map(jnp.zeros_like, params)}, jnp.zeros((1, 3)))
     np.testing.assert_allclose(std, np.log(2.0) + 0.01, rtol=1e-6)  # softplus(0) + floor

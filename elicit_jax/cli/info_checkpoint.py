@@ -11,6 +11,7 @@ from elicit_jax.policy.checkpoint import (
     list_checkpoints,
     seed_dirs,
 )
+from elicit_jax.policy.kinds import MODEL_KINDS
 
 
 def _fmt(x: Any) -> str:
@@ -20,8 +21,8 @@ def _fmt(x: Any) -> str:
 def _model_line(header: dict[str, Any]) -> str:
     m = header["model"]
     sizes = "x".join(str(h) for h in m["hidden"])
-    extra = f", {m['n_components']} components" if m["kind"] == "mdn" else ""
-    extra += f", state reset every {m['reset_every']} steps" if m["kind"] == "lstm" else ""
+    kind = MODEL_KINDS.get(m["kind"])
+    extra = kind.describe(m) if kind is not None else ""
     return (
         f"{m['kind']} x{m['n_members']} members, hidden {sizes}, dropout {m['dropout']}{extra}; "
         f"obs_dim {m['obs_dim']}, action_dim {m['action_dim']}"

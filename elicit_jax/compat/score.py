@@ -3,8 +3,8 @@
 Feed-forward policies (MLP ensemble, MDN) are scored row by row: rows are grouped into chunks
 of one fixed size — at most ``config.chunk_size``, balanced over the dataset so the padded
 last chunk wastes little (:func:`~elicit_jax.compat.chunks.balanced_chunk`) — and ONE jitted
-function, the per-pair
-:func:`~elicit_jax.compat.measures.score_pair` vmapped over the chunk, scores each chunk, so
+function (:func:`~elicit_jax.compat.scorer.score_rows`: the per-pair
+:func:`~elicit_jax.compat.measures.score_pair` vmapped over the chunk) scores each chunk, so
 the whole dataset compiles once. Scores do not depend on the chunk size.
 
 Recurrent policies (LSTM) need each episode as one sequence from the zero state: complete
@@ -27,18 +27,25 @@ content hashes of the policy checkpoint and the demonstrations.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import jax
 import numpy as np
-from flax import struct
 
 from elicit_jax.compat.chunks import balanced_chunk, concat, episode_groups, pad, row_chunks
-from elicit_jax.compat.measures import ScoreConfig, score_pair
+from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.scorer import (
+    ScoreInputs,
+    policy_spec,
+    score_inputs,
+    score_rows,
+    score_sequences,
+    static_config,
+)
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.kinds import model_kind
 from elicit_jax.sharding import device_count, round_up, row_placer
 
 SCORES_KIND = "scores"
@@ -52,157 +59,6 @@ def episodes_path(scores_path: str | Path) -> Path:
     """Sibling per-episode summary of a scores file: ``x.parquet`` -> ``x.episodes.parquet``."""
     p = Path(scores_path)
     return p.with_name(p.name.removesuffix(".parquet") + ".episodes.parquet")
-
-
-def policy_spec(policy: Any, name: str, default: Any = None) -> Any:
-    """A static spec field of a policy (on the policy or on its ``spec`` attribute)."""
-    if hasattr(policy, name):
-        return getattr(policy, name)
-    spec = getattr(policy, "spec", None)
-    return getattr(spec, name, default) if spec is not None else default
-
-
-@struct.dataclass
-class ScoreInputs:
-    """Numbers of a scoring call that are arguments, not compile-time constants.
-
-    Attributes:
-      lam: λ; eta: η (scalars).
-      low: (A,) lower clipping bound of ``member-average``; high: (A,) upper bound.
-      weight: (A,) action scaling (1/std, 0 for dims left out), or None (paper).
-      seed: MC-dropout seed (int32 scalar).
-    """
-
-    lam: Any
-    eta: Any
-    low: Any
-    high: Any
-    weight: Any
-    seed: Any
-
-
-def static_config(config: ScoreConfig) -> ScoreConfig:
-    """The part of a config that shapes the compiled function (numbers are arguments).
-
-    Args:
-      config: the full score config.
-
-    Returns:
-      A config with only the fields :func:`score_rows` compiles on, so configs differing in
-      λ, η or chunk size share one compile.
-    """
-    return ScoreConfig(
-        likelihood=config.likelihood,
-        ddof=config.ddof,
-        action_scale=config.action_scale,
-        dropout_samples=config.dropout_samples,
-    )
-
-
-def _pair_fn(inputs: ScoreInputs, config: ScoreConfig) -> Callable[..., Any]:
-    return functools.partial(
-        score_pair,
-        lambda_=inputs.lam,
-        eta=inputs.eta,
-        config=config,
-        clip=(inputs.low, inputs.high),
-        weight=inputs.weight,
-    )
-
-
-@functools.partial(jax.jit, static_argnames=("config",))
-def score_rows(
-    policy: Any, obs: Any, action: Any, inputs: ScoreInputs, row0: Any, config: ScoreConfig
-) -> Any:
-    """Scores of a chunk of independent pairs (jitted; ``config`` is static).
-
-    The batch scorer calls it per chunk and the live scorer per step, so both give the same
-    numbers for the same pair.
-
-    Args:
-      policy: the trained policy (ensemble, MDN or dropout).
-      obs: (C, O) observations.
-      action: (C, A) actions.
-      inputs: the numeric inputs from :func:`score_inputs` (λ, η, bounds, weight, seed).
-      row0: the chunk's first row in the dataset: MC-dropout masks are keyed by the row,
-        so they do not depend on the chunking.
-      config: :func:`static_config` of the score config (one compile per shape).
-
-    Returns:
-      PairScores with leading axis C.
-    """
-    import jax.numpy as jnp
-
-    if config.dropout_samples:
-        base = jax.random.key(inputs.seed)
-        rows = row0 + jnp.arange(obs.shape[0])
-        keys = jax.vmap(lambda r: jax.random.fold_in(base, r))(rows)
-        members = policy.sample_members(obs, keys, config.dropout_samples)  # (K*N, C, A)
-        spread = None
-    else:
-        members = policy.members(obs)  # (K, C, A)
-        spread = policy.spread(obs)  # (C, A) or None
-    fn = _pair_fn(inputs, config)
-    if spread is None:
-        return jax.vmap(lambda m, a: fn(m, a), in_axes=(1, 0))(members, action)
-    return jax.vmap(lambda m, a, s: fn(m, a, spread=s), in_axes=(1, 0, 0))(members, action, spread)
-
-
-@functools.partial(jax.jit, static_argnames=("config",))
-def _score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, config: ScoreConfig):
-    """Scores of G padded episodes. obs: (G, L, O), action: (G, L, A) -> PairScores (G, L)."""
-
-    fn = _pair_fn(inputs, config)
-
-    def one(o, a):
-        members = policy.members(o)  # (K, L, A)
-        return jax.vmap(lambda m, x: fn(m, x), in_axes=(1, 0))(members, a)
-
-    return jax.vmap(one)(obs, action)
-
-
-def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") -> Any:
-    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions, 0 for
-    dims that were constant there; None for ``action_scale='none'``."""
-    if config.action_scale == "none":
-        return None
-    std = getattr(policy, "action_std", None)
-    if std is None:
-        raise ElicitError(
-            "--action-scale std needs the training actions' std, which this checkpoint "
-            "predates; retrain the base policy",
-            source,
-        )
-    std = np.asarray(std, np.float64)
-    weight = np.where(std >= 1e-6, 1.0 / np.maximum(std, 1e-6), 0.0)
-    if not weight.any():
-        raise ElicitError("every action dim was constant in the training data", source)
-    return weight.astype(np.float32)
-
-
-def score_inputs(
-    policy: Any, config: ScoreConfig, bounds: tuple[Any, Any] | None, source: str
-) -> ScoreInputs:
-    """The :class:`ScoreInputs` of a scoring run: thresholds, clipping bounds (``config.clip``,
-    else the demonstrations' recorded ``bounds``, else ±1), action weights, dropout seed."""
-    import jax.numpy as jnp
-
-    a = int(policy_spec(policy, "action_dim", 1))
-    if config.clip is not None:
-        low, high = -config.clip, config.clip
-    elif bounds is not None:
-        low, high = bounds
-    else:
-        low, high = -1.0, 1.0
-    weight = action_weight(policy, config, source)
-    return ScoreInputs(
-        lam=jnp.float32(config.lambda_),
-        eta=jnp.float32(config.eta),
-        low=jnp.broadcast_to(jnp.asarray(low, jnp.float32), (a,)),
-        high=jnp.broadcast_to(jnp.asarray(high, jnp.float32), (a,)),
-        weight=None if weight is None else jnp.asarray(weight),
-        seed=jnp.int32(config.dropout_seed),
-    )
 
 
 def _to_numpy(scores: Any, n: int) -> dict[str, np.ndarray]:
@@ -274,8 +130,9 @@ def score_batches(
 
     inputs = score_inputs(policy, config, bounds, policy_source)
     static = static_config(config)
-    recurrent = policy_spec(policy, "kind", "mlp") == "lstm"
-    if config.dropout_samples and policy_spec(policy, "kind", "mlp") != "mlp":
+    kind = model_kind(policy_spec(policy, "kind", "mlp"))
+    recurrent = kind.recurrent
+    if config.dropout_samples and not kind.mc_dropout:
         raise ElicitError("--dropout-samples applies to MLP ensembles only", policy_source)
     if config.dropout_samples and not policy_spec(policy, "dropout", 0.0):
         raise ElicitError(
@@ -340,7 +197,7 @@ def _score_episodes(
                 act[j, : lengths[i]] = rows["action"][starts[i] : stops[i]]
             if place is not None:
                 obs, act = place(obs), place(act)
-            out = _score_sequences(policy, obs, act, inputs, static)
+            out = score_sequences(policy, obs, act, inputs, static)
             if place is not None:
                 out = jax.device_get(out)  # gather once, not once per episode
             for j, i in enumerate(part):

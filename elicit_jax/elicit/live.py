@@ -2,7 +2,7 @@
 
 :class:`LiveScorer` jits, once, a function of ``(policy, obs (O,), action (A,), inputs,
 step)`` that runs the batch scorer's own per-chunk function
-(:mod:`elicit_jax.compat.score`: the policy's members, then
+(:func:`elicit_jax.compat.scorer.score_rows`: the policy's members, then
 :func:`elicit_jax.compat.measures.score_pair`) on a chunk of ONE pair — so a live score is
 ``elicit-jax score``'s score, with the same definitions and options (likelihood kind, ddof,
 clipping bounds, action scaling, MC-dropout). The policy and the numbers (thresholds,
@@ -50,12 +50,16 @@ class StepScore:
 
 
 def check_live_policy(policy: Any, source: str = "<policy>") -> None:
-    """Raise unless ``policy`` can be scored one state at a time (feed-forward)."""
-    kind = getattr(policy, "kind", "mlp")
-    if kind == "lstm":
+    """Raise unless ``policy`` can be scored one state at a time (a feed-forward kind)."""
+    from elicit_jax.policy.kinds import MODEL_KINDS, model_kind
+
+    kind = model_kind(getattr(policy, "kind", "mlp"))
+    if kind.recurrent:
+        feed_forward = " or ".join(k.name for k in MODEL_KINDS.values() if not k.recurrent)
         raise ElicitError(
-            "live scoring needs a feed-forward policy (mlp or mdn); this one is an lstm, whose "
-            "scores depend on the whole episode (score its demonstrations with `score`)",
+            f"live scoring needs a feed-forward policy ({feed_forward}); this one is an "
+            f"{kind.name}, whose scores depend on the whole episode (score its demonstrations "
+            "with `score`)",
             source,
         )
 
@@ -86,7 +90,7 @@ class LiveScorer:
         import jax
         import jax.numpy as jnp
 
-        from elicit_jax.compat.score import score_inputs, score_rows, static_config
+        from elicit_jax.compat.scorer import score_inputs, score_rows, static_config
 
         self.config = config
         self.traces = 0

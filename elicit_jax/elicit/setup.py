@@ -363,8 +363,7 @@ def open_session(
     from elicit_jax.data.demos import read_demos
     from elicit_jax.elicit import people  # noqa: F401  (registers the person: operators)
     from elicit_jax.elicit.operators import OperatorContext, make_session_operator
-    from elicit_jax.elicit.retrain import loaded_seed, policy_train_config
-    from elicit_jax.policy.checkpoint import check_compatible, load_policy, policy_spec
+    from elicit_jax.policy.checkpoint import check_compatible, load_checkpoint, policy_spec
     from elicit_jax.sim.env import make_task
 
     if resume and overwrite:
@@ -377,11 +376,11 @@ def open_session(
             "support yet: use collect and evaluate"
         )
     base = read_demos(config.base_demos)
-    policy = load_policy(config.policy, config.which, seed=config.policy_seed)
+    loaded = load_checkpoint(config.policy, config.which, seed=config.policy_seed)
+    policy, seed = loaded.policy, loaded.seed
     _check_inputs(config, task, base, policy)
     check_compatible(policy, base, config.base_demos)
-    seed = loaded_seed(config.policy, config.policy_seed)
-    train_config = policy_train_config(config.policy, seed) if config.batch else None
+    train_config = loaded.train_config() if config.batch else None
     operator = make_session_operator(config.operator, OperatorContext(task, base, config.dagger))
     root = Path(out)
     if resume and not (root / "artifact.json").exists():

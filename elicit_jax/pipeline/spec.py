@@ -27,8 +27,8 @@ from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.config import PIPELINE_PROFILES as PROFILES
 
-PROFILES = ("paper", "cpu")
 SECTIONS = (
     "collect",
     "train",

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from elicit_jax.policy import models
+from elicit_jax.policy import kinds, models
 
 STD_FLOOR = 1e-6
 MEMBER_LOOP_ROWS = 512  # batches this large run the members one after another
@@ -72,9 +72,14 @@ class Policy:
     action_std: Any = None
 
     @property
+    def entry(self) -> kinds.ModelKind:
+        """The registry entry of the policy's kind (:mod:`elicit_jax.policy.kinds`)."""
+        return kinds.model_kind(self.kind)
+
+    @property
     def module(self) -> Any:
         """The Flax module of one member."""
-        return models.make_module(
+        return kinds.make_module(
             self.kind,
             self.hidden,
             self.action_dim,
@@ -104,15 +109,9 @@ class Policy:
         """
         x = self.normalize(obs)
         module = self.module
-        if self.kind == "mlp":
-            return self._each_member(lambda p: module.apply({"params": p}, x), x.shape[0])
-        if self.kind == "mdn":
-
-            def one(p: Any) -> jax.Array:
-                logits, means, _ = module.apply({"params": p}, x)
-                return models.mdn_mode(logits, means)
-
-            return self._each_member(one, x.shape[0])
+        entry = self.entry
+        if not entry.recurrent:
+            return self.each_member(lambda p: entry.predict(module, p, x), x.shape[0])
         reset = _reset_mask(x.shape[0], self.reset_every)
         out = jax.vmap(lambda p: models.lstm_sequence(module, p, x[:, None, :], reset))(self.params)
         return out[:, :, 0, :]
@@ -129,7 +128,7 @@ class Policy:
         Returns:
           (K * n, B, A) predictions: member k's passes are rows ``k * n .. k * n + n - 1``.
         """
-        if self.kind != "mlp":
+        if not self.entry.mc_dropout:
             raise ValueError(f"MC-dropout scoring needs an MLP ensemble, not {self.kind}")
         x = self.normalize(obs)
         module = self.module
@@ -153,16 +152,15 @@ class Policy:
         MDN: the mixture's standard deviation (averaged over members if K > 1). Ensembles
         without their own uncertainty return ``None`` (use the spread across members).
         """
-        if self.kind != "mdn":
+        spread = self.entry.spread
+        if spread is None:
             return None
         x = self.normalize(obs)
         module = self.module
-        std = self._each_member(
-            lambda p: models.mdn_std(*module.apply({"params": p}, x)), x.shape[0]
-        )
+        std = self.each_member(lambda p: spread(module, p, x), x.shape[0])
         return jnp.mean(std, axis=0)
 
-    def _each_member(self, fn: Any, rows: int) -> Any:
+    def each_member(self, fn: Any, rows: int) -> Any:
         """``fn(params_k)`` of every member, stacked on a leading axis K.
 
         Batches of at least :data:`MEMBER_LOOP_ROWS` rows run the members one after another
@@ -180,7 +178,7 @@ class Policy:
     def init_carry(self, batch: int) -> Any:
         """Recurrent state for ``batch`` parallel rollouts: ``()`` for feed-forward models;
         for ``lstm`` ``(step (), per-layer (c, h) with shape (K, B, H))``."""
-        if self.kind != "lstm":
+        if not self.entry.recurrent:
             return ()
         zero = models.lstm_zero_carry(self.hidden, batch)
         stacked = jax.tree.map(lambda z: jnp.broadcast_to(z, (self.n_members, *z.shape)), zero)
@@ -196,7 +194,7 @@ class Policy:
         Returns:
           (new carry, (B, A) ensemble-mean action in [-1, 1]).
         """
-        if self.kind != "lstm":
+        if not self.entry.recurrent:
             return carry, jnp.mean(self.members(obs), axis=0)
         x = self.normalize(obs)
         step, state = carry
@@ -247,7 +245,7 @@ def init_policy(
     mdn_min_std: float = models.MDN_MIN_STD,
 ) -> Policy:
     """A freshly initialised policy (identity normalisation unless stats are given)."""
-    module = models.make_module(
+    module = kinds.make_module(
         kind,
         hidden,
         action_dim,
@@ -257,7 +255,7 @@ def init_policy(
         dropout_last=dropout_last,
         mdn_min_std=mdn_min_std,
     )
-    params = models.init_members(module, kind, key, obs_dim, n_members)
+    params = kinds.init_members(module, kind, key, obs_dim, n_members)
     return Policy(
         params=params,
         obs_mean=jnp.zeros(obs_dim) if obs_mean is None else jnp.asarray(obs_mean),

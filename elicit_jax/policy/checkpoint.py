@@ -16,6 +16,7 @@ last epoch's file.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping
 from pathlib import Path
@@ -25,6 +26,7 @@ import numpy as np
 
 from elicit_jax.artifact import read_header, write_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.kinds import ModelKind, foreign_fields, model_kind
 
 CHECKPOINT_KIND = "checkpoint"
 RUN_KIND = "training_run"
@@ -154,8 +156,47 @@ def _resolve_seed_dir(path: Path, seed: int | None) -> Path:
     return next(iter(dirs.values()))
 
 
-def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None = None) -> Any:
-    """Load a :class:`~elicit_jax.policy.base.Policy` from a checkpoint.
+@dataclasses.dataclass(frozen=True)
+class LoadedPolicy:
+    """A checkpoint read once: the policy, its training seed and config, its kind's entry.
+
+    Attributes:
+      policy: the :class:`~elicit_jax.policy.base.Policy` (params, normalisation, spec).
+      seed: the training seed of the checkpoint.
+      config: the training config as stored in its header (``{}`` when it records none).
+      kind: the registry entry of its model kind (:mod:`elicit_jax.policy.kinds`).
+      seed_dir: the seed directory it was read from.
+      source: the path as given (named in errors).
+    """
+
+    policy: Any
+    seed: int
+    config: Mapping[str, Any]
+    kind: ModelKind
+    seed_dir: Path
+    source: str
+
+    def train_config(self) -> Any:
+        """The :class:`~elicit_jax.policy.config.TrainConfig` the policy was trained with,
+        restricted to its own training seed (how π_new is retrained between batches).
+
+        Raises:
+          ElicitError: the header records no training config, or an invalid one.
+        """
+        from elicit_jax.policy.config import TrainConfig
+
+        if not self.config:
+            raise ElicitError(
+                "checkpoint header records no training config to retrain with", self.source
+            )
+        config = TrainConfig.from_dict(self.config)
+        return dataclasses.replace(config, seeds=(self.seed,))
+
+
+def load_checkpoint(
+    path: str | Path, which: str | int = "best", *, seed: int | None = None
+) -> LoadedPolicy:
+    """Read a checkpoint once: its policy, seed, training config and model-kind entry.
 
     Args:
       path: a seed directory (``runs/base/seed0``) or a run directory with one seed (or pass
@@ -164,12 +205,12 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
       seed: pick this seed of a run directory.
 
     Raises:
-      ElicitError: missing directory, checkpoint or seed; parameters not matching the spec.
+      ElicitError: missing directory, checkpoint or seed; an unknown model kind; parameters
+        not matching the spec.
     """
     import jax
     import jax.numpy as jnp
 
-    from elicit_jax.policy import models
     from elicit_jax.policy.base import Policy
 
     seed_dir = _resolve_seed_dir(Path(path), seed)
@@ -181,25 +222,17 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
             seed_dir,
         )
     spec = header["model"]
-    if which == "final":
-        which = int(header["final_epoch"])
-    if which == "best":
-        file = seed_dir / "params" / "best.npz"
-    elif isinstance(which, int) or str(which).isdigit():
-        file = seed_dir / "params" / epoch_file(int(which))
-        if not file.exists():
-            avail = list_checkpoints(seed_dir)[int(header["seed"])]
-            raise ElicitError(f"no checkpoint for epoch {which}; available: {avail}", seed_dir)
-    else:
-        raise ElicitError(f"unknown checkpoint {which!r}; use best, final or an epoch number")
+    kind = _kind_of(spec, seed_dir)
+    file = _params_file(seed_dir, header, which)
     params = load_params(file)
     norm = load_params(seed_dir / "normalization.npz")
     check_param_shapes(params, spec, file)
-    return Policy(
+    optional = {k: spec[k] for k in ("layer_norm_eps", "dropout_last", "mdn_min_std") if k in spec}
+    policy = Policy(
         params=jax.tree.map(jnp.asarray, params),
         obs_mean=jnp.asarray(norm["obs_mean"]),
         obs_std=jnp.asarray(norm["obs_std"]),
-        kind=spec["kind"],
+        kind=kind.name,
         obs_dim=int(spec["obs_dim"]),
         action_dim=int(spec["action_dim"]),
         n_members=int(spec["n_members"]),
@@ -208,24 +241,64 @@ def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None
         n_components=int(spec["n_components"]),
         reset_every=int(spec["reset_every"]),
         obs_fields=tuple(spec.get("obs_fields", ())),
-        layer_norm_eps=float(spec.get("layer_norm_eps", models.LAYER_NORM_EPS)),
-        dropout_last=bool(spec.get("dropout_last", False)),
-        mdn_min_std=float(spec.get("mdn_min_std", models.MDN_MIN_STD)),
         action_std=jnp.asarray(norm["action_std"]) if "action_std" in norm else None,
+        **_typed(optional),
     )
+    return LoadedPolicy(
+        policy=policy,
+        seed=int(header["seed"]),
+        config=dict(header.get("config") or {}),
+        kind=kind,
+        seed_dir=seed_dir,
+        source=str(path),
+    )
+
+
+def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None = None) -> Any:
+    """Load a :class:`~elicit_jax.policy.base.Policy` from a checkpoint (the ``policy`` of
+    :func:`load_checkpoint`; same arguments and errors)."""
+    return load_checkpoint(path, which, seed=seed).policy
+
+
+def _kind_of(spec: Mapping[str, Any], seed_dir: Path) -> ModelKind:
+    try:
+        return model_kind(str(spec["kind"]))
+    except ElicitError as e:
+        raise ElicitError(f"{e} (checkpoint model spec)", seed_dir) from None
+
+
+def _typed(optional: Mapping[str, Any]) -> dict[str, Any]:
+    """Spec fields older checkpoints may lack (the Policy's defaults apply), typed."""
+    types = {"layer_norm_eps": float, "dropout_last": bool, "mdn_min_std": float}
+    return {k: types[k](v) for k, v in optional.items()}
+
+
+def _params_file(seed_dir: Path, header: Mapping[str, Any], which: str | int) -> Path:
+    """The parameter file of checkpoint ``which`` (best, final or an epoch number)."""
+    if which == "final":
+        which = int(header["final_epoch"])
+    if which == "best":
+        return seed_dir / "params" / "best.npz"
+    if isinstance(which, int) or str(which).isdigit():
+        file = seed_dir / "params" / epoch_file(int(which))
+        if not file.exists():
+            avail = list_checkpoints(seed_dir)[int(header["seed"])]
+            raise ElicitError(f"no checkpoint for epoch {which}; available: {avail}", seed_dir)
+        return file
+    raise ElicitError(f"unknown checkpoint {which!r}; use best, final or an epoch number")
 
 
 def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file: Path) -> None:
     """Raise unless ``params`` have exactly the shapes the model ``spec`` builds."""
     import jax
 
-    from elicit_jax.policy import models
+    from elicit_jax.policy.kinds import init_members, make_module
 
-    module = models.make_module(
+    module = make_module(
         spec["kind"], spec["hidden"], spec["action_dim"], spec["dropout"], spec["n_components"]
     )  # LayerNorm epsilon and dropout placement do not change shapes
     expected = jax.eval_shape(
-        lambda k: models.init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
+        lambda k: init_members(module, spec["kind"], k, spec["obs_dim"], spec["n_members"]),
         jax.random.key(0),
     )
     want = {k: tuple(v.shape) for k, v in flatten_params(expected).items()}
@@ -270,8 +343,8 @@ def policy_spec(policy: Any) -> dict[str, Any]:
     spec = {k: getattr(policy, k) for k in SPEC_KEYS}
     spec["hidden"] = list(spec["hidden"])
     spec["obs_fields"] = list(spec["obs_fields"])
-    if spec["kind"] != "mdn":
-        del spec["mdn_min_std"]  # unused; older checkpoints and other models go without it
+    for name in foreign_fields(spec["kind"]):
+        del spec[name]  # unused; older checkpoints and other models go without them
     return spec
 
 

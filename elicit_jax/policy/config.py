@@ -27,6 +27,10 @@ Profiles (:data:`PROFILES`):
     squared error *summed* over action dims, gradients clipped at global norm 10, LayerNorm
     epsilon 1e-5.
 
+:data:`PROFILES` is the one table of profiles (a pipeline accepts those marked
+``pipelines``: :data:`PIPELINE_PROFILES`); each kind's ``cpu`` settings are its entry's
+(:attr:`elicit_jax.policy.kinds.ModelKind.cpu`), its defaults its entry's too.
+
 :func:`default_profile` picks ``paper`` on an accelerator and ``cpu`` on a CPU-only machine
 (the ``train`` command prints its choice).
 """
@@ -34,17 +38,15 @@ Profiles (:data:`PROFILES`):
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.kinds import MODELS, foreign_fields, model_kind
 
-MODELS = ("mlp", "mdn", "lstm")
+__all__ = ["MODELS", "PIPELINE_PROFILES", "PROFILES", "Profile", "TrainConfig", "default_profile"]
 LOSSES = ("mean", "sum")
-_DEFAULT_HIDDEN = MappingProxyType({"mlp": (1024, 1024), "mdn": (1024, 1024), "lstm": (512, 512)})
-_DEFAULT_MEMBERS = MappingProxyType({"mlp": 5, "mdn": 1, "lstm": 5})
-_DEFAULT_LR = MappingProxyType({"mlp": 1e-3, "mdn": 1e-4, "lstm": 1e-3})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,13 +105,8 @@ class TrainConfig:
     vmap_seeds: bool = True
 
     def __post_init__(self) -> None:
-        if self.model not in MODELS:
-            raise ElicitError(f"unknown model {self.model!r}; choose one of {', '.join(MODELS)}")
-        fill = {
-            "ensemble_size": _DEFAULT_MEMBERS[self.model],
-            "hidden": _DEFAULT_HIDDEN[self.model],
-            "lr": _DEFAULT_LR[self.model],
-        }
+        kind = model_kind(self.model)
+        fill = {"ensemble_size": kind.members, "hidden": kind.hidden, "lr": kind.lr}
         for name, value in fill.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
@@ -154,15 +151,16 @@ class TrainConfig:
         if unknown:
             raise ElicitError(f"unknown training option(s): {', '.join(sorted(unknown))}")
         model = overrides.get("model", "mlp")
-        return cls(**{**PROFILES[profile](model), **overrides})
+        return cls(**{**PROFILES[profile].settings(model), **overrides})
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (tuples become lists). ``mdn_min_std`` only for the MDN: other models
-        ignore it, and leaving it out keeps their stored configs (and the pipeline's stage
-        identities) as they were before the setting existed."""
+        """JSON-ready dict (tuples become lists). A kind's own fields (``mdn_min_std``: the
+        MDN's, :attr:`~elicit_jax.policy.kinds.ModelKind.own_fields`) only for that kind: other
+        models ignore them, and leaving them out keeps their stored configs (and the
+        pipeline's stage identities) as they were before the settings existed."""
         out = dataclasses.asdict(self)
-        if self.model != "mdn":
-            del out["mdn_min_std"]
+        for name in foreign_fields(self.model):
+            del out[name]
         return out
 
     @classmethod
@@ -179,40 +177,27 @@ class TrainConfig:
         return cls(**data)
 
 
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    """A named set of training settings.
+
+    Attributes:
+      name: the profile's name (``--profile``, a pipeline's ``profile``).
+      settings: ``model -> field values`` of :class:`TrainConfig` under this profile.
+      pipelines: pipelines may run under it (their reports describe ``paper`` and ``cpu``).
+    """
+
+    name: str
+    settings: Callable[[str], dict[str, Any]]
+    pipelines: bool
+
+
 def _paper(model: str) -> dict[str, Any]:
     return {"model": model}
 
 
 def _cpu(model: str) -> dict[str, Any]:
-    if model == "mdn":
-        return {
-            "model": model,
-            "hidden": (256, 256),
-            "lr": 1e-3,
-            "mdn_min_std": 0.01,
-            "epochs": 500,
-            "checkpoint_every": 100,
-            "progress_every": 10,
-            "seeds": (0,),
-        }
-    if model == "lstm":
-        return {
-            "model": model,
-            "hidden": (64, 64),
-            "batch_size": 64,
-            "epochs": 40,
-            "checkpoint_every": 10,
-            "progress_every": 1,
-            "seeds": (0,),
-        }
-    return {
-        "model": model,
-        "hidden": (256, 256),
-        "epochs": 100,
-        "checkpoint_every": 20,
-        "progress_every": 5,
-        "seeds": (0,),
-    }
+    return {"model": model, **model_kind(model).cpu}
 
 
 def _original_code(model: str) -> dict[str, Any]:
@@ -225,7 +210,17 @@ def _original_code(model: str) -> dict[str, Any]:
     }
 
 
-PROFILES = MappingProxyType({"paper": _paper, "cpu": _cpu, "original-code": _original_code})
+PROFILES: Mapping[str, Profile] = MappingProxyType(
+    {
+        p.name: p
+        for p in (
+            Profile("paper", _paper, pipelines=True),
+            Profile("cpu", _cpu, pipelines=True),
+            Profile("original-code", _original_code, pipelines=False),
+        )
+    }
+)
+PIPELINE_PROFILES: tuple[str, ...] = tuple(p.name for p in PROFILES.values() if p.pipelines)
 
 
 def default_profile() -> tuple[str, str]:

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from elicit_jax.policy import models
+from elicit_jax.policy import kinds
 
 Batch = tuple[jax.Array, jax.Array, jax.Array]
 
@@ -99,21 +99,14 @@ def member_loss(
       rng: dropout key. train: dropout on.
 
     Returns:
-      (loss, total weight): squared error averaged over action dims (``spec.loss_sum``: summed
-      over them, as the original code does), or the MDN's negative log-likelihood.
+      (loss, total weight): the kind's loss (:attr:`ModelKind.loss
+      <elicit_jax.policy.kinds.ModelKind>`): squared error averaged over action dims
+      (``spec.loss_sum``: summed over them, as the original code does), or the MDN's negative
+      log-likelihood.
     """
     weight = jnp.sum(mask)
     reduce = jnp.sum if spec.loss_sum else jnp.mean
-    if spec.kind == "lstm":
-        reset = jnp.arange(obs.shape[1]) == 0
-        pred = models.lstm_sequence(spec.module, params, jnp.swapaxes(obs, 0, 1), reset)
-        per = reduce((jnp.swapaxes(pred, 0, 1) - action) ** 2, axis=-1)
-    else:
-        out = spec.module.apply({"params": params}, obs[:, 0], train, rngs={"dropout": rng})
-        if spec.kind == "mdn":
-            per = -models.mdn_log_likelihood(*out, action[:, 0])[:, None]
-        else:
-            per = reduce((out - action[:, 0]) ** 2, axis=-1)[:, None]
+    per = kinds.model_kind(spec.kind).loss(spec.module, params, obs, action, rng, train, reduce)
     return jnp.sum(per * mask) / jnp.maximum(weight, 1.0), weight
 
 
@@ -138,7 +131,7 @@ def _batches(key: jax.Array, samples: jax.Array, n_batches: int, size: int) -> t
 def init_state(spec: LoopSpec, key: jax.Array) -> TrainState:
     """Fresh state of one seed's run from its key."""
     k_init, k_boot, k_run = jax.random.split(key, 3)
-    params = models.init_members(spec.module, spec.kind, k_init, spec.obs_dim, spec.n_members)
+    params = kinds.init_members(spec.module, spec.kind, k_init, spec.obs_dim, spec.n_members)
     if spec.bootstrap:
         samples = jax.random.randint(k_boot, (spec.n_members, spec.n_train), 0, spec.n_train)
     else:

@@ -1,8 +1,11 @@
 """Flax modules of ONE ensemble member, and pure functions applying them to stacked params.
 
 Every model maps *normalised* observations to actions in [-1, 1]. An ensemble is one
-parameter pytree whose leaves carry a leading member axis ``K``; :func:`init_members` builds it
-and the ``*_members`` functions run all members with ``jax.vmap`` in a single call.
+parameter pytree whose leaves carry a leading member axis ``K``
+(:func:`elicit_jax.policy.kinds.init_members` builds it) and
+:class:`~elicit_jax.policy.base.Policy` runs all members in a single call. Which module a model
+kind uses, and how it is initialised and trained, is its entry in
+:mod:`elicit_jax.policy.kinds`.
 
 Architectures (paper defaults, ``docs/method.md``):
   * ``mlp``: ``hidden`` Dense layers, each followed by LayerNorm and ReLU, dropout between
@@ -103,56 +106,9 @@ class LSTMStep(nn.Module):
         return tuple(new), jnp.tanh(nn.Dense(self.action_dim, name="head")(x))
 
 
-def make_module(
-    kind: str,
-    hidden: Sequence[int],
-    action_dim: int,
-    dropout: float,
-    n_components: int,
-    *,
-    layer_norm_eps: float = LAYER_NORM_EPS,
-    dropout_last: bool = False,
-    mdn_min_std: float = MDN_MIN_STD,
-) -> nn.Module:
-    """The Flax module of one member of a ``kind`` model (``mdn_min_std``: the MDN's floor on
-    component stds)."""
-    hidden = tuple(int(h) for h in hidden)
-    eps, last = float(layer_norm_eps), bool(dropout_last)
-    if kind == "mlp":
-        return MLPMember(hidden, action_dim, dropout, eps, last)
-    if kind == "mdn":
-        return MDNMember(hidden, action_dim, dropout, n_components, eps, last, float(mdn_min_std))
-    if kind == "lstm":
-        return LSTMStep(hidden, action_dim)
-    raise ValueError(f"unknown model kind {kind!r} (expected mlp, mdn or lstm)")
-
-
 def lstm_zero_carry(hidden: Sequence[int], batch: int) -> LSTMCarry:
     """Zero LSTM state for ``batch`` rows: per layer ``(c (B, H), h (B, H))``."""
     return tuple((jnp.zeros((batch, h)), jnp.zeros((batch, h))) for h in hidden)
-
-
-def init_member(module: nn.Module, kind: str, key: jax.Array, obs_dim: int) -> Params:
-    """Parameters of one member."""
-    x = jnp.zeros((1, obs_dim), jnp.float32)
-    if kind == "lstm":
-        return module.init(key, lstm_zero_carry(module.hidden, 1), x)["params"]
-    return module.init(key, x, False)["params"]
-
-
-def init_members(
-    module: nn.Module, kind: str, key: jax.Array, obs_dim: int, n_members: int
-) -> Params:
-    """Stacked parameters of ``n_members`` independently initialised members (leading axis K).
-
-    LSTM members are initialised one by one and stacked: a batched QR (the orthogonal
-    recurrent initialiser under ``vmap``) deadlocks XLA:CPU in jax 0.10 for hidden >= 64.
-    """
-    keys = jax.random.split(key, n_members)
-    if kind == "lstm":
-        members = [init_member(module, kind, keys[i], obs_dim) for i in range(n_members)]
-        return jax.tree.map(lambda *xs: jnp.stack(xs), *members)
-    return jax.vmap(lambda k: init_member(module, kind, k, obs_dim))(keys)
 
 
 def lstm_sequence(module: nn.Module, params: Params, obs: jax.Array, reset: jax.Array) -> jax.Array:

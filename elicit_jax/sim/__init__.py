@@ -1,9 +1,9 @@
 """Simulation: MJX/MuJoCo manipulation tasks, scripted operators, collection and evaluation.
 
-Modules: :mod:`.env` (env state, task base class, registry), :mod:`.mjcf` (the floating
-gripper and scene builder), :mod:`.tasks` (``reach-pillar``, ``square-nut``, ``round-nut``,
-``hammer-drawer``, ``robosuite-square``, ``robosuite-round``), :mod:`.operators` (scripted
-operator styles), :mod:`.collect`, :mod:`.rollout_mujoco` (C MuJoCo batch),
+Modules: :mod:`.registry` (one entry per task: its class, scripted operators and threshold
+preset), :mod:`.env` (env state, task base class, ``make_task``), :mod:`.mjcf` (the floating
+gripper and scene builder), :mod:`.tasks` (one task class per module), :mod:`.operators`
+(scripted operator styles), :mod:`.collect`, :mod:`.rollout_mujoco` (C MuJoCo batch),
 :mod:`.rollout_mjx` (jitted MJX rollouts), :mod:`.evaluate`; the robosuite backend (optional
 extra): :mod:`.robosuite_env` (one environment), :mod:`.robosuite_compat` (MuJoCo 3.17
 adaptations), :mod:`.rollout_robosuite` (worker processes), :mod:`.evaluate_robosuite`.

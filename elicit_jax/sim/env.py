@@ -1,4 +1,4 @@
-"""Task definitions shared by both simulators: the env state, the task base class, a registry.
+"""Task definitions shared by both simulators: the env state, the task base class, task lookup.
 
 A task is written for ONE environment. Its pure functions ``reset(rng) -> EnvState`` and
 ``step(state, action) -> EnvState`` run on MJX and are batched with ``jax.vmap`` by callers.
@@ -31,6 +31,7 @@ from flax import struct
 from elicit_jax.data.demos import ObsField, fields_from_sizes
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim import mjcf
+from elicit_jax.sim.registry import TASKS, task_entry
 
 OBS_FIELDS: tuple[ObsField, ...] = fields_from_sizes(
     [("robot0_eef_pos", 3), ("robot0_eef_quat", 4), ("robot0_gripper_qpos", 2), ("object", 14)]
@@ -261,35 +262,26 @@ def yaw_quat(yaw: Any, xp: Any = np) -> Any:
     return xp.stack([xp.cos(yaw / 2), zero, zero, xp.sin(yaw / 2)], axis=-1)
 
 
-_REGISTRY: dict[str, type[Task]] = {}
+def task_class(name: str) -> type[Task]:
+    """The task class of task ``name`` (its registry entry's factory, imported here).
 
-
-def register_task(cls: type[Task]) -> type[Task]:
-    """Class decorator adding a task to the registry under its ``name``."""
-    _REGISTRY[cls.name] = cls
-    return cls
-
-
-def _load_tasks() -> None:
+    Raises:
+      ElicitError: unknown task name.
+    """
     import importlib
 
-    for mod in ("reach_pillar", "square_nut", "round_nut", "hammer_drawer", "robosuite_nuts"):
-        try:
-            importlib.import_module(f"elicit_jax.sim.tasks.{mod}")
-        except ModuleNotFoundError as e:
-            if e.name != f"elicit_jax.sim.tasks.{mod}":
-                raise
+    module, cls = task_entry(name).factory.split(":")
+    return getattr(importlib.import_module(f"elicit_jax.sim.tasks.{module}"), cls)
 
 
 def task_names() -> list[str]:
-    """Names of the registered tasks."""
-    _load_tasks()
-    return sorted(_REGISTRY)
+    """Names of the registered tasks (:data:`elicit_jax.sim.registry.TASKS`), sorted."""
+    return sorted(TASKS)
 
 
 @functools.lru_cache(maxsize=16)
 def _make_cached(name: str, config: TaskConfig | None) -> Task:
-    return _REGISTRY[name](config)
+    return task_class(name)(config)
 
 
 def make_task(name: str, config: TaskConfig | None = None, **overrides: Any) -> Task:
@@ -298,10 +290,7 @@ def make_task(name: str, config: TaskConfig | None = None, **overrides: Any) -> 
     Raises:
       ElicitError: unknown task name or config field.
     """
-    _load_tasks()
-    if name not in _REGISTRY:
-        raise ElicitError(f"unknown task '{name}' (known: {', '.join(sorted(_REGISTRY))})")
-    cls = _REGISTRY[name]
+    cls = task_class(name)
     if overrides:
         base = config or cls.config_cls()
         known = {f.name for f in dataclasses.fields(base)}

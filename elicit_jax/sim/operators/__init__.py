@@ -1,4 +1,5 @@
-"""Scripted operators per task: a registry of named styles (see :mod:`.base`)."""
+"""Scripted operators per task: named styles (see :mod:`.base`), found through the task's
+registry entry (:attr:`elicit_jax.sim.registry.TaskEntry.operators`)."""
 
 from __future__ import annotations
 
@@ -8,24 +9,13 @@ from typing import Any
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.env import Task
 from elicit_jax.sim.operators.base import Operator, Style
-
-_MODULES = {
-    "reach-pillar": "reach_pillar",
-    "square-nut": "square_nut",
-    "round-nut": "round_nut",
-    "hammer-drawer": "hammer_drawer",
-    "robosuite-square": "robosuite_nuts",
-    "robosuite-round": "robosuite_nuts",
-}
+from elicit_jax.sim.registry import TASKS
 
 
 def _module(task_name: str) -> Any:
-    if task_name not in _MODULES:
+    if task_name not in TASKS:
         raise ElicitError(f"no scripted operators for task '{task_name}'")
-    try:
-        return importlib.import_module(f"elicit_jax.sim.operators.{_MODULES[task_name]}")
-    except ModuleNotFoundError as e:
-        raise ElicitError(f"no scripted operators for task '{task_name}'") from e
+    return importlib.import_module(f"elicit_jax.sim.operators.{TASKS[task_name].operators}")
 
 
 def operator_names(task_name: str) -> dict[str, str]:

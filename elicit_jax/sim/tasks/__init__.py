@@ -1,1 +1,2 @@
-"""Task definitions; each module registers its task class with :func:`register_task`."""
+"""Task definitions, one task class per module; :data:`elicit_jax.sim.registry.TASKS` names
+each task's class (its ``factory``)."""

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig, register_task
+from elicit_jax.sim.env import Task, TaskConfig
 
 INTERIOR_X = 0.2
 """x of the drawer interior's centre when closed."""
@@ -183,7 +183,6 @@ def sensors() -> str:
   </sensor>"""
 
 
-@register_task
 class HammerDrawer(Task):
     """Open the drawer, put the hammer in, close it (see the module docstring)."""
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig, register_task
+from elicit_jax.sim.env import Task, TaskConfig
 
 PILLAR_XY = (0.0, 0.0)
 PILLAR_RADIUS = 0.03
@@ -40,7 +40,6 @@ class ReachPillarConfig(TaskConfig):
     goal_tol: float = 0.02
 
 
-@register_task
 class ReachPillar(Task):
     """Reach a goal past a pillar (see the module docstring)."""
 

@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 
 from elicit_jax.data.demos import ObsField
 from elicit_jax.errors import ElicitError
-from elicit_jax.sim.env import OBS_FIELDS, Task, TaskConfig, register_task
+from elicit_jax.sim.env import OBS_FIELDS, Task, TaskConfig
 from elicit_jax.sim.robosuite_env import RobosuiteSpec, spec_for
 
 OBS_KEYS = tuple(f.name for f in OBS_FIELDS)
@@ -74,7 +74,6 @@ class RobosuiteTask(Task):
         raise ElicitError(f"task '{self.name}': success is robosuite's own check")
 
 
-@register_task
 class RobosuiteSquare(RobosuiteTask):
     """robosuite NutAssemblySquare (robomimic's Square)."""
 
@@ -88,7 +87,6 @@ class RobosuiteSquare(RobosuiteTask):
     peg_symmetry = math.pi / 2
 
 
-@register_task
 class RobosuiteRound(RobosuiteTask):
     """robosuite NutAssemblyRound."""
 

@@ -13,7 +13,6 @@ import itertools
 import math
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import register_task
 from elicit_jax.sim.tasks.square_nut import SquareNut, SquareNutConfig
 
 PEG_XY = (0.12, 0.06)
@@ -46,7 +45,6 @@ def octagon_geoms(prefix: str, mid: float, radius: float, mass: float) -> str:
     )
 
 
-@register_task
 class RoundNut(SquareNut):
     """Round nut onto a round peg (see the module docstring)."""
 

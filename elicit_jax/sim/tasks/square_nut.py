@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig, register_task
+from elicit_jax.sim.env import Task, TaskConfig
 
 PEG_XY = (0.1, 0.1)
 PEG_HALF = 0.011
@@ -68,7 +68,6 @@ def ring_geoms(prefix: str, half: float, radius: float, mass: float) -> str:
     )
 
 
-@register_task
 class SquareNut(Task):
     """Square nut onto a square peg (see the module docstring)."""
 
