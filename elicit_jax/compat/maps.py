@@ -24,6 +24,7 @@ import numpy as np
 from elicit_jax.artifact import atomic_path
 from elicit_jax.compat.measures import check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
+from elicit_jax.render import html_page
 
 AXES = ("likelihood-error", "neg-likelihood-error")
 FLOOR = 1e-6
@@ -219,22 +220,18 @@ def write_html(
             f"{html.escape(name)} ({int((ops == name).sum())} pairs)</label>"
         )
     svg = f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}">{"".join(parts)}</svg>'
-    page = _PAGE.format(
-        title=f"compatibility map (λ={lambda_:.3g}, η={eta:.3g})",
-        legend=" ".join(legend),
-        svg=svg,
-    )
+    title = f"compatibility map (λ={lambda_:.3g}, η={eta:.3g})"
+    body = _BODY.format(title=html.escape(title), legend=" ".join(legend), svg=svg)
     with atomic_path(out) as tmp:
-        tmp.write_text(page, encoding="utf-8")
+        tmp.write_text(html_page(title, body, _CSS), encoding="utf-8")
 
 
-_PAGE = """<!DOCTYPE html>
-<html><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font:13px sans-serif;margin:16px}}text{{font:11px sans-serif}}
-#tip{{position:fixed;background:#fff;border:1px solid #888;padding:4px;display:none}}
-label{{margin-right:12px;cursor:pointer}}</style></head>
-<body><h3>{title}</h3><p>Red box: incompatible pairs (ℓ > λ, ν < η). Grey: density of all pairs.
-Hover a point for details; untick an operator to hide it.</p><div>{legend}</div>{svg}
+_CSS = """body{font:13px sans-serif;margin:16px}text{font:11px sans-serif}
+#tip{position:fixed;background:#fff;border:1px solid #888;padding:4px;display:none}
+label{margin-right:12px;cursor:pointer}"""
+
+_BODY = """<h3>{title}</h3><p>Red box: incompatible pairs (ℓ &gt; λ, ν &lt; η). Grey: density of all
+pairs. Hover a point for details; untick an operator to hide it.</p><div>{legend}</div>{svg}
 <div id="tip"></div>
 <script>
 const tip = document.getElementById("tip");
@@ -255,8 +252,7 @@ document.querySelectorAll("input[data-op]").forEach(box => {{
     }});
   }});
 }});
-</script></body></html>
-"""
+</script>"""
 
 
 def write_map(
