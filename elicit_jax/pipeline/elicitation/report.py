@@ -13,20 +13,22 @@ import numpy as np
 from elicit_jax.artifact import atomic_path, dumps, make_header
 from elicit_jax.pipeline.elicitation.evidence import write_study_data
 from elicit_jax.pipeline.elicitation.gather import StudyData
-from elicit_jax.pipeline.elicitation.tables import (
+from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
     DIFFERENCES,
-    ablation_table,
     cells_of,
     compare,
-    dagger_table,
     diff_text,
+    success_cells,
+)
+from elicit_jax.pipeline.elicitation.tables import (
+    ablation_table,
+    dagger_table,
     filter_table,
     learning_curves,
     learning_table,
     length_table,
     person_table,
-    success_cells,
     table2,
     threshold_table,
 )
