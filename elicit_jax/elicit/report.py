@@ -157,23 +157,21 @@ def _batches(data: dict[str, Any]) -> list[list[Any]]:
     return rows
 
 
-def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
-    c, p = data["config"], data["progress"]
-    counts = p.counts
-    demos = data["demos"]
+def _trend_text(demos: list[dict[str, Any]]) -> str:
+    """Does the incompatible fraction change over the session, beyond the noise?"""
     fr = [r["fraction_incompatible"] for r in demos if r["fraction_incompatible"] is not None]
     slope, pval = trend(np.array(fr))
     if pval is None:
-        trend_text = f"{len(fr)} scored demonstrations: too few for a trend."
-    else:
-        verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
-        trend_text = (
-            f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
-            f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
-        )
-    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
-    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
-    settings = [
+        return f"{len(fr)} scored demonstrations: too few for a trend."
+    verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
+    return (
+        f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
+        f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
+    )
+
+
+def _settings(c: Any) -> list[list[Any]]:
+    return [
         ["task", c.task],
         ["operator", c.operator],
         ["mode", c.mode + (" + HG-DAgger" if c.dagger else "")],
@@ -183,7 +181,13 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ["scoring", "fixed base" if c.fixed_base else "latest π_new"],
         ["policy / base demos", f"{c.policy} / {c.base_demos}"],
     ]
-    summary = [
+
+
+def _summary(data: dict[str, Any]) -> list[list[Any]]:
+    counts, demos = data["progress"].counts, data["demos"]
+    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
+    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
+    return [
         ["practice episodes", counts.practice],
         ["accepted", f"{counts.accepted} of {counts.wanted} wanted"],
         ["rejected", counts.rejected],
@@ -198,6 +202,11 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ],
         ["mean intervention rate", _pct(float(np.mean(rates))) if rates else "-"],
     ]
+
+
+def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
+    demos = data["demos"]
+    settings, summary, trend_text = _settings(data["config"]), _summary(data), _trend_text(demos)
     per_demo = [
         [
             r["index"],
