@@ -25,6 +25,7 @@ LAYERS = {
     "stats": 1,
     "sharding": 1,
     "artifact": 2,
+    "render": 2,
     "data": 3,
     "policy": 4,
     "sim": 5,

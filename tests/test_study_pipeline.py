@@ -19,13 +19,8 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
 from elicit_jax.pipeline.elicitation.plan import build_study_graph, session_seed
 from elicit_jax.pipeline.elicitation.spec import load_study, parse_study
-from elicit_jax.pipeline.elicitation.tables import (
-    ablation_table,
-    compare,
-    length_table,
-    success_cells,
-    table2,
-)
+from elicit_jax.pipeline.elicitation.success import compare, success_cells
+from elicit_jax.pipeline.elicitation.tables import ablation_table, length_table, table2
 from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 from elicit_jax.pipeline.tables import ResultRow
 

@@ -14,6 +14,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from collections.abc import Mapping
 from pathlib import Path
@@ -24,6 +25,7 @@ import numpy as np
 from elicit_jax.artifact import atomic_path
 from elicit_jax.compat.measures import check_thresholds, is_incompatible
 from elicit_jax.errors import ElicitError
+from elicit_jax.render import html_page
 
 AXES = ("likelihood-error", "neg-likelihood-error")
 FLOOR = 1e-6
@@ -160,39 +162,72 @@ def write_html(
     if axis not in AXES:
         raise ElicitError(f"unknown axis '{axis}' (choose {', '.join(AXES)})")
     ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
-    ops = np.asarray(scores["operator"]).astype(str)
-    names = sorted(set(ops.tolist()))
-    x0, x1, y0, y1 = _ranges(ell, nu, lambda_, eta)
-    w, h, pad = 760, 480, 60
-    sign = -1 if axis == "neg-likelihood-error" else 1
+    frame = _Frame(*_ranges(ell, nu, lambda_, eta), sign=-1 if axis == AXES[1] else 1)
+    parts = _density_svg(frame, ell, nu, bins) + _axes_svg(frame, lambda_, eta, axis)
+    points, legend = _points_svg(frame, scores, max_points)
+    w, h = _SVG_SIZE
+    svg = f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}">'
+    svg += "".join(parts + points) + "</svg>"
+    title = f"compatibility map (λ={lambda_:.3g}, η={eta:.3g})"
+    body = _BODY.format(title=html.escape(title), legend=" ".join(legend), svg=svg)
+    with atomic_path(out) as tmp:
+        tmp.write_text(html_page(title, body, _CSS), encoding="utf-8")
 
-    def px(lx: np.ndarray | float) -> Any:
-        frac = (np.asarray(lx) - x0) / (x1 - x0)
-        return pad + (frac if sign > 0 else 1 - frac) * (w - 2 * pad)
 
-    def py(v: np.ndarray | float) -> Any:
-        return h - pad - (np.asarray(v) - y0) / (y1 - y0) * (h - 2 * pad)
+_SVG_SIZE, _SVG_PAD = (760, 480), 60
 
-    parts = []
-    hist, xe, ye = np.histogram2d(_log_ell(ell), nu, bins=bins, range=((x0, x1), (y0, y1)))
+
+@dataclasses.dataclass(frozen=True)
+class _Frame:
+    """The SVG plot area: data ranges (x in log10 ℓ) and the x direction (``sign``)."""
+
+    x0: float
+    x1: float
+    y0: float
+    y1: float
+    sign: int
+
+    def px(self, lx: np.ndarray | float) -> Any:
+        w, pad = _SVG_SIZE[0], _SVG_PAD
+        frac = (np.asarray(lx) - self.x0) / (self.x1 - self.x0)
+        return pad + (frac if self.sign > 0 else 1 - frac) * (w - 2 * pad)
+
+    def py(self, v: np.ndarray | float) -> Any:
+        h, pad = _SVG_SIZE[1], _SVG_PAD
+        return h - pad - (np.asarray(v) - self.y0) / (self.y1 - self.y0) * (h - 2 * pad)
+
+
+def _density_svg(f: _Frame, ell: np.ndarray, nu: np.ndarray, bins: int) -> list[str]:
+    """Grey cells of the 2-D histogram of every pair (log-scaled opacity)."""
+    rng = ((f.x0, f.x1), (f.y0, f.y1))
+    hist, xe, ye = np.histogram2d(_log_ell(ell), nu, bins=bins, range=rng)
     top = np.log1p(hist.max()) or 1.0
+    parts = []
     for i, j in zip(*np.nonzero(hist), strict=True):
-        a, b = sorted((float(px(xe[i])), float(px(xe[i + 1]))))
+        a, b = sorted((float(f.px(xe[i])), float(f.px(xe[i + 1]))))
         parts.append(
-            f'<rect x="{a:.1f}" y="{py(ye[j + 1]):.1f}" width="{b - a:.1f}" '
-            f'height="{py(ye[j]) - py(ye[j + 1]):.1f}" fill="#444" '
+            f'<rect x="{a:.1f}" y="{f.py(ye[j + 1]):.1f}" width="{b - a:.1f}" '
+            f'height="{f.py(ye[j]) - f.py(ye[j + 1]):.1f}" fill="#444" '
             f'fill-opacity="{0.45 * np.log1p(hist[i, j]) / top:.3f}"/>'
         )
-    bx = sorted((float(px(np.log10(lambda_))), float(px(x1))))
-    parts.append(
-        f'<rect x="{bx[0]:.1f}" y="{py(eta):.1f}" width="{bx[1] - bx[0]:.1f}" '
-        f'height="{py(0) - py(eta):.1f}" fill="red" fill-opacity="0.12" stroke="red"/>'
-    )
-    for t in _ticks(x0, x1):
-        lab = f"{'−' if sign < 0 else ''}1e{int(t)}"
-        parts.append(f'<text x="{px(t):.1f}" y="{h - pad + 18}" text-anchor="middle">{lab}</text>')
-    for v in np.linspace(y0, y1, 5):
-        parts.append(f'<text x="{pad - 6}" y="{py(v):.1f}" text-anchor="end">{v:.3g}</text>')
+    return parts
+
+
+def _axes_svg(f: _Frame, lambda_: float, eta: float, axis: str) -> list[str]:
+    """The incompatible box, the tick labels, the axis titles and the frame."""
+    (w, h), pad = _SVG_SIZE, _SVG_PAD
+    bx = sorted((float(f.px(np.log10(lambda_))), float(f.px(f.x1))))
+    parts = [
+        f'<rect x="{bx[0]:.1f}" y="{f.py(eta):.1f}" width="{bx[1] - bx[0]:.1f}" '
+        f'height="{f.py(0) - f.py(eta):.1f}" fill="red" fill-opacity="0.12" stroke="red"/>'
+    ]
+    for t in _ticks(f.x0, f.x1):
+        lab = f"{'−' if f.sign < 0 else ''}1e{int(t)}"
+        parts.append(
+            f'<text x="{f.px(t):.1f}" y="{h - pad + 18}" text-anchor="middle">{lab}</text>'
+        )
+    for v in np.linspace(f.y0, f.y1, 5):
+        parts.append(f'<text x="{pad - 6}" y="{f.py(v):.1f}" text-anchor="end">{v:.3g}</text>')
     parts.append(
         f'<text x="{w / 2}" y="{h - 12}" text-anchor="middle">{html.escape(_x_label(axis))}'
         f'</text><text x="14" y="{h / 2}" transform="rotate(-90 14 {h / 2})" '
@@ -200,13 +235,23 @@ def write_html(
         f'<rect x="{pad}" y="{pad}" width="{w - 2 * pad}" height="{h - 2 * pad}" '
         'fill="none" stroke="#888"/>'
     )
+    return parts
+
+
+def _points_svg(
+    f: _Frame, scores: Mapping[str, np.ndarray], max_points: int
+) -> tuple[list[str], list[str]]:
+    """One group of points per operator (a seeded subsample, each with its hover data) and
+    the legend's checkboxes."""
+    ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
+    ops = np.asarray(scores["operator"]).astype(str)
     comp = np.asarray(scores.get("compatibility", np.ones(len(ell))))
     ep, st = np.asarray(scores["episode"]), np.asarray(scores["step"])
-    legend = []
-    for k, name in enumerate(names):
+    parts, legend = [], []
+    for k, name in enumerate(sorted(set(ops.tolist()))):
         color = _PALETTE[k % len(_PALETTE)]
         idx = np.flatnonzero(ops == name)[_subsample(int((ops == name).sum()), max_points, k)]
-        cx, cy = px(_log_ell(ell[idx])), py(np.clip(nu[idx], y0, y1))
+        cx, cy = f.px(_log_ell(ell[idx])), f.py(np.clip(nu[idx], f.y0, f.y1))
         dots = "".join(
             f'<circle cx="{a:.1f}" cy="{b:.1f}" r="2.2" data-t="{int(ep[i])},{int(st[i])},'
             f'{ell[i]:.4g},{nu[i]:.4g},{comp[i]:.3f}"/>'
@@ -218,23 +263,15 @@ def write_html(
             f'<label style="color:{color}"><input type="checkbox" checked data-op={op_id}> '
             f"{html.escape(name)} ({int((ops == name).sum())} pairs)</label>"
         )
-    svg = f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}">{"".join(parts)}</svg>'
-    page = _PAGE.format(
-        title=f"compatibility map (λ={lambda_:.3g}, η={eta:.3g})",
-        legend=" ".join(legend),
-        svg=svg,
-    )
-    with atomic_path(out) as tmp:
-        tmp.write_text(page, encoding="utf-8")
+    return parts, legend
 
 
-_PAGE = """<!DOCTYPE html>
-<html><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font:13px sans-serif;margin:16px}}text{{font:11px sans-serif}}
-#tip{{position:fixed;background:#fff;border:1px solid #888;padding:4px;display:none}}
-label{{margin-right:12px;cursor:pointer}}</style></head>
-<body><h3>{title}</h3><p>Red box: incompatible pairs (ℓ > λ, ν < η). Grey: density of all pairs.
-Hover a point for details; untick an operator to hide it.</p><div>{legend}</div>{svg}
+_CSS = """body{font:13px sans-serif;margin:16px}text{font:11px sans-serif}
+#tip{position:fixed;background:#fff;border:1px solid #888;padding:4px;display:none}
+label{margin-right:12px;cursor:pointer}"""
+
+_BODY = """<h3>{title}</h3><p>Red box: incompatible pairs (ℓ &gt; λ, ν &lt; η). Grey: density of all
+pairs. Hover a point for details; untick an operator to hide it.</p><div>{legend}</div>{svg}
 <div id="tip"></div>
 <script>
 const tip = document.getElementById("tip");
@@ -255,8 +292,7 @@ document.querySelectorAll("input[data-op]").forEach(box => {{
     }});
   }});
 }});
-</script></body></html>
-"""
+</script>"""
 
 
 def write_map(

@@ -3,15 +3,14 @@
 :func:`demo_figure` draws one demonstration: M per step with the flagged windows shaded, then
 for the worst window the observation fields that differ most — the operator's states solid,
 the retrieved base segment's dashed, aligned step by step. :func:`write_demo_page` writes it as
-a PNG and a self-contained HTML page (the PNG inlined, no external asset). Figures use
-matplotlib's object API with the Agg canvas (no global backend state).
+a PNG and a self-contained HTML page (the PNG inlined, no external asset) with the package's
+renderer (:mod:`elicit_jax.render`); :data:`PAGE_CSS` is the session pages' stylesheet.
+Figures use matplotlib's object API with the Agg canvas (no global backend state).
 """
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,53 +19,9 @@ import numpy as np
 
 from elicit_jax.artifact import atomic_path
 from elicit_jax.elicit.events import WindowFeedback
+from elicit_jax.render import CSS, figure_png, html_page, html_table, img_tag
 
-CSS = (
-    "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;"
-    "color:#222}table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #ccc;"
-    "padding:4px 8px;text-align:left;vertical-align:top}th{background:#f3f3f3}"
-    ".accepted{color:#1a7f37}.rejected,.failed{color:#b42318}img{max-width:100%}"
-    ".note{background:#fff3cd;padding:.6em 1em;border-radius:4px}"
-)
-
-
-def figure_png(fig: Any) -> bytes:
-    """PNG bytes of a matplotlib ``Figure`` (Agg canvas)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    return buf.getvalue()
-
-
-def html_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """An HTML table of escaped cells."""
-    esc = html.escape
-    head = "".join(f"<th>{esc(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{esc(str(c))}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def md_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """A Markdown table (pipes in cells escaped)."""
-    cells = [[str(c).replace("|", "\\|") for c in r] for r in [header, *rows]]
-    lines = ["| " + " | ".join(cells[0]) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in cells[1:]])
-
-
-def html_page(title: str, body: str) -> str:
-    """A complete self-contained HTML document."""
-    return (
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        f"<title>{html.escape(title)}</title><style>{CSS}</style></head>"
-        f"<body>{body}</body></html>\n"
-    )
-
-
-def img_tag(png: bytes, alt: str) -> str:
-    b64 = base64.b64encode(png).decode()
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
+PAGE_CSS = CSS + "th,td{vertical-align:top}.accepted{color:#1a7f37}.rejected,.failed{color:#b42318}"
 
 
 def demo_figure(
@@ -166,4 +121,4 @@ def write_demo_page(
         + windows
     )
     with atomic_path(html_path) as tmp:
-        tmp.write_text(html_page(title, body))
+        tmp.write_text(html_page(title, body, PAGE_CSS))

@@ -23,11 +23,14 @@ from elicit_jax.artifact import (
     provenance_line,
     read_header,
 )
-from elicit_jax.elicit.pages import figure_png, html_page, html_table, img_tag, md_table
+from elicit_jax.elicit.pages import PAGE_CSS
 from elicit_jax.elicit.progress import Progress
 from elicit_jax.elicit.store import SessionStore
+from elicit_jax.render import figure_png, html_block, html_code, html_page, img_tag, markdown_block
 
 TREND_PERMUTATIONS = 2000
+TREND_TITLE = "Does the operator improve?"
+FIGURE_ALT = "incompatible fraction and length per demonstration"
 
 
 def trend(values: np.ndarray, seed: int = 0) -> tuple[float, float | None]:
@@ -154,23 +157,21 @@ def _batches(data: dict[str, Any]) -> list[list[Any]]:
     return rows
 
 
-def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
-    c, p = data["config"], data["progress"]
-    counts = p.counts
-    demos = data["demos"]
+def _trend_text(demos: list[dict[str, Any]]) -> str:
+    """Does the incompatible fraction change over the session, beyond the noise?"""
     fr = [r["fraction_incompatible"] for r in demos if r["fraction_incompatible"] is not None]
     slope, pval = trend(np.array(fr))
     if pval is None:
-        trend_text = f"{len(fr)} scored demonstrations: too few for a trend."
-    else:
-        verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
-        trend_text = (
-            f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
-            f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
-        )
-    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
-    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
-    settings = [
+        return f"{len(fr)} scored demonstrations: too few for a trend."
+    verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
+    return (
+        f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
+        f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
+    )
+
+
+def _settings(c: Any) -> list[list[Any]]:
+    return [
         ["task", c.task],
         ["operator", c.operator],
         ["mode", c.mode + (" + HG-DAgger" if c.dagger else "")],
@@ -180,7 +181,13 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ["scoring", "fixed base" if c.fixed_base else "latest π_new"],
         ["policy / base demos", f"{c.policy} / {c.base_demos}"],
     ]
-    summary = [
+
+
+def _summary(data: dict[str, Any]) -> list[list[Any]]:
+    counts, demos = data["progress"].counts, data["demos"]
+    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
+    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
+    return [
         ["practice episodes", counts.practice],
         ["accepted", f"{counts.accepted} of {counts.wanted} wanted"],
         ["rejected", counts.rejected],
@@ -195,6 +202,11 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ],
         ["mean intervention rate", _pct(float(np.mean(rates))) if rates else "-"],
     ]
+
+
+def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
+    demos = data["demos"]
+    settings, summary, trend_text = _settings(data["config"]), _summary(data), _trend_text(demos)
     per_demo = [
         [
             r["index"],
@@ -234,7 +246,7 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
             if data["policies"]
             else "None: no batch was completed with retraining on (--batch).",
         ),
-        ("Does the operator improve?", trend_text),
+        (TREND_TITLE, trend_text),
         (
             "Demonstrations",
             (
@@ -262,34 +274,26 @@ def _provenance(data: dict[str, Any]) -> str:
 
 
 def render_markdown(data: dict[str, Any], figure: str | None) -> str:
+    """The session report as Markdown; ``figure`` is the trend figure's path, if any."""
     out = [f"# Elicitation session `{data['root']}`", "", _provenance(data), ""]
     for title, content in _sections(data):
-        out += [f"## {title}", ""]
-        if isinstance(content, str):
-            out += [content, ""]
-        else:
-            out += [md_table(*content), ""]
-        if title == "Does the operator improve?" and figure:
-            out += [f"![incompatible fraction and length per demonstration]({figure})", ""]
-    out += ["## Session header", "", "```", dumps(data["header"]), "```", ""]
+        out += markdown_block(title, content)
+        if title == TREND_TITLE and figure:
+            out += [f"![{FIGURE_ALT}]({figure})", ""]
+    out += markdown_block("Session header", ("code", dumps(data["header"])))
     return "\n".join(out)
 
 
 def render_html(data: dict[str, Any], png: bytes | None) -> str:
+    """The session report as one self-contained page; ``png`` is the trend figure, if any."""
     body = [f"<h1>Elicitation session {html.escape(data['root'])}</h1>"]
     body.append(f"<p>{html.escape(_provenance(data))}</p>")
     for title, content in _sections(data):
-        body.append(f"<h2>{html.escape(title)}</h2>")
-        body.append(
-            f"<p>{html.escape(content)}</p>" if isinstance(content, str) else html_table(*content)
-        )
-        if title == "Does the operator improve?" and png:
-            body.append(img_tag(png, "incompatible fraction and length per demonstration"))
-    body.append(
-        f"<details><summary>session header</summary><pre>{html.escape(dumps(data['header']))}"
-        "</pre></details>"
-    )
-    return html_page(f"session {data['root']}", "".join(body))
+        body += html_block(title, content)
+        if title == TREND_TITLE and png:
+            body.append(img_tag(png, FIGURE_ALT))
+    body.append(html_code(dumps(data["header"]), "session header"))
+    return html_page(f"session {data['root']}", "".join(body), PAGE_CSS)
 
 
 def write_session_report(root: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:

@@ -1,15 +1,18 @@
 """Built-in inputs for ``elicit-jax serve --demo``: a small reach-pillar base, built once.
 
 :func:`demo_inputs` makes what a session needs — base demonstrations, a base policy and
-thresholds fitted on contrast sets — with the library's own stages, the quickstart's way:
-20 demonstrations of the scripted ``base`` operator (it passes the pillar on the left), a
-5 x 128-128 ensemble trained on them, and (λ, η) fitted on 4 held-out ``base``
-demonstrations against 4 of ``conflict-over`` (it climbs over the pillar). Everything lands
-in ``CACHE/serve-demo/<hash>/``, where the hash covers the recipe, the resolved training
-config, the task's model, the scripted operators' code and the elicit-jax version, so a
-changed recipe, training default or operator — or an upgrade — builds anew and an unchanged
-one is reused (about a minute the first time on a 2-core CPU, instant after). The directory
-is written atomically: a build cut short leaves nothing that looks finished.
+thresholds fitted on contrast sets — by running the quickstart's own stages on the pipeline
+engine (:func:`demo_graph`: a filtering definition of one task, cut down to the stages the
+thresholds need): 20 demonstrations of the scripted ``base`` operator (it passes the pillar
+on the left), a 5 x 128-128 ensemble trained on them, and (λ, η) fitted on 4 held-out
+``base`` demonstrations against 4 of ``conflict-over`` (it climbs over the pillar). The local
+runner writes them to ``CACHE/serve-demo/<hash>/``, a pipeline run directory, where the hash
+covers the recipe, the resolved training config, every stage's config, the task's model, the
+scripted operators' code and the elicit-jax version, so a changed recipe, default or operator
+— or an upgrade — builds anew and an unchanged one is reused (about a minute the first time
+on a 2-core CPU, instant after). Each stage is written atomically and ``recipe.json`` last: a
+build cut short leaves nothing that looks finished, and the next call resumes it from the
+stages it finished.
 """
 
 from __future__ import annotations
@@ -24,11 +27,9 @@ from typing import Any
 from elicit_jax.errors import ElicitError
 
 RECIPE_FILE = "recipe.json"
-BASE_FILE = "base.parquet"
-CONTRAST_FILE = "contrast.parquet"
-SCORES_FILE = "contrast-scores.parquet"
-POLICY_DIR = "policy"
-THRESHOLDS_FILE = "thresholds.json"
+MODEL = "mlp"
+LAYOUT = "pipeline-run/1"
+"""The cache directory's layout (part of the hash: a cache of another layout is not reused)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,33 +69,83 @@ class DemoInputs:
     thresholds: Path
 
 
+def _train_overrides(recipe: DemoRecipe) -> dict[str, Any]:
+    return {
+        "hidden": list(recipe.hidden),
+        "ensemble_size": recipe.ensemble_size,
+        "epochs": recipe.epochs,
+        "checkpoint_every": recipe.epochs // 4,
+        "progress_every": 10,
+    }
+
+
 def train_config(recipe: DemoRecipe) -> Any:
     """The ``TrainConfig`` the base policy is trained with (the ``cpu`` profile's defaults,
-    with the recipe's sizes)."""
+    with the recipe's sizes): the one the train stage of :func:`demo_graph` resolves."""
     from elicit_jax.policy.config import TrainConfig
 
-    return TrainConfig.from_profile(
-        "cpu",
-        hidden=recipe.hidden,
-        ensemble_size=recipe.ensemble_size,
-        epochs=recipe.epochs,
-        checkpoint_every=recipe.epochs // 4,
-        progress_every=10,
-    )
+    return TrainConfig.from_profile("cpu", model=MODEL, **_train_overrides(recipe))
+
+
+def demo_definition(recipe: DemoRecipe) -> dict[str, Any]:
+    """The recipe as a filtering pipeline definition (parsed TOML) of one task and one
+    model. The format asks for a D_new; the demo never runs its stages (:func:`demo_graph`)."""
+    r = recipe
+    task = {
+        "name": r.task,
+        "base_operator": r.operator,
+        "operators": [r.incompatible_operator],
+        "base_episodes": r.episodes,
+        "holdout_episodes": r.contrast_episodes,
+        "incompatible_operator": r.incompatible_operator,
+        "incompatible_episodes": r.contrast_episodes,
+    }
+    head = {"name": "serve-demo", "profile": "cpu", "seeds": [0], "models": [MODEL]}
+    head |= {"methods": ["base", "filtered"], "collect_seed": r.seed}
+    return {"pipeline": head, "task": [task], "train": _train_overrides(r)}
+
+
+def _targets(recipe: DemoRecipe) -> tuple[str, str, str]:
+    """Ids of the stages whose outputs the demo serves: D_base, the base policy, (λ, η)."""
+    cell = f"{recipe.task}/{MODEL}"
+    return f"collect/{recipe.task}/base", f"train/{cell}/base", f"fit-thresholds/{cell}"
+
+
+def demo_graph(recipe: DemoRecipe) -> Any:
+    """The stage graph that builds the demo inputs: the pipeline's plan of
+    :func:`demo_definition`, kept to the stages the base demos, the base policy and the
+    fitted thresholds need (collect D_base and the two contrast sets, train, score the
+    contrast sets, fit)."""
+    from elicit_jax.pipeline.graph import Graph
+    from elicit_jax.pipeline.plan import build_graph
+    from elicit_jax.pipeline.spec import parse_spec
+    from elicit_jax.pipeline.stages import resolve_config
+
+    spec = parse_spec(demo_definition(recipe), source="serve --demo")
+    full = build_graph(spec, resolve_config)
+    keep, frontier = set(), set(_targets(recipe))
+    while frontier:
+        keep |= frontier
+        frontier = {i for sid in frontier for i in full[sid].inputs.values()} - keep
+    return Graph(s for s in full.order if s.id in keep)
 
 
 def recipe_hash(recipe: DemoRecipe) -> str:
-    """SHA-256 of the recipe, its training config, the task's MJCF, the source of its
-    scripted operators and the elicit-jax version."""
+    """SHA-256 of the cache layout, the recipe, its training config, its stage graph (every
+    stage's resolved config), the task's MJCF, the source of its scripted operators and the
+    elicit-jax version."""
     from elicit_jax import __version__
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.operators import base as operator_base
 
     task = make_task(recipe.task)
     module = inspect.getmodule(type(_operator(task, recipe.operator)))
+    stages = [[s.id, s.kind, s.output, dict(s.config), dict(s.inputs)] for s in demo_graph(recipe)]
     parts = [
+        LAYOUT,
         json.dumps(dataclasses.asdict(recipe), sort_keys=True),
         json.dumps(train_config(recipe).to_dict(), sort_keys=True, default=str),
+        json.dumps(stages, sort_keys=True, default=str),
         __version__,
         task.xml(),
         inspect.getsource(operator_base),
@@ -116,26 +167,34 @@ def default_demo_root() -> Path:
     return default_cache_dir().parent / "serve-demo"
 
 
-def _paths(root: Path) -> DemoInputs:
-    return DemoInputs(root, root / BASE_FILE, root / POLICY_DIR, root / THRESHOLDS_FILE)
+def _paths(root: Path, recipe: DemoRecipe) -> DemoInputs:
+    graph = demo_graph(recipe)
+    base, policy, thresholds = (root / graph[sid].output for sid in _targets(recipe))
+    return DemoInputs(root, base, policy, thresholds)
 
 
 def demo_inputs(
     recipe: DemoRecipe = DemoRecipe(),
     root: str | Path | None = None,
     echo: Any = print,
+    console: Any = None,
 ) -> DemoInputs:
     """The demo inputs of ``recipe``: reused from the cache, or built there now.
 
     Args:
       recipe: what to build.
       root: cache root (default :func:`default_demo_root`); inputs go to ``root/<hash16>``.
-      echo: where progress lines go.
+      echo: where the one-line messages go.
+      console: a ``rich`` console for the stages' progress (default: the runner's own).
 
     Returns:
       Paths of the base demonstrations, the policy run and the thresholds.
     """
-    from elicit_jax.artifact import atomic_path, read_json, write_json
+    from elicit_jax.artifact import read_json, write_json
+    from elicit_jax.pipeline.run import write_manifest
+    from elicit_jax.pipeline.runner import run_graph, run_lock
+    from elicit_jax.pipeline.spec import parse_spec
+    from elicit_jax.pipeline.stages import real_registry
 
     digest = recipe_hash(recipe)
     out = Path(root or default_demo_root()) / digest[:16]
@@ -143,56 +202,15 @@ def demo_inputs(
         stored = read_json(out / RECIPE_FILE)
         if stored.get("sha256") != digest:
             raise ElicitError("holds demo inputs of another recipe; remove it", out)
-        return _paths(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+        return _paths(out, recipe)
     echo(f"building the demo inputs for {recipe.task} (once; cached in {out})")
-    with atomic_path(out) as tmp:
-        tmp.mkdir()
-        _build(recipe, tmp, echo)
+    graph = demo_graph(recipe)
+    out.mkdir(parents=True, exist_ok=True)
+    with run_lock(out):
+        write_manifest(out, parse_spec(demo_definition(recipe), source="serve --demo"), graph)
+        run_graph(graph, out, real_registry(), console=console, lock=False)
         write_json(
-            tmp / RECIPE_FILE,
+            out / RECIPE_FILE,
             {"kind": "serve-demo-inputs", "sha256": digest, "recipe": dataclasses.asdict(recipe)},
         )
-    return _paths(out)
-
-
-def _build(recipe: DemoRecipe, out: Path, echo: Any) -> None:
-    from elicit_jax.compat.fit import FitJob, fit_scores_file
-    from elicit_jax.compat.measures import ScoreConfig
-    from elicit_jax.compat.score_file import score_file
-    from elicit_jax.data.demos import concat_demos, read_demos, write_demos
-    from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.policy.train import train_policy
-    from elicit_jax.sim.collect import CollectConfig, collect
-
-    r = recipe
-    sets = (
-        (BASE_FILE, r.operator, r.episodes, r.seed),
-        ("holdout.parquet", r.operator, r.contrast_episodes, r.seed + 1),
-        ("incompatible.parquet", r.incompatible_operator, r.contrast_episodes, r.seed + 2),
-    )
-    for name, op, n, seed in sets:
-        echo(f"  collect {n} demonstrations of '{op}'")
-        collect(CollectConfig(task=r.task, operator=op, episodes=n, seed=seed), out / name)
-    parts = [read_demos(out / name) for name, *_ in sets[1:]]
-    write_demos(out / CONTRAST_FILE, concat_demos(parts))
-    echo(f"  train the base policy ({r.ensemble_size} x {r.hidden}, {r.epochs} epochs)")
-    train_policy(
-        read_demos(out / BASE_FILE),
-        train_config(r),
-        out / POLICY_DIR,
-        inputs={"demos": out / BASE_FILE},
-        quiet=True,
-    )
-    echo("  fit the thresholds on the contrast sets")
-    score_file(
-        load_policy(out / POLICY_DIR),
-        out / CONTRAST_FILE,
-        out / SCORES_FILE,
-        ScoreConfig(),
-        policy_path=out / POLICY_DIR,
-    )
-    job = FitJob(
-        compatible=f"operator:{r.operator}", incompatible=f"operator:{r.incompatible_operator}"
-    )
-    fit_scores_file(out / SCORES_FILE, out / THRESHOLDS_FILE, job)
+    return _paths(out, recipe)

@@ -15,12 +15,13 @@ pairs before training. One report.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
 from elicit_jax.pipeline.graph import Graph, Stage
-from elicit_jax.pipeline.plan import COLLECT_SEED_OFFSETS, threshold_stages
+from elicit_jax.pipeline.plan import collect_seed, threshold_stages
 
 ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
@@ -96,7 +97,7 @@ def _collect_stages(spec: StudySpec, task: StudyTask, resolve: ConfigResolver) -
     ]
     out = []
     for role, operator, episodes in sets:
-        seed = spec.collect_seed + COLLECT_SEED_OFFSETS[role]
+        seed = collect_seed(spec, task, role)
         raw = {**spec.section("collect"), "task": task.name, "operator": operator}
         raw |= {"episodes": episodes, "seed": seed, "role": role}
         out.append(
@@ -112,85 +113,101 @@ def _collect_stages(spec: StudySpec, task: StudyTask, resolve: ConfigResolver) -
     return out
 
 
-def _cell_stages(
-    spec: StudySpec, task: StudyTask, model: str, resolve: ConfigResolver
-) -> list[Stage]:
-    t = task.name
-    cell = f"{t}/{model}"
-    base_data = f"collect/{t}/base"
-    where = {"task": t, "model": model}
-    seeds = list(spec.seeds)
+@dataclasses.dataclass(frozen=True)
+class _Cell:
+    """One task × model cell of the study: what its stages share."""
 
-    def train(method: str, who: str | None, extra: dict[str, str]) -> list[Stage]:
-        suffix = method if who is None else f"{method}/{who}"
-        raw = {**spec.section("train"), **where, "seeds": seeds, "profile": spec.profile}
-        tr = Stage(
-            id=f"train/{cell}/{suffix}",
-            kind="train",
-            output=f"policies/{cell}/{suffix.replace('/', '-')}",
-            config=resolve("train", {**raw, "method": method, "operator": who}),
-            inputs={"demos0": base_data, **extra},
-            label=f"train {t} {model} {suffix}",
+    spec: StudySpec
+    task: StudyTask
+    model: str
+    resolve: ConfigResolver
+
+    @property
+    def name(self) -> str:
+        return f"{self.task.name}/{self.model}"
+
+    @property
+    def where(self) -> dict[str, str]:
+        return {"task": self.task.name, "model": self.model}
+
+    @property
+    def base_data(self) -> str:
+        return f"collect/{self.task.name}/base"
+
+    def policy_stage(
+        self, kind: str, suffix: str, output: str, inputs: dict[str, str], method: str, who: Any
+    ) -> Stage:
+        """A ``train`` or ``evaluate`` stage (all seeds) of one training set."""
+        spec = self.spec
+        raw = {**spec.section(kind), **self.where, "seeds": list(spec.seeds)}
+        raw |= {"profile": spec.profile}
+        return Stage(
+            id=f"{kind}/{self.name}/{suffix}",
+            kind=kind,
+            output=output,
+            config=self.resolve(kind, {**raw, "method": method, "operator": who}),
+            inputs=inputs,
+            label=f"{kind} {self.task.name} {self.model} {suffix}",
         )
-        raw = {**spec.section("evaluate"), **where, "seeds": seeds, "profile": spec.profile}
-        ev = Stage(
-            id=f"evaluate/{cell}/{suffix}",
-            kind="evaluate",
-            output=f"evals/{cell}/{suffix.replace('/', '-')}.parquet",
-            config=resolve("evaluate", {**raw, "method": method, "operator": who}),
-            inputs={"policy": tr.id},
-            label=f"evaluate {t} {model} {suffix}",
+
+    def train(self, method: str, who: str | None, extra: dict[str, str]) -> list[Stage]:
+        """Train on D_base plus ``extra`` (all seeds), and evaluate every seed."""
+        suffix = method if who is None else f"{method}/{who}"
+        flat = f"{self.name}/{suffix.replace('/', '-')}"
+        inputs = {"demos0": self.base_data, **extra}
+        tr = self.policy_stage("train", suffix, f"policies/{flat}", inputs, method, who)
+        ev = self.policy_stage(
+            "evaluate", suffix, f"evals/{flat}.parquet", {"policy": tr.id}, method, who
         )
         return [tr, ev]
 
-    stages = train("base", None, {})
-    base = stages[0]
-    contrast, fit = threshold_stages(spec, task, model, base.id, resolve)
+
+def _cell_stages(
+    spec: StudySpec, task: StudyTask, model: str, resolve: ConfigResolver
+) -> list[Stage]:
+    c = _Cell(spec, task, model, resolve)
+    stages = c.train("base", None, {})
+    contrast, fit = threshold_stages(spec, task, model, stages[0].id, resolve)
     stages += [contrast, fit]
-    modes = session_modes(spec, task)
     for index, person in enumerate(task.people):
-        who = person_id(index)
-        sessions = {}
-        for cond, mode in modes.items():
-            raw = {
-                **_score_options(spec),
-                **spec.section("session"),
-                **where,
-                **mode,
-                "operator": person,
-                "person": who,
-                "condition": cond,
-                "seed": session_seed(spec, index),
-                "policy_seed": seeds[0],
-            }
-            sessions[cond] = Stage(
-                id=f"session/{cell}/{cond}/{who}",
-                kind="session",
-                output=f"sessions/{cell}/{cond}/{who}",
-                config=resolve("session", raw),
-                inputs={"policy": base.id, "base": base_data, "thresholds": fit.id},
-                label=f"session {t} {cond} {who} ({person.partition(',')[0]})",
-            )
-            stages.append(sessions[cond])
-            if cond != "naive" or "naive" in spec.conditions:
-                stages += train(cond, who, {"demos1": sessions[cond].id})
-        if "filtered" in spec.conditions:
-            raw = {"score": spec.section("score"), "filter": spec.section("filter")}
-            filt = Stage(
-                id=f"filter-session/{cell}/{who}",
-                kind="filter-session",
-                output=f"filtered/{cell}/{who}",
-                config=resolve(
-                    "filter-session", {**raw, **where, "person": who, "policy_seed": seeds[0]}
-                ),
-                inputs={
-                    "session": sessions["naive"].id,
-                    "policy": base.id,
-                    "thresholds": fit.id,
-                },
-                label=f"M-filter {t} naive {who}",
-            )
-            stages += [filt, *train("filtered", who, {"demos1": filt.id})]
+        stages += _person_stages(c, index, person, stages[0], fit)
+    return stages
+
+
+def _person_stages(c: _Cell, index: int, person: str, base: Stage, fit: Stage) -> list[Stage]:
+    """One person's sessions (one per condition), each retrained on, and the M-filter of
+    their naive session."""
+    spec, t, who = c.spec, c.task.name, person_id(index)
+    stages: list[Stage] = []
+    sessions = {}
+    for cond, mode in session_modes(spec, c.task).items():
+        raw = {**_score_options(spec), **spec.section("session"), **c.where, **mode}
+        raw |= {"operator": person, "person": who, "condition": cond}
+        raw |= {"seed": session_seed(spec, index), "policy_seed": spec.seeds[0]}
+        sessions[cond] = Stage(
+            id=f"session/{c.name}/{cond}/{who}",
+            kind="session",
+            output=f"sessions/{c.name}/{cond}/{who}",
+            config=c.resolve("session", raw),
+            inputs={"policy": base.id, "base": c.base_data, "thresholds": fit.id},
+            label=f"session {t} {cond} {who} ({person.partition(',')[0]})",
+        )
+        stages.append(sessions[cond])
+        if cond != "naive" or "naive" in spec.conditions:
+            stages += c.train(cond, who, {"demos1": sessions[cond].id})
+    if "filtered" in spec.conditions:
+        raw = {"score": spec.section("score"), "filter": spec.section("filter")}
+        filt = Stage(
+            id=f"filter-session/{c.name}/{who}",
+            kind="filter-session",
+            output=f"filtered/{c.name}/{who}",
+            config=c.resolve(
+                "filter-session", {**raw, **c.where, "person": who, "policy_seed": spec.seeds[0]}
+            ),
+            inputs={"session": sessions["naive"].id, "policy": base.id, "thresholds": fit.id},
+            label=f"M-filter {t} naive {who}",
+        )
+        stages += [filt, *c.train("filtered", who, {"demos1": filt.id})]
     return stages
 
 

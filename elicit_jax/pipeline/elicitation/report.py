@@ -4,9 +4,7 @@ report's style: the same table rendering, figures inlined as base64 PNG, no exte
 
 from __future__ import annotations
 
-import base64
 import dataclasses
-import html
 from pathlib import Path
 from typing import Any
 
@@ -15,20 +13,22 @@ import numpy as np
 from elicit_jax.artifact import atomic_path, dumps, make_header
 from elicit_jax.pipeline.elicitation.evidence import write_study_data
 from elicit_jax.pipeline.elicitation.gather import StudyData
-from elicit_jax.pipeline.elicitation.tables import (
+from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
     DIFFERENCES,
-    ablation_table,
     cells_of,
     compare,
-    dagger_table,
     diff_text,
+    success_cells,
+)
+from elicit_jax.pipeline.elicitation.tables import (
+    ablation_table,
+    dagger_table,
     filter_table,
     learning_curves,
     learning_table,
     length_table,
     person_table,
-    success_cells,
     table2,
     threshold_table,
 )
@@ -42,6 +42,7 @@ from elicit_jax.pipeline.findings import write_beside
 from elicit_jax.pipeline.render import html_document, markdown_document
 from elicit_jax.pipeline.report import CPU_NOTE, provenance_blocks, provenance_intro
 from elicit_jax.pipeline.tables import STD_NOTE
+from elicit_jax.render import html_figure
 
 FIGURES = "figures"
 INTERVAL_NOTE = (
@@ -82,7 +83,7 @@ def _verdicts(data: StudyData) -> list[str]:
 def _figure(data: StudyData, task: str, model: str) -> bytes | None:
     from matplotlib.figure import Figure
 
-    from elicit_jax.elicit.pages import figure_png
+    from elicit_jax.render import figure_png
 
     curves = learning_curves(data, task, model)
     if not curves:
@@ -156,11 +157,7 @@ def render_html(data: StudyData, figures: dict[str, bytes]) -> str:
     """The study report as one self-contained HTML page."""
 
     def figure(title: str, item: tuple[str, str]) -> list[str]:
-        b64 = base64.b64encode(figures[item[1]]).decode()
-        return [
-            f'<figure><img alt="{html.escape(title)}" src="data:image/png;base64,{b64}">',
-            "</figure>",
-        ]
+        return [html_figure(figures[item[1]], title)]
 
     return html_document(
         f"elicit-jax study: {data.pipeline}",
