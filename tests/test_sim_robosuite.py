@@ -208,6 +208,7 @@ def test_elicit_session_on_robosuite_square_end_to_end(work):
     scene = scene_description(task.mj_model, task.name)
     types = {it["type"] for it in scene["items"]}
     assert types <= {"plane", "box", "cylinder", "sphere", "capsule"} and "box" in types
+    assert all(it["kind"] == "geom" for it in scene["items"])  # robosuite's sites stay hidden
     named = {scene["bodies"][it["body"]] for it in scene["items"]}
     assert {"table", "peg1", "SquareNut_main", "robot0_link4", "gripper0_right_leftfinger"} <= named
     assert scene["gripper"] == "gripper0_right_eef" and scene["origin"] == (0.0, 0.0, 0.82)

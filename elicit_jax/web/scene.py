@@ -38,17 +38,19 @@ MESH = 7
 
 
 def _rgba(m: Any, kind: str, i: int, colours: dict[str, Any]) -> np.ndarray:
-    """An item's colour: a hinted colour by body (or item) name prefix, else its own, else
-    its material's."""
-    body = m.body(int(getattr(m, f"{kind}_bodyid")[i])).name
-    name = getattr(m, kind)(i).name
-    for prefix, rgba in colours.items():
-        if body.startswith(prefix) or name.startswith(prefix):
-            return np.asarray(rgba, float)
+    """An item's colour: its own (or its material's); a hinted colour by body (or item) name
+    prefix replaces it, except on an item hidden by a zero alpha (robosuite's sites)."""
     rgba = np.asarray(getattr(m, f"{kind}_rgba")[i], float)
     matid = int(getattr(m, f"{kind}_matid")[i])
     if matid >= 0 and tuple(np.round(rgba, 6)) == DEFAULT_RGBA:
         rgba = np.asarray(m.mat_rgba[matid], float)
+    if rgba[3] <= 0:
+        return rgba
+    body = m.body(int(getattr(m, f"{kind}_bodyid")[i])).name
+    name = getattr(m, kind)(i).name
+    for prefix, hinted in colours.items():
+        if body.startswith(prefix) or name.startswith(prefix):
+            return np.asarray(hinted, float)
     return rgba
 
 

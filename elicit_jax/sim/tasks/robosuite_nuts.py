@@ -64,7 +64,7 @@ class RobosuiteTask(Task):
 
     scene_hints: ClassVar[dict[str, Any]] = {
         "origin": (0.0, 0.0, 0.82),
-        "home": {"position": (-1.05, -0.6, 0.75), "target": (0.05, 0.0, 0.05)},
+        "home": {"position": (0.0, -1.3, 0.7), "target": (-0.05, 0.0, 0.1)},
         "meshes": "collision-boxes",
         "gripper": "gripper0_right_eef",
         "colours": {
