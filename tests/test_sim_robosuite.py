@@ -220,3 +220,24 @@ def test_elicit_session_on_robosuite_square_end_to_end(work):
     poses = body_poses(data, scene["origin"])
     table = scene["bodies"].index("table")
     assert abs(poses[table, 2] + 0.025) < 1e-6  # table top (0.82 up) drawn at height 0
+
+
+def test_session_environment_matches_workers_and_leaves_numpy_alone(pool):
+    """The session's in-process environment starts from the same initial state as a worker
+    given the same seed, puts NumPy's global generator back, and is reused once closed."""
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.rollout_robosuite import PoolBatch
+    from elicit_jax.sim.single import control_period, open_env
+
+    task = make_task("robosuite-square")
+    np.random.seed(123)
+    expected = np.random.random(3)
+    np.random.seed(123)
+    with open_env(task) as env:
+        mine = env.reset_seeds(np.array([11]))[0].copy()
+    assert np.array_equal(np.random.random(3), expected)
+    with open_env(task) as again:
+        assert again is env  # given back, taken again: built once per process
+    workers = PoolBatch(pool).reset_seeds(np.array([11, 12]))
+    assert np.allclose(mine, workers[0], atol=1e-6) and not np.allclose(mine, workers[1])
+    assert control_period(task) == 0.05

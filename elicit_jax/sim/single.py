@@ -74,7 +74,12 @@ class RobosuiteEnv:
         logging.getLogger("robosuite_logs").setLevel(logging.ERROR)  # its chatter, not ours
         self.spec = spec
         self.batch = 1
-        self.env = rs.make_env(spec, ROBOSUITE_HORIZON)
+        with _LOCK:  # building resets the environment too: from NumPy's global generator
+            state = np.random.get_state()
+            try:
+                self.env = rs.make_env(spec, ROBOSUITE_HORIZON)
+            finally:
+                np.random.set_state(state)
         self.model = self.env.sim.model._model
         self.obs = np.zeros((1, 0))
         self.success = np.zeros(1, bool)
