@@ -4,7 +4,8 @@ Modules: :mod:`.env` (env state, task base class, registry), :mod:`.mjcf` (the f
 gripper and scene builder), :mod:`.tasks` (``reach-pillar``, ``square-nut``, ``round-nut``,
 ``hammer-drawer``, ``robosuite-square``, ``robosuite-round``), :mod:`.operators` (scripted
 operator styles), :mod:`.collect`, :mod:`.rollout_mujoco` (C MuJoCo batch),
-:mod:`.rollout_mjx` (jitted MJX rollouts), :mod:`.evaluate`; the robosuite backend (optional
-extra): :mod:`.robosuite_env` (one environment), :mod:`.robosuite_compat` (MuJoCo 3.17
+:mod:`.rollout_mjx` (jitted MJX rollouts), :mod:`.evaluate`, :mod:`.single` (one environment
+of any task in this process: sessions, replays, the browser's scene); the robosuite backend
+(optional extra): :mod:`.robosuite_env` (one environment), :mod:`.robosuite_compat` (MuJoCo 3.17
 adaptations), :mod:`.rollout_robosuite` (worker processes), :mod:`.evaluate_robosuite`.
 """
