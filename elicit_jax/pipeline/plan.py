@@ -212,16 +212,17 @@ def collection_stages(spec: PipelineSpec, number: int, resolve: ConfigResolver) 
 
 def in_collection(stage: Stage, number: int) -> Stage:
     """``stage`` moved into collection ``number``: ``c<number>/`` after the first part of its
-    id, output and input ids."""
+    id, output and input ids (a map: ``maps/c<number>-<name>.png``, as reports keep maps side
+    by side under their file names)."""
 
-    def move(path: str) -> str:
+    def move(path: str, sep: str = "/") -> str:
         head, _, rest = path.partition("/")
-        return f"{head}/c{number}/{rest}"
+        return f"{head}/c{number}{sep}{rest}"
 
     return dataclasses.replace(
         stage,
         id=move(stage.id),
-        output=move(stage.output),
+        output=move(stage.output, "-" if stage.kind == "map" else "/"),
         inputs={k: move(v) for k, v in stage.inputs.items()},
         label=f"c{number}: {stage.label}",
     )
