@@ -59,7 +59,6 @@ REPORT_KINDS = (
 )
 
 
-
 def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
     return raw
 

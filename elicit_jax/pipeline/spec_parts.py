@@ -75,8 +75,6 @@ class SensitivitySpec:
     tasks: tuple[str, ...] = ()
 
 
-
-
 def parse_sensitivity(
     data: Mapping[str, Any],
     seeds: tuple[int, ...],
