@@ -180,8 +180,9 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
     lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
     header, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
-    assert header["thresholds_source"].startswith("provisional")  # scored before the fit
+    assert header["thresholds_source"].startswith("the pipeline's threshold fit")  # after it
     budget = int(is_incompatible(pairs["likelihood"], pairs["novelty"], lam, eta).sum())
+    assert int(np.asarray(pairs["incompatible"]).sum()) == budget
     deminf = read_episode_scores(out / "curation/reach-pillar/deminf-conflict-right.parquet")
     cum = np.cumsum(deminf.length[np.argsort(deminf.score, kind="stable")])
     want = int(cum[np.searchsorted(cum, budget)]) if budget else 0
