@@ -58,7 +58,7 @@ PRINTING_ALLOWED = {
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
     "elicit_jax.pipeline.ray_runner": "the Ray driver's progress bars and messages",
     "elicit_jax.pipeline.run": "builds the default console; prints the plan and result tables",
-    "elicit_jax.pipeline.stages": "nested progress bars on the console passed down",
+    "elicit_jax.pipeline.stages_policy": "nested progress bars on the console passed down",
     "elicit_jax.pipeline.elicitation.stages": "nested progress bars on the console passed down",
 }
 
