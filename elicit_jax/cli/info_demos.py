@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.stats import sample_std
 
 
 def _console() -> Any:
@@ -90,7 +91,7 @@ def operator_stats(path: str | Path) -> list[dict[str, Any]]:
                 "episodes": int(sel.sum()),
                 "steps": int(n.sum()),
                 "mean_length": float(n.mean()),
-                "std_length": float(n.std()),
+                "std_length": sample_std(n),
                 "success_rate": float(ep_ok[sel].mean()),
             }
         )
@@ -193,7 +194,7 @@ def describe_robomimic_file(path: Path) -> None:
                     ("task", task_name(f, path)),
                     ("demos", len(names)),
                     ("steps", sum(lengths)),
-                    ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                    ("length mean/std", f"{np.mean(lengths):.1f} / {sample_std(lengths):.1f}"),
                     ("action shape", first["actions"].shape[1:]),
                 ],
             )
@@ -231,7 +232,7 @@ def describe_lerobot_folder(path: Path) -> None:
                 ("fps", info.get("fps")),
                 ("episodes", len(rows)),
                 ("frames", sum(lengths)),
-                ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                ("length mean/std", f"{np.mean(lengths):.1f} / {sample_std(lengths):.1f}"),
                 ("tasks", " | ".join(read_tasks(path, info).values())),
             ],
         )
