@@ -12,11 +12,11 @@ from typing import Any
 import typer
 
 from elicit_jax.cli.app import check_seed
+from elicit_jax.cli.threshold_options import PRESET  # noqa: F401  (serve spells it so.PRESET)
 
 TASK = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`).")
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
-PRESET = typer.Option(None, "--preset", help="Paper thresholds of a task: square-nut, ...")
 MODE = typer.Option(None, "--mode", help="informed (default) or naive (control).")
 SHOW = typer.Option(
     None, "--show", help="Informed mode: parts shown, comma-separated [prompt,indicator,feedback]."

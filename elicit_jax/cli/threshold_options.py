@@ -1,4 +1,4 @@
-"""The thresholds flags (``--thresholds``, ``--lambda``, ``--eta``) every command shares.
+"""The thresholds flags the commands share: ``--thresholds``, ``--lambda``/``--eta``, ``--preset``.
 
 Declared once so ``score``, ``filter``, ``map``, ``elicit``, ``serve`` and ``watch`` spell and
 document them the same way; :func:`thresholds_from_flags` resolves them through
@@ -16,6 +16,9 @@ from elicit_jax.compat.threshold_source import Thresholds, resolve_thresholds
 THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
 LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
 ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
+PRESET = typer.Option(
+    None, "--preset", help="Paper thresholds: square-nut, round-nut or hammer-drawer."
+)
 
 
 def thresholds_from_flags(
@@ -31,7 +34,8 @@ def thresholds_from_flags(
       thresholds: ``--thresholds``.
       lam: ``--lambda``.
       eta: ``--eta``.
-      preset: ``--preset``, for the commands that have it.
+      preset: ``--preset``, for the commands that have it (``score``, ``elicit``, ``serve``,
+        ``watch``).
       action_scale: the scale of the scores they apply to, to check units (None: no check).
 
     Returns:

@@ -1,0 +1,192 @@
+"""The ``score`` command: per-pair compatibility scores of demonstrations under a base policy,
+with the thresholds it falls back to when none are given (the demos' task's paper preset)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import typer
+
+from elicit_jax.cli.app import COMPAT, app, check_seed
+from elicit_jax.cli.outputs import OVERWRITE
+from elicit_jax.cli.threshold_options import (
+    ETA,
+    LAMBDA,
+    PRESET,
+    THRESHOLDS,
+    thresholds_from_flags,
+)
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.measures import ScoreConfig
+
+
+@app.command(rich_help_panel=COMPAT)
+def score(
+    policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
+    demos: Path = typer.Option(..., "--demos", help="Demonstrations to score (demos artifact)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Scores artifact to write (.parquet)."),
+    thresholds: Path | None = THRESHOLDS,
+    lambda_: float | None = LAMBDA,
+    eta: float | None = ETA,
+    preset: str | None = PRESET,
+    likelihood: str = typer.Option(
+        "ensemble-mean", "--likelihood", help="ensemble-mean (paper) or member-average (code)."
+    ),
+    ddof: int = typer.Option(0, "--ddof", help="Std convention of novelty: 0 paper, 1 code."),
+    action_scale: str = typer.Option(
+        "none",
+        "--action-scale",
+        help="none (paper: raw action units) or std (each dim divided by the training actions' "
+        "std; constant dims left out).",
+    ),
+    dropout_samples: int = typer.Option(
+        0,
+        "--dropout-samples",
+        help="MC-dropout scoring: N passes per member with dropout on (the original code "
+        "scored with dropout on). 0 = deterministic members (paper).",
+    ),
+    dropout_seed: int = typer.Option(
+        0, "--dropout-seed", help="Seed of the dropout masks.", callback=check_seed
+    ),
+    accept_fraction: float = typer.Option(
+        0.05, "--accept-fraction", help="Reject a demo above this fraction incompatible."
+    ),
+    chunk_size: int = typer.Option(4096, "--chunk-size", help="Pairs per compiled chunk."),
+    which: str = typer.Option("best", "--which", help="Checkpoint: best, final or an epoch."),
+    seed: int | None = typer.Option(
+        None, "--seed", help="Seed of a multi-seed run directory.", callback=check_seed
+    ),
+    overwrite: bool = OVERWRITE,
+) -> None:
+    """Score every state-action pair: likelihood error, novelty, compatibility M.
+
+    Writes per-pair scores to OUT and a per-episode summary (5% accept/reject rule) next to
+    it as OUT.episodes.parquet, and prints a table per operator.
+
+    Without thresholds, the paper's preset of the demos' task is used (NutAssemblyRound ->
+    round-nut, ...); for other tasks square-nut's values stand in, with a warning: fit your own
+    with fit-thresholds.
+
+    Example: elicit-jax score --policy runs/base --demos new.parquet -o scores.parquet
+    --preset round-nut
+    """
+    from elicit_jax.artifact import check_outputs
+    from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score import episodes_path
+
+    (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
+    check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
+    config = ScoreConfig(
+        likelihood=likelihood,  # type: ignore[arg-type]
+        ddof=ddof,
+        lambda_=lam,
+        eta=et,
+        accept_fraction=accept_fraction,
+        chunk_size=chunk_size,
+        action_scale=action_scale,
+        dropout_samples=dropout_samples,
+        dropout_seed=dropout_seed,
+    )
+    which_: str | int = int(which) if which.isdigit() else which
+    _score_and_show(policy, demos, out, config, which_, seed, source)
+
+
+def _score_and_show(
+    policy: Path,
+    demos: Path,
+    out: Path,
+    config: ScoreConfig,
+    which: str | int,
+    seed: int | None,
+    source: str | None,
+) -> None:
+    """Load the checkpoint, warn about a one-member policy, score with a progress bar and
+    print a table per operator."""
+    from rich.console import Console
+
+    from elicit_jax.cli.info_compat import print_operator_table
+    from elicit_jax.compat.score_file import one_member_note, score_file
+    from elicit_jax.compat.show import scoring_bar
+    from elicit_jax.policy.checkpoint import load_policy
+
+    loaded = load_policy(policy, which, seed=seed)
+    note = one_member_note(loaded, config)
+    if note:
+        Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)
+    result = score_file(
+        loaded,
+        demos,
+        out,
+        config,
+        policy_path=policy,
+        policy_info={"which": which, "seed": seed},
+        progress=scoring_bar,
+        thresholds_source=source,
+    )
+    print_operator_table(
+        result.episodes,
+        title=f"{demos.name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
+        f"reject > {100 * config.accept_fraction:g}% incompatible)",
+    )
+
+
+def _score_thresholds(
+    demos: Path,
+    thresholds: Path | None,
+    lam: float | None,
+    eta: float | None,
+    preset: str | None,
+    action_scale: str,
+) -> tuple[tuple[float, float], str]:
+    """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
+    given = thresholds_from_flags(thresholds, lam, eta, preset, action_scale)
+    resolved, source = (None, "") if given is None else (given.pair, given.source)
+    if resolved is None:
+        resolved, source = _task_preset(demos, quiet=action_scale == "std")
+        if action_scale == "std":
+            source = _std_placeholder(source)
+    elif action_scale == "std" and thresholds is None:
+        typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
+        source += " (std-scaled units)"
+    return resolved, source
+
+
+def _std_placeholder(task_source: str) -> str:
+    """Said (and recorded) when ``--action-scale std`` scores without thresholds: the
+    task's preset is in raw units, so M and accept/reject only hold its values as a stand-in."""
+    typer.echo(
+        "warning: --action-scale std: the paper presets are in raw action units, so M and "
+        "accept/reject in this file are placeholders, not verdicts; ℓ and ν are std-scaled. "
+        "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
+        "filter and map.",
+        err=True,
+    )
+    return f"placeholder, not valid for --action-scale std scores: {task_source} (raw units)"
+
+
+def _task_preset(demos: Path, quiet: bool = False) -> tuple[tuple[float, float], str]:
+    """(λ, η) and their source when none are given: the paper preset of the demos' task, or
+    square-nut's values, borrowed and marked as such (said on stderr unless ``quiet``)."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.compat.measures import PRESETS, preset_for_task
+
+    task = read_header(demos).get("task", "unknown")
+    name = preset_for_task(task)
+    if name is not None:
+        lam, eta = PRESETS[name]
+        if not quiet:
+            typer.echo(
+                f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}", err=True
+            )
+        return (lam, eta), f"preset {name} (task {task})"
+    lam, eta = PRESETS["square-nut"]
+    if not quiet:
+        typer.echo(
+            f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
+            f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
+            "(elicit-jax fit-thresholds) and pass --thresholds to filter and map.",
+            err=True,
+        )
+    return (lam, eta), f"borrowed: square-nut preset, not fitted for task {task} (it has no preset)"
