@@ -154,23 +154,46 @@ def _batches(data: dict[str, Any]) -> list[list[Any]]:
     return rows
 
 
-def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
-    c, p = data["config"], data["progress"]
-    counts = p.counts
-    demos = data["demos"]
+BATCH_COLUMNS = (
+    "batch",
+    "demos",
+    "accepted",
+    "rejected",
+    "failed",
+    "accept rate",
+    "mean incompatible",
+    "scored by",
+)
+DEMO_COLUMNS = (
+    "episode",
+    "verdict",
+    "rule",
+    "batch",
+    "scored by",
+    "length",
+    "incompatible",
+    "intervention rate",
+    "summary",
+)
+TREND_TITLE = "Does the operator improve?"
+
+
+def _trend_text(demos: list[dict[str, Any]]) -> str:
+    """Whether the fraction of incompatible pairs moves over the demonstrations."""
     fr = [r["fraction_incompatible"] for r in demos if r["fraction_incompatible"] is not None]
     slope, pval = trend(np.array(fr))
     if pval is None:
-        trend_text = f"{len(fr)} scored demonstrations: too few for a trend."
-    else:
-        verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
-        trend_text = (
-            f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
-            f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
-        )
-    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
-    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
-    settings = [
+        return f"{len(fr)} scored demonstrations: too few for a trend."
+    verdict = "a trend" if pval < 0.05 else "no trend distinguishable from noise"
+    return (
+        f"Fraction incompatible changes by {100 * slope:+.2f} points per demonstration over "
+        f"{len(fr)} demonstrations (permutation p = {pval:.2f}: {verdict})."
+    )
+
+
+def _settings(c: Any) -> list[list[Any]]:
+    """The session's settings, as (setting, value) rows."""
+    return [
         ["task", c.task],
         ["operator", c.operator],
         ["mode", c.mode + (" + HG-DAgger" if c.dagger else "")],
@@ -180,22 +203,28 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ["scoring", "fixed base" if c.fixed_base else "latest π_new"],
         ["policy / base demos", f"{c.policy} / {c.base_demos}"],
     ]
-    summary = [
+
+
+def _summary(data: dict[str, Any]) -> list[list[Any]]:
+    """The session's counts, lengths and intervention rate."""
+    counts, demos = data["progress"].counts, data["demos"]
+    lengths = [r["length"] for r in demos if r["verdict"] == "accepted"]
+    rates = [r["intervention_rate"] for r in demos if r["intervention_rate"] is not None]
+    base = "-" if np.isnan(data["base_length"]) else f"{data['base_length']:.0f}"
+    return [
         ["practice episodes", counts.practice],
         ["accepted", f"{counts.accepted} of {counts.wanted} wanted"],
         ["rejected", counts.rejected],
         ["failed the task", counts.failed],
         ["episodes", counts.episodes],
-        [
-            "mean length (accepted) vs base",
-            f"{np.mean(lengths):.0f} vs "
-            + ("-" if np.isnan(data["base_length"]) else f"{data['base_length']:.0f}")
-            if lengths
-            else "-",
-        ],
+        ["mean length (accepted) vs base", f"{np.mean(lengths):.0f} vs {base}" if lengths else "-"],
         ["mean intervention rate", _pct(float(np.mean(rates))) if rates else "-"],
     ]
-    per_demo = [
+
+
+def _per_demo(demos: list[dict[str, Any]]) -> list[list[Any]]:
+    """One row per demonstration, in :data:`DEMO_COLUMNS`."""
+    return [
         [
             r["index"],
             r["verdict"],
@@ -209,49 +238,22 @@ def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
         ]
         for r in demos
     ]
+
+
+def _sections(data: dict[str, Any]) -> list[tuple[str, Any]]:
+    """The report's sections in order: a title and a table (columns, rows) or a text."""
+    policies = (
+        (["policy", "path", "episodes", "best epoch", "best val loss"], data["policies"])
+        if data["policies"]
+        else "None: no batch was completed with retraining on (--batch)."
+    )
     return [
-        ("Settings", (["setting", "value"], settings)),
-        ("Summary", (["", ""], summary)),
-        (
-            "Per batch",
-            (
-                [
-                    "batch",
-                    "demos",
-                    "accepted",
-                    "rejected",
-                    "failed",
-                    "accept rate",
-                    "mean incompatible",
-                    "scored by",
-                ],
-                _batches(data),
-            ),
-        ),
-        (
-            "Batch policies (π_b: trained on D_base + the first b batches)",
-            (["policy", "path", "episodes", "best epoch", "best val loss"], data["policies"])
-            if data["policies"]
-            else "None: no batch was completed with retraining on (--batch).",
-        ),
-        ("Does the operator improve?", trend_text),
-        (
-            "Demonstrations",
-            (
-                [
-                    "episode",
-                    "verdict",
-                    "rule",
-                    "batch",
-                    "scored by",
-                    "length",
-                    "incompatible",
-                    "intervention rate",
-                    "summary",
-                ],
-                per_demo,
-            ),
-        ),
+        ("Settings", (["setting", "value"], _settings(data["config"]))),
+        ("Summary", (["", ""], _summary(data))),
+        ("Per batch", (list(BATCH_COLUMNS), _batches(data))),
+        ("Batch policies (π_b: trained on D_base + the first b batches)", policies),
+        (TREND_TITLE, _trend_text(data["demos"])),
+        ("Demonstrations", (list(DEMO_COLUMNS), _per_demo(data["demos"]))),
     ]
 
 
@@ -269,7 +271,7 @@ def render_markdown(data: dict[str, Any], figure: str | None) -> str:
             out += [content, ""]
         else:
             out += [md_table(*content), ""]
-        if title == "Does the operator improve?" and figure:
+        if title == TREND_TITLE and figure:
             out += [f"![incompatible fraction and length per demonstration]({figure})", ""]
     out += ["## Session header", "", "```", dumps(data["header"]), "```", ""]
     return "\n".join(out)
@@ -283,7 +285,7 @@ def render_html(data: dict[str, Any], png: bytes | None) -> str:
         body.append(
             f"<p>{html.escape(content)}</p>" if isinstance(content, str) else html_table(*content)
         )
-        if title == "Does the operator improve?" and png:
+        if title == TREND_TITLE and png:
             body.append(img_tag(png, "incompatible fraction and length per demonstration"))
     body.append(
         f"<details><summary>session header</summary><pre>{html.escape(dumps(data['header']))}"
