@@ -25,6 +25,8 @@ LAYERS = {
     "stats": 1,
     "sharding": 1,
     "artifact": 2,
+    "provenance": 2,
+    "output_rules": 2,
     "data": 3,
     "policy": 4,
     "sim": 5,
