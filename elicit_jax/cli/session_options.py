@@ -51,7 +51,8 @@ MAX_EPISODES = typer.Option(
 HORIZON = typer.Option(None, "--horizon", help="Steps per episode [the task's].")
 
 
-THRESHOLD_FIELDS = ("lambda_", "eta", "thresholds_file")
+THRESHOLD_FIELDS = ("thresholds",)
+"""SessionConfig fields the thresholds flags resolve (through ``thresholds_from_flags``)."""
 
 
 def given(params: dict[str, Any]) -> dict[str, Any]:

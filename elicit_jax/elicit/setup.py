@@ -280,16 +280,13 @@ def task_action_names(task: Any) -> tuple[str, ...]:
 
 def _absolute_inputs(config: SessionConfig) -> SessionConfig:
     """The config with its input paths made absolute (a session resumes from anywhere)."""
-    paths = {k: getattr(config, k) for k in ("policy", "base_demos", "thresholds_file")}
-    return dataclasses.replace(
-        config, **{k: str(Path(v).absolute()) for k, v in paths.items() if v is not None}
-    )
+    return config.with_absolute_paths()
 
 
 def _inputs(config: SessionConfig) -> dict[str, str]:
     out = {"policy": config.policy, "base_demos": config.base_demos}
-    if config.thresholds_file:
-        out["thresholds"] = config.thresholds_file
+    if config.thresholds.file is not None:
+        out["thresholds"] = str(config.thresholds.file)
     return out
 
 
