@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from elicit_jax.cli import filter_options as fo
+from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import COMPAT, app
 from elicit_jax.cli.outputs import OVERWRITE, drop_reason, note_duplicates
-from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
+from elicit_jax.cli.params import with_flags
 from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
@@ -91,7 +92,9 @@ def fit_thresholds_cmd(
 
 
 @app.command("filter", rich_help_panel=COMPAT)
+@with_flags(th.FLAGS, before="seed")
 def filter_cmd(
+    ctx: typer.Context,
     scores: Path | None = fo.SCORES,
     demos: Path = fo.DEMOS,
     out: Path = fo.OUT,
@@ -99,9 +102,6 @@ def filter_cmd(
     level: str = fo.LEVEL,
     method: str = fo.METHOD,
     pair_mode: str = fo.PAIR_MODE,
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
     seed: int = fo.SEED,
     export: str | None = fo.EXPORT,
     export_out: Path | None = fo.EXPORT_OUT,
@@ -117,6 +117,7 @@ def filter_cmd(
     checkpoint: str = fo.CHECKPOINT,
     proj_dim: int = fo.PROJ_DIM,
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Drop incompatible pairs (ℓ > λ, ν < η) or rejected demos from D_new, or a baseline.
 
@@ -152,8 +153,8 @@ def filter_cmd(
     from elicit_jax.compat.filtering import filter_demos
 
     scale = _scores_scale(scores) if scores is not None else None
-    given = thresholds_from_flags(thresholds, lambda_, eta, action_scale=scale)
-    inputs = [scores, demos, base, policy, source, thresholds, trajectories]
+    given = th.from_params(ctx.params, action_scale=scale)
+    inputs = [scores, demos, base, policy, source, flags["thresholds"], trajectories]
     fo.check_filter_outputs(out, method, export_out, overwrite, inputs)
     if method in fo.CURATORS:
         from elicit_jax.cli.curation_cmds import CurateArgs, curate
@@ -184,16 +185,16 @@ def _print_filtered(r: FilterResult, out: Path, export_out: Path | None) -> None
 
 
 @app.command("map", rich_help_panel=COMPAT)
+@with_flags(th.FLAGS, before="axis")
 def map_cmd(
+    ctx: typer.Context,
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
     out: Path = typer.Option(..., "-o", "--out", help="map.png or map.html (interactive)."),
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
     axis: str = typer.Option(
         "likelihood-error", "--axis", help="likelihood-error (ℓ) or neg-likelihood-error (−ℓ)."
     ),
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Draw the compatibility map: likelihood vs novelty per operator, threshold box.
 
@@ -202,8 +203,8 @@ def map_cmd(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.maps import map_scores_file
 
-    given = thresholds_from_flags(thresholds, lambda_, eta, action_scale=_scores_scale(scores))
+    given = th.from_params(ctx.params, action_scale=_scores_scale(scores))
     resolved = None if given is None else given.pair
-    check_outputs([out], [scores, thresholds], overwrite=overwrite)
+    check_outputs([out], [scores, flags["thresholds"]], overwrite=overwrite)
     lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
     typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")

@@ -12,6 +12,7 @@ import typer
 from elicit_jax.cli import data_options as do
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE
+from elicit_jax.cli.params import with_flags
 from elicit_jax.errors import ElicitError
 
 
@@ -32,42 +33,21 @@ def _echo_warnings(fn: Callable[[], Any]) -> Any:
 
 def _operator_table(path: Path) -> None:
     from rich.console import Console
-    from rich.table import Table
 
     from elicit_jax.artifact import read_header
-    from elicit_jax.cli.info_demos import operator_stats, success_recorded, success_text
+    from elicit_jax.cli.info_demos import operator_table
 
-    recorded = success_recorded(read_header(path))
-    table = Table(title=f"wrote {path}", title_justify="left")
-    for col in ("operator", "episodes", "steps", "length mean", "success"):
-        table.add_column(col, justify="left" if col == "operator" else "right")
-    for r in operator_stats(path):
-        table.add_row(
-            r["operator"],
-            str(r["episodes"]),
-            str(r["steps"]),
-            f"{r['mean_length']:.1f}",
-            success_text(r["success_rate"], recorded),
-        )
-    Console().print(table)
+    Console().print(operator_table(path, read_header(path), f"wrote {path}", spread=False))
 
 
 @app.command("import", rich_help_panel=DATA)
+@with_flags(do.IMPORT_FLAGS, before="overwrite")
 def import_cmd(
     ctx: typer.Context,
     source: Path = typer.Argument(..., help="robomimic .hdf5, LeRobot folder or .npz."),
     out: Path = typer.Option(..., "-o", "--out", help="Demonstrations artifact to write."),
-    fmt: str = do.FORMAT,
-    obs_keys: str = do.OBS_KEYS,
-    operator: str = do.OPERATOR,
-    operators_from_masks: str = do.OPERATORS_FROM_MASKS,
-    filter_key: str = do.FILTER_KEY,
-    task: str = do.TASK,
-    clip_actions: bool = do.CLIP,
-    warn_actions: bool = do.WARN,
-    action_bounds: str = do.ACTION_BOUNDS,
-    skip_bad_episodes: bool = do.SKIP_BAD,
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Import demonstrations from a robomimic, LeRobot or .npz dataset into a Parquet artifact.
 

@@ -58,18 +58,19 @@ SKIP_BAD = typer.Option(
 
 
 IMPORT_FLAGS = (
-    "fmt",
-    "obs_keys",
-    "operator",
-    "operators_from_masks",
-    "filter_key",
-    "task",
-    "clip_actions",
-    "warn_actions",
-    "action_bounds",
-    "skip_bad_episodes",
+    ("fmt", str, FORMAT),
+    ("obs_keys", str, OBS_KEYS),
+    ("operator", str, OPERATOR),
+    ("operators_from_masks", str, OPERATORS_FROM_MASKS),
+    ("filter_key", str, FILTER_KEY),
+    ("task", str, TASK),
+    ("clip_actions", bool, CLIP),
+    ("warn_actions", bool, WARN),
+    ("action_bounds", str, ACTION_BOUNDS),
+    ("skip_bad_episodes", bool, SKIP_BAD),
 )
-"""The parameter names of the import flags above, in a command's ``ctx.params``."""
+"""The import flags as (parameter name, type, option), in the order ``--help`` lists them
+(a command adds them with :func:`elicit_jax.cli.params.with_flags`)."""
 
 
 def import_config(source: Path, out: Path | str, flags: Mapping[str, Any]) -> ImportConfig:
@@ -79,7 +80,7 @@ def import_config(source: Path, out: Path | str, flags: Mapping[str, Any]) -> Im
     Args:
       source: the dataset to read.
       out: the demos artifact to write (``""``: none, ``watch`` keeps the demos in memory).
-      flags: the command's parameters (``ctx.params``); the :data:`IMPORT_FLAGS` are read.
+      flags: the command's parameters (``ctx.params``); those of :data:`IMPORT_FLAGS` are read.
 
     Returns:
       The import config.
@@ -90,7 +91,7 @@ def import_config(source: Path, out: Path | str, flags: Mapping[str, Any]) -> Im
     """
     from elicit_jax.data.convert import ImportConfig
 
-    f = {k: flags[k] for k in IMPORT_FLAGS}
+    f = {name: flags[name] for name, _, _ in IMPORT_FLAGS}
     if f["clip_actions"] and f["warn_actions"]:
         raise ElicitError("choose one of --clip-actions and --warn-actions")
     if f["action_bounds"] not in (None, "unit", "data"):

@@ -3,34 +3,28 @@ with the thresholds it falls back to when none are given (the demos' task's pape
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
+from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE
-from elicit_jax.cli.threshold_options import (
-    ETA,
-    LAMBDA,
-    PRESET,
-    THRESHOLDS,
-    thresholds_from_flags,
-)
+from elicit_jax.cli.params import from_params, with_flags
 
 if TYPE_CHECKING:
     from elicit_jax.compat.measures import ScoreConfig
 
 
 @app.command(rich_help_panel=COMPAT)
+@with_flags(th.FLAGS_AND_PRESET, before="likelihood")
 def score(
+    ctx: typer.Context,
     policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
     demos: Path = typer.Option(..., "--demos", help="Demonstrations to score (demos artifact)."),
     out: Path = typer.Option(..., "-o", "--out", help="Scores artifact to write (.parquet)."),
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
-    preset: str | None = PRESET,
     likelihood: str = typer.Option(
         "ensemble-mean", "--likelihood", help="ensemble-mean (paper) or member-average (code)."
     ),
@@ -59,6 +53,7 @@ def score(
         None, "--seed", help="Seed of a multi-seed run directory.", callback=check_seed
     ),
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Score every state-action pair: likelihood error, novelty, compatibility M.
 
@@ -76,19 +71,10 @@ def score(
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import episodes_path
 
-    (lam, et), source = _score_thresholds(demos, thresholds, lambda_, eta, preset, action_scale)
-    check_outputs([out, episodes_path(out)], [demos, policy, thresholds], overwrite=overwrite)
-    config = ScoreConfig(
-        likelihood=likelihood,  # type: ignore[arg-type]
-        ddof=ddof,
-        lambda_=lam,
-        eta=et,
-        accept_fraction=accept_fraction,
-        chunk_size=chunk_size,
-        action_scale=action_scale,
-        dropout_samples=dropout_samples,
-        dropout_seed=dropout_seed,
-    )
+    (lam, et), source = _score_thresholds(demos, ctx.params, action_scale)
+    inputs = [demos, policy, flags["thresholds"]]
+    check_outputs([out, episodes_path(out)], inputs, overwrite=overwrite)
+    config = from_params(ScoreConfig, ctx.params, lambda_=lam, eta=et)
     which_: str | int = int(which) if which.isdigit() else which
     _score_and_show(policy, demos, out, config, which_, seed, source)
 
@@ -133,21 +119,16 @@ def _score_and_show(
 
 
 def _score_thresholds(
-    demos: Path,
-    thresholds: Path | None,
-    lam: float | None,
-    eta: float | None,
-    preset: str | None,
-    action_scale: str,
+    demos: Path, params: Mapping[str, Any], action_scale: str
 ) -> tuple[tuple[float, float], str]:
     """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
-    given = thresholds_from_flags(thresholds, lam, eta, preset, action_scale)
+    given = th.from_params(params, action_scale)
     resolved, source = (None, "") if given is None else (given.pair, given.source)
     if resolved is None:
         resolved, source = _task_preset(demos, quiet=action_scale == "std")
         if action_scale == "std":
             source = _std_placeholder(source)
-    elif action_scale == "std" and thresholds is None:
+    elif action_scale == "std" and params["thresholds"] is None:
         typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
         source += " (std-scaled units)"
     return resolved, source

@@ -51,6 +51,31 @@ MAX_EPISODES = typer.Option(
 HORIZON = typer.Option(None, "--horizon", help="Steps per episode [the task's].")
 
 
+SESSION_FLAGS = (
+    ("mode", str, MODE),
+    ("show", str, SHOW),
+    ("demos", int, DEMOS),
+    ("batch", int, BATCH),
+    ("fixed_base", bool, FIXED_BASE),
+    ("dagger", bool, DAGGER),
+    ("practice", int, PRACTICE),
+    ("prompt", int, PROMPT),
+    ("accept_fraction", float, ACCEPT_FRACTION),
+    ("reject_count", int, REJECT_COUNT),
+    ("window", int, WINDOW),
+    ("windows", int, WINDOWS),
+    ("retrieval", str, RETRIEVAL),
+    ("likelihood", str, LIKELIHOOD),
+    ("ddof", int, DDOF),
+    ("which", str, WHICH),
+    ("policy_seed", int, POLICY_SEED),
+    ("seed", int, SEED),
+    ("max_episodes", int, MAX_EPISODES),
+    ("horizon", int, HORIZON),
+)
+"""The protocol's settings as (parameter name, type, option), in ``--help`` order: a command
+adds them with :func:`elicit_jax.cli.params.with_flags` and reads them with :func:`given`."""
+
 THRESHOLD_FIELDS = ("thresholds",)
 """SessionConfig fields the thresholds flags resolve (through ``thresholds_from_flags``)."""
 

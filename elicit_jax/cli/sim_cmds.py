@@ -9,6 +9,7 @@ import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed, log_path
 from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
+from elicit_jax.cli.params import from_params
 from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
@@ -42,6 +43,7 @@ def tasks() -> None:
 
 @app.command(rich_help_panel=DATA)
 def collect(
+    ctx: typer.Context,
     task: str = typer.Option("square-nut", "--task", help="Task name (see `elicit-jax tasks`)."),
     operator: str = typer.Option("base", "--operator", help="Scripted operator name."),
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
@@ -71,14 +73,7 @@ def collect(
     from elicit_jax.sim.collect import collect as run
 
     check_outputs([out], overwrite=overwrite)
-    config = CollectConfig(
-        task=task,
-        operator=operator,
-        episodes=episodes,
-        seed=seed,
-        max_attempts=max_attempts,
-        threads=threads,
-    )
+    config = from_params(CollectConfig, ctx.params)
     t0 = time.perf_counter()
     with Progress(transient=True) as bar:
         tid = bar.add_task(f"{task} / {operator}", total=episodes)
@@ -92,6 +87,7 @@ def collect(
 
 @app.command(rich_help_panel=HAND_BACK)
 def evaluate(
+    ctx: typer.Context,
     policy: list[str] = typer.Option(
         ..., "--policy", help="Run directory, or LABEL=DIR (same label = seeds); repeatable."
     ),
@@ -144,17 +140,8 @@ def evaluate(
     from elicit_jax.sim.evaluate import EvalConfig
 
     check_outputs([out, trajectories], policy_dirs(policy), overwrite=overwrite)
-    config = EvalConfig(
-        task=task,
-        rollouts=rollouts,
-        seed=seed,
-        backend=backend,
-        horizon=horizon,
-        checkpoints=tuple(checkpoint),
-        select=select,
-        threads=threads,
-        env_from=str(env_from or ""),
-        workers=workers,
+    config = from_params(
+        EvalConfig, ctx.params, checkpoints=tuple(checkpoint), env_from=str(env_from or "")
     )
     traj = _trajectory_config(trajectories, action_noise)
     console = Console()

@@ -7,7 +7,9 @@ document them the same way; :func:`thresholds_from_flags` resolves them through
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -19,6 +21,30 @@ ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
 PRESET = typer.Option(
     None, "--preset", help="Paper thresholds: square-nut, round-nut or hammer-drawer."
 )
+FLAGS = (
+    ("thresholds", Path | None, THRESHOLDS),
+    ("lambda_", float | None, LAMBDA),
+    ("eta", float | None, ETA),
+)
+"""The thresholds flags as (parameter name, type, option): a command adds them with
+:func:`elicit_jax.cli.params.with_flags` and resolves them with :func:`from_params`."""
+FLAGS_AND_PRESET = (*FLAGS, ("preset", str | None, PRESET))
+"""The same with ``--preset`` (``score``, ``elicit``, ``serve``, ``watch``)."""
+
+
+def from_params(params: Mapping[str, Any], action_scale: str | None = None) -> Thresholds | None:
+    """:func:`thresholds_from_flags` of a command's parameters (``ctx.params``).
+
+    Args:
+      params: the command's parameters: those of :data:`FLAGS` (and ``preset`` if it has it).
+      action_scale: the scale of the scores they apply to (None: no check).
+
+    Returns:
+      The thresholds, or None when no flag gives them.
+    """
+    return thresholds_from_flags(
+        params["thresholds"], params["lambda_"], params["eta"], params.get("preset"), action_scale
+    )
 
 
 def thresholds_from_flags(

@@ -171,7 +171,7 @@ class Watcher:
       handled: ``(item, signature)`` of items read (or failed) as they are now.
     """
 
-    def __init__(self, config: WatchConfig, echo: Callable[[str], None] = print) -> None:
+    def __init__(self, config: WatchConfig, echo: Callable[[str], None]) -> None:
         from elicit_jax.compat.feedback import normalizer
         from elicit_jax.data.demos import read_demos
         from elicit_jax.elicit.live import check_live_policy

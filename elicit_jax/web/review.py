@@ -14,6 +14,7 @@ access token it prints (``?token=`` on first load, then a same-site cookie) on e
 from __future__ import annotations
 
 import base64
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -190,8 +191,9 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
     )
 
 
-def serve_review(review: Any, port: int = 0, echo: Any = print) -> None:
-    """Serve ``review`` on 127.0.0.1 until interrupted; prints the URL (with its token)."""
+def serve_review(review: Any, port: int, echo: Callable[[str], None]) -> None:
+    """Serve ``review`` on 127.0.0.1 until interrupted; ``echo`` says the URL (with its
+    token): the CLI passes its printer."""
     import uvicorn
 
     from elicit_jax.web.access import new_token
