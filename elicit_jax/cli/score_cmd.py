@@ -121,53 +121,18 @@ def _score_and_show(
 def _score_thresholds(
     demos: Path, params: Mapping[str, Any], action_scale: str
 ) -> tuple[tuple[float, float], str]:
-    """``score``'s (λ, η) and where they came from, in the units of ``action_scale``."""
-    given = th.from_params(params, action_scale)
-    resolved, source = (None, "") if given is None else (given.pair, given.source)
-    if resolved is None:
-        resolved, source = _task_preset(demos, quiet=action_scale == "std")
-        if action_scale == "std":
-            source = _std_placeholder(source)
-    elif action_scale == "std" and params["thresholds"] is None:
-        typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
-        source += " (std-scaled units)"
-    return resolved, source
-
-
-def _std_placeholder(task_source: str) -> str:
-    """Said (and recorded) when ``--action-scale std`` scores without thresholds: the
-    task's preset is in raw units, so M and accept/reject only hold its values as a stand-in."""
-    typer.echo(
-        "warning: --action-scale std: the paper presets are in raw action units, so M and "
-        "accept/reject in this file are placeholders, not verdicts; ℓ and ν are std-scaled. "
-        "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
-        "filter and map.",
-        err=True,
-    )
-    return f"placeholder, not valid for --action-scale std scores: {task_source} (raw units)"
-
-
-def _task_preset(demos: Path, quiet: bool = False) -> tuple[tuple[float, float], str]:
-    """(λ, η) and their source when none are given: the paper preset of the demos' task, or
-    square-nut's values, borrowed and marked as such (said on stderr unless ``quiet``)."""
+    """``score``'s (λ, η) and where they came from, in the units of ``action_scale``: the
+    flags', else the demos' task's (:func:`~elicit_jax.compat.threshold_source.task_thresholds`)."""
     from elicit_jax.artifact import read_header
-    from elicit_jax.compat.measures import PRESETS, preset_for_task
+    from elicit_jax.compat.threshold_source import task_thresholds
 
-    task = read_header(demos).get("task", "unknown")
-    name = preset_for_task(task)
-    if name is not None:
-        lam, eta = PRESETS[name]
-        if not quiet:
-            typer.echo(
-                f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}", err=True
-            )
-        return (lam, eta), f"preset {name} (task {task})"
-    lam, eta = PRESETS["square-nut"]
-    if not quiet:
-        typer.echo(
-            f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
-            f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
-            "(elicit-jax fit-thresholds) and pass --thresholds to filter and map.",
-            err=True,
-        )
-    return (lam, eta), f"borrowed: square-nut preset, not fitted for task {task} (it has no preset)"
+    given = th.from_params(params, action_scale)
+    if given is None:
+        chosen, notes = task_thresholds(read_header(demos).get("task", "unknown"), action_scale)
+        for note in notes:
+            typer.echo(note, err=True)
+        return chosen.pair, chosen.source
+    if action_scale == "std" and params["thresholds"] is None:
+        typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
+        return given.pair, given.source + " (std-scaled units)"
+    return given.pair, given.source
