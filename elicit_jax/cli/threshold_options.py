@@ -42,32 +42,25 @@ def from_params(params: Mapping[str, Any], action_scale: str | None = None) -> T
     Returns:
       The thresholds, or None when no flag gives them.
     """
-    return thresholds_from_flags(
-        params["thresholds"], params["lambda_"], params["eta"], params.get("preset"), action_scale
-    )
+    flags = (params["thresholds"], params["lambda_"], params["eta"], params.get("preset"))
+    return thresholds_from_flags(*flags, action_scale=action_scale)
 
 
 def thresholds_from_flags(
-    thresholds: Path | None,
-    lam: float | None,
-    eta: float | None,
-    preset: str | None = None,
-    action_scale: str | None = None,
+    *flags: Path | float | str | None, action_scale: str | None = None
 ) -> Thresholds | None:
     """Resolve the thresholds flags; a file's recorded trust verdict goes to stderr.
 
     Args:
-      thresholds: ``--thresholds``.
-      lam: ``--lambda``.
-      eta: ``--eta``.
-      preset: ``--preset``, for the commands that have it (``score``, ``elicit``, ``serve``,
-        ``watch``).
+      *flags: ``--thresholds``, ``--lambda``, ``--eta`` and, for the commands that have it,
+        ``--preset``, as :func:`~elicit_jax.compat.threshold_source.resolve_thresholds`
+        takes them.
       action_scale: the scale of the scores they apply to, to check units (None: no check).
 
     Returns:
       The thresholds, or None when no flag gives them.
     """
-    resolved = resolve_thresholds(thresholds, lam, eta, preset, action_scale)
+    resolved = resolve_thresholds(*flags, action_scale=action_scale)  # type: ignore[arg-type]
     line = resolved.verdict_line() if resolved is not None else None
     if line is not None:
         typer.echo(line, err=True)
