@@ -26,6 +26,8 @@ LAYERS = {
     "sharding": 1,
     "artifact": 2,
     "render": 2,
+    "provenance": 2,
+    "output_rules": 2,
     "data": 3,
     "policy": 4,
     "sim": 5,

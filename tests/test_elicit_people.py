@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import EpisodeEndEvent, EpisodeStartEvent, PromptEvent, ReviewEvent
 from elicit_jax.elicit.people import SimulatedPerson, make_population, parse_person, person_of
@@ -270,8 +271,7 @@ def _session(nut, out, operator=PERSON, **kw):
         task="square-nut",
         policy=str(nut.policy),
         base_demos=str(nut.base),
-        lambda_=nut.lam,
-        eta=nut.eta,
+        thresholds=Thresholds(nut.lam, nut.eta, "given"),
         operator=operator,
         demos=2,
         practice=1,

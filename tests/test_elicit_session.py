@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
     IndicatorEvent,
@@ -62,8 +63,7 @@ def _config(nut: SessionInputs, operator: str, **kw) -> SessionConfig:
         task="square-nut",
         policy=str(nut.policy),
         base_demos=str(nut.base),
-        lambda_=nut.lam,
-        eta=nut.eta,
+        thresholds=Thresholds(nut.lam, nut.eta, "given"),
         operator=operator,
         demos=2,
         practice=1,

@@ -9,7 +9,6 @@ directory, or an output that would overwrite an input, are refused too.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -21,17 +20,14 @@ from elicit_jax.errors import ElicitError
 
 def absolute_inputs(config: SessionConfig) -> SessionConfig:
     """The config with its input paths made absolute (a session resumes from anywhere)."""
-    paths = {k: getattr(config, k) for k in ("policy", "base_demos", "thresholds_file")}
-    return dataclasses.replace(
-        config, **{k: str(Path(v).absolute()) for k, v in paths.items() if v is not None}
-    )
+    return config.with_absolute_paths()
 
 
 def session_inputs(config: SessionConfig) -> dict[str, str]:
     """The session's input files by role (their hashes go in the session's header)."""
     out = {"policy": config.policy, "base_demos": config.base_demos}
-    if config.thresholds_file:
-        out["thresholds"] = config.thresholds_file
+    if config.thresholds.file is not None:
+        out["thresholds"] = str(config.thresholds.file)
     return out
 
 
