@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -556,6 +557,21 @@ def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40
     return write_robomimic(path, demos, masks=names, env_name="NutAssemblySquare")
 
 
+def run_cli(monkeypatch, capsys, *args) -> tuple[int, str, str]:
+    """Run ``elicit-jax ARGS`` in-process through ``main``; returns (exit code, out, err)."""
+    from elicit_jax.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
+    monkeypatch.setenv("COLUMNS", "250")  # rich wraps tables at the terminal width
+    code = 0
+    try:
+        main()
+    except SystemExit as e:
+        code = e.code or 0
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
 def tiny_episodes(n: int = 6, t: int = 20, seed: int = 0) -> list[dict]:
     """``n`` random episodes of ``t`` steps: obs (t, 3), action (t, 2) in [-1, 1]."""
     rng = np.random.default_rng(seed)
@@ -600,6 +616,25 @@ class SessionInputs:
     policy: Path
     lam: float
     eta: float
+
+    def session_config(self, operator: str, **overrides):
+        """A square-nut ``SessionConfig`` on these inputs for ``operator``: 1 practice, 2
+        prompt and 2 demonstration episodes, at most 4 episodes; ``overrides`` replace fields."""
+        from elicit_jax.elicit.config import SessionConfig
+
+        base = dict(
+            task="square-nut",
+            policy=str(self.policy),
+            base_demos=str(self.base),
+            lambda_=self.lam,
+            eta=self.eta,
+            operator=operator,
+            demos=2,
+            practice=1,
+            prompt=2,
+            max_episodes=4,
+        )
+        return SessionConfig(**{**base, **overrides})
 
 
 def square_nut_session_inputs(d: Path) -> SessionInputs:

@@ -140,36 +140,16 @@ def test_score_fit_filter_map(run):
         _ok(["info", str(d / artifact)])
 
 
-def test_cli_errors_are_clear(run):
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--lambda", "0.1"], "--lambda and --eta go together"),
+        (["--preset", "peg"], "unknown preset"),
+    ],
+)
+def test_cli_errors_are_clear(run, flags, message):
     d = run
-    result = CliRunner().invoke(
-        app,
-        [
-            "score",
-            "--policy",
-            str(d / "runs"),
-            "--demos",
-            str(d / "new.parquet"),
-            "-o",
-            str(d / "x.parquet"),
-            "--lambda",
-            "0.1",
-        ],
-    )
+    args = ["score", "--policy", d / "runs", "--demos", d / "new.parquet", "-o", d / "x.parquet"]
+    result = CliRunner().invoke(app, [str(a) for a in [*args, *flags]])
     assert isinstance(result.exception, ElicitError)
-    assert "--lambda and --eta go together" in str(result.exception)
-    result = CliRunner().invoke(
-        app,
-        [
-            "score",
-            "--policy",
-            str(d / "runs"),
-            "--demos",
-            str(d / "new.parquet"),
-            "-o",
-            str(d / "x.parquet"),
-            "--preset",
-            "peg",
-        ],
-    )
-    assert "unknown preset" in str(result.exception)
+    assert message in str(result.exception)

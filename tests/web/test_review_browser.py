@@ -4,17 +4,12 @@ and the server's Host check and token."""
 
 from __future__ import annotations
 
-import queue
-import re
-import signal
-import subprocess
-import sys
-import threading
 import urllib.error
 import urllib.request
 
 import numpy as np
 import pytest
+from cli_server import CliServer
 from fixtures_data import robomimic_demo, write_robomimic
 from typer.testing import CliRunner
 
@@ -68,46 +63,6 @@ def _m_scores(path):
     write_parquet(path, table, make_header("scores", 1))
 
 
-class ReviewServer:
-    """`elicit-jax review` in a subprocess; its printed URL is read from its output."""
-
-    def __init__(self, *args) -> None:
-        code = "from elicit_jax.cli import main; main()"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, "review", *map(str, args)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            self.output.append(line)
-            self.lines.put(line)
-
-    def url(self) -> str:
-        while True:
-            try:
-                line = self.lines.get(timeout=120)
-            except queue.Empty:
-                raise AssertionError("no URL:\n" + "".join(self.output)) from None
-            found = re.search(r"open (http://\S+)", line)
-            if found:
-                return found.group(1)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-
-
 def _status(url: str, host: str | None = None) -> int:
     req = urllib.request.Request(url, headers={"Host": host} if host else {})
     try:
@@ -122,12 +77,12 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
     imported,
 ):
     d = imported
-    server = ReviewServer(
-        d / "demos.parquet", "--scores", d / "scores.parquet", "--quality", d / "quality.parquet",
-        "-o", d / "rv",
+    server = CliServer(
+        "review", d / "demos.parquet", "--scores", d / "scores.parquet",
+        "--quality", d / "quality.parquet", "-o", d / "rv",
     )  # fmt: skip
     try:
-        url = server.url()
+        url = server.start()
         base = url.split("?")[0]
         port = base.rstrip("/").rsplit(":", 1)[1]
         assert _status(base) == 403  # no token

@@ -16,13 +16,10 @@ cannot pass by skipping. ELICIT_JAX_SCREENSHOTS=DIR saves a screenshot of each s
 from __future__ import annotations
 
 import os
-import queue
 import re
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
+
+from cli_server import CliServer
 
 from elicit_jax.data.demos import read_demos
 from elicit_jax.elicit.store import SessionStore
@@ -32,11 +29,11 @@ SHOTS = os.environ.get("ELICIT_JAX_SCREENSHOTS")
 ATTEMPTS = 4  # at the base route (the session has 2 + ATTEMPTS episodes: practice, wrong side)
 
 
-class Server:
+class Server(CliServer):
     """`elicit-jax serve --demo` in a subprocess; its printed URL is read from its output."""
 
     def __init__(self, demo_root: Path, sessions: Path) -> None:
-        self.args = [
+        super().__init__(
             "serve",
             "--demo",
             "--demo-dir",
@@ -53,46 +50,11 @@ class Server:
             str(2 + ATTEMPTS),
             "--horizon",
             "200",
-        ]
-        self.proc: subprocess.Popen | None = None
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
+        )
 
     def start(self, port: int = 0) -> str:
-        code = "from elicit_jax.cli import main; main()"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, *self.args, "--port", str(port)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        threading.Thread(target=self._read, args=(self.proc,), daemon=True).start()
-        while True:
-            try:
-                line = self.lines.get(timeout=180)
-            except queue.Empty:
-                raise AssertionError(
-                    "the server printed no URL:\n" + "".join(self.output)
-                ) from None
-            url = re.search(r"open (http://\S+)", line)
-            if url:
-                return url.group(1)
-            if self.proc.poll() is not None and self.lines.empty():
-                raise AssertionError("the server died:\n" + "".join(self.output))
-
-    def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            self.output.append(line)
-            self.lines.put(line)
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        """Start the server on ``port`` (0: any free one); its URL."""
+        return super().start("--port", port)
 
 
 def shot(page, name: str) -> None:
