@@ -557,6 +557,22 @@ def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40
     return write_robomimic(path, demos, masks=names, env_name="NutAssemblySquare")
 
 
+def invoke(*args):
+    """``elicit-jax ARGS`` through Typer's ``CliRunner`` (arguments as strings): its Result."""
+    from typer.testing import CliRunner
+
+    from elicit_jax.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def cli_ok(*args):
+    """:func:`invoke` that must exit 0; fails with the output and exception otherwise."""
+    result = invoke(*args)
+    assert result.exit_code == 0, (result.output, result.exception)
+    return result
+
+
 def run_cli(monkeypatch, capsys, *args) -> tuple[int, str, str]:
     """Run ``elicit-jax ARGS`` in-process through ``main``; returns (exit code, out, err)."""
     from elicit_jax.cli import main

@@ -10,16 +10,7 @@ import urllib.request
 import numpy as np
 import pytest
 from cli_server import CliServer
-from fixtures_data import robomimic_demo, write_robomimic
-from typer.testing import CliRunner
-
-from elicit_jax.cli import app
-
-
-def _ok(*args):
-    r = CliRunner().invoke(app, [str(a) for a in args])
-    assert r.exit_code == 0, (r.output, r.exception)
-    return r.output
+from fixtures_data import cli_ok, robomimic_demo, write_robomimic
 
 
 @pytest.fixture(scope="module")
@@ -35,8 +26,8 @@ def imported(tmp_path_factory):
         demo["actions"] = np.where(i == 3, demo["actions"], smooth)
         demos[f"demo_{i}"] = demo
     src = write_robomimic(d / "teleop.hdf5", demos)
-    _ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
-    _ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
+    cli_ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
+    cli_ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
     _m_scores(d / "scores.parquet")
     return d
 
@@ -132,7 +123,9 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         assert errors == []
     finally:
         server.stop()
-    _ok("import", d / "rv" / "reviewed.hdf5", "--filter-key", "reviewed", "-o", d / "back.parquet")
+    cli_ok(
+        "import", d / "rv" / "reviewed.hdf5", "--filter-key", "reviewed", "-o", d / "back.parquet"
+    )
     from elicit_jax.data.demos import read_demos
 
     back = read_demos(d / "back.parquet")
