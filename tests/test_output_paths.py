@@ -17,7 +17,7 @@ from elicit_jax.errors import ElicitError
 def work(tmp_path_factory):
     d = tiny_run(tmp_path_factory.mktemp("paths"))
     cli_ok("score", "--policy", d / "run", "--demos", d / "demos.parquet", "-o", d / "s.parquet",
-        "--lambda", "0.4", "--eta", "0.05")  # fmt: skip
+           "--lambda", "0.4", "--eta", "0.05")  # fmt: skip
     return d
 
 
@@ -55,7 +55,7 @@ def test_an_existing_directory_is_never_replaced(work, tmp_path):
             assert sorted(p.name for p in notes.iterdir()) == ["a.txt"], name
     # train replaces only training runs, even with --overwrite
     r = invoke("train", "--demos", work / "demos.parquet", "--out", notes, "--profile", "cpu",
-                "--epochs", "1", "--overwrite")  # fmt: skip
+               "--epochs", "1", "--overwrite")  # fmt: skip
     assert "not a training run" in str(r.exception)
     assert (notes / "a.txt").read_text() == "mine"
     # a report goes over an earlier report only, never over another directory
@@ -98,7 +98,7 @@ def test_an_output_inside_an_input_directory_is_refused(work):
         assert "inside the input directory" in str(r.exception), r.exception
     assert file_sha256(loss) == before
     r = invoke("evaluate", "--policy", work / "run", "--rollouts", "1", "-o",
-                work / "run" / "evals.parquet")  # fmt: skip
+               work / "run" / "evals.parquet")  # fmt: skip
     assert "inside the input directory" in str(r.exception)
 
 
@@ -136,7 +136,7 @@ def test_filter_base_drops_episodes_of_demos_identical_to_base(work, tmp_path):
     cli_ok("demos", "select", demos, "--episodes", "0,1", "-o", base)
     out = tmp_path / "f.parquet"
     r = cli_ok("filter", "--scores", work / "s.parquet", "--demos", demos, "--base", base,
-            "-o", out, "--lambda", "1e9", "--eta", "1e-9")  # keeps every pair by M  # fmt: skip
+               "-o", out, "--lambda", "1e9", "--eta", "1e-9")  # keeps every pair by M  # fmt: skip
     assert "dropped 2 episode(s) of --demos identical to --base episodes" in r.output
     assert "(6 -> 4 episodes; 2 episode(s) as duplicates of --base; the others:" in r.output
     got = read_demos(out)
@@ -158,7 +158,7 @@ def test_std_scaled_scores_refuse_raw_unit_thresholds(work, tmp_path):
     assert "raw action units" in str(r.exception) and not (tmp_path / "a.parquet").exists()
     # a thresholds file fitted on raw-unit scores
     cli_ok("fit-thresholds", "--scores", work / "s.parquet", "--lambda", "0.4", "--eta", "0.05",
-        "-o", tmp_path / "raw.json")  # fmt: skip
+           "-o", tmp_path / "raw.json")  # fmt: skip
     assert json.loads((tmp_path / "raw.json").read_text())["action_scale"] == "none"
     r = invoke(*score, "-o", tmp_path / "a.parquet", "--thresholds", tmp_path / "raw.json")
     assert "--action-scale none scores" in str(r.exception)
@@ -168,18 +168,18 @@ def test_std_scaled_scores_refuse_raw_unit_thresholds(work, tmp_path):
     assert read_header(tmp_path / "std.parquet")["thresholds_source"].startswith("placeholder")
     # thresholds fitted on std-scaled scores apply to std-scaled scores only
     cli_ok("fit-thresholds", "--scores", tmp_path / "std.parquet", "--lambda", "2", "--eta", "1",
-        "-o", tmp_path / "std.json")  # fmt: skip
+           "-o", tmp_path / "std.json")  # fmt: skip
     cli_ok(*score, "-o", tmp_path / "b.parquet", "--thresholds", tmp_path / "std.json")
     r = invoke("filter", "--scores", work / "s.parquet", "--demos", demos,
-                "--thresholds", tmp_path / "std.json", "-o", tmp_path / "f.parquet")  # fmt: skip
+               "--thresholds", tmp_path / "std.json", "-o", tmp_path / "f.parquet")  # fmt: skip
     assert "--action-scale std scores" in str(r.exception)
     # live scoring (elicit, watch) is in raw units
     r = invoke("watch", tmp_path, "--policy", run, "--base-demos", demos,
-                "--thresholds", tmp_path / "std.json", "--once")  # fmt: skip
+               "--thresholds", tmp_path / "std.json", "--once")  # fmt: skip
     assert "do not apply to --action-scale none" in str(r.exception)
     r = invoke("serve", "--task", "reach-pillar", "--policy", run, "--base-demos", demos,
-                "--thresholds", tmp_path / "std.json", "--sessions", tmp_path / "sessions",
-                "--port", "0")  # fmt: skip
+               "--thresholds", tmp_path / "std.json", "--sessions", tmp_path / "sessions",
+               "--port", "0")  # fmt: skip
     assert "do not apply to --action-scale none" in str(r.exception)
     assert not (tmp_path / "sessions").exists()
     r = cli_ok(*score, "-o", tmp_path / "c.parquet", "--lambda", "2", "--eta", "1")
