@@ -4,24 +4,18 @@ Every artifact elicit-jax writes carries a header (``kind``, ``schema_version``,
 that made it, the content hashes of its inputs, seeds, library versions). Parquet artifacts
 keep it in the schema metadata under :data:`HEADER_KEY`; directory artifacts (checkpoints,
 runs) keep it in ``artifact.json``.
+
+The header's provenance block is made in :mod:`elicit_jax.provenance`, the atomic writes and
+the output rule live in :mod:`elicit_jax.output_rules`, the hashes in
+:mod:`elicit_jax.hashing`; this module re-exports them (the artifact API is one import).
 """
 
 from __future__ import annotations
 
-import contextlib
 import datetime as _dt
-import functools
-import hashlib
 import json
 import os
-import platform
-import re
-import shlex
-import shutil
-import subprocess
-import sys
-import tempfile
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -34,131 +28,22 @@ from elicit_jax.hashing import (  # noqa: F401  (re-exported: the artifact API)
     matches_recorded,
     stable_fields,
 )
-from elicit_jax.runtime import available_cpus, process_alive
+from elicit_jax.output_rules import (  # noqa: F401  (re-exported: the artifact API)
+    atomic_path,
+    check_outputs,
+    clean_stale_temporaries,
+    refuse_overwriting_inputs,
+)
+from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact API)
+    PROVENANCE_KEY,
+    code_commit,
+    library_versions,
+    provenance,
+    provenance_line,
+    runtime_settings,
+)
 
 DIR_HEADER = "artifact.json"
-PROVENANCE_KEY = "provenance"
-"""The header key holding where an artifact came from (code commit, dirty tree, command line,
-versions, time). Everything under it describes the making, not the content, so content hashes
-of a header leave it out."""
-
-
-def library_versions() -> dict[str, str]:
-    """Versions of the libraries that shape results, without importing heavy modules."""
-    return dict(_library_versions())
-
-
-@functools.cache
-def _library_versions() -> tuple[tuple[str, str], ...]:
-    """Looked up once per process: reading package metadata takes milliseconds of Python
-    (about 40 ms per artifact header before), and an installed version does not change under
-    a running process."""
-    from importlib import metadata
-
-    out = []
-    for name in ("elicit-jax", "jax", "jaxlib", "flax", "optax", "mujoco", "mujoco-mjx", "numpy"):
-        with contextlib.suppress(metadata.PackageNotFoundError):
-            out.append((name, metadata.version(name)))
-    return tuple(out)
-
-
-def code_commit() -> dict[str, Any]:
-    """The git commit of the elicit-jax code that runs, and whether its tree had uncommitted
-    changes (``{"commit": sha, "dirty": bool}``).
-
-    Looked up once per process in the checkout that holds the imported package; an install
-    from a wheel (no checkout) gives the commit its installer recorded, if any, else
-    ``{"commit": "unknown (not a git checkout)", "dirty": None}``.
-    """
-    return dict(_code_commit())
-
-
-@functools.cache
-def _code_commit() -> tuple[tuple[str, Any], ...]:
-    root = Path(__file__).resolve().parent.parent
-    try:
-        sha = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        status = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout
-        return (("commit", sha), ("dirty", bool(status.strip())))
-    except (OSError, subprocess.SubprocessError):
-        return (("commit", _installed_commit()), ("dirty", None))
-
-
-def _installed_commit() -> str:
-    """The commit pip recorded for a VCS install (``direct_url.json``), if any."""
-    from importlib import metadata
-
-    with contextlib.suppress(metadata.PackageNotFoundError, ValueError, TypeError):
-        text = metadata.distribution("elicit-jax").read_text("direct_url.json")
-        commit = json.loads(text or "{}").get("vcs_info", {}).get("commit_id")
-        if commit:
-            return str(commit)
-    return "unknown (not a git checkout)"
-
-
-def provenance() -> dict[str, Any]:
-    """Where an artifact made now comes from: code commit and dirty flag, the command line,
-    the elicit-jax and library versions and the UTC time (kept under
-    :data:`PROVENANCE_KEY` in every header)."""
-    versions = library_versions()
-    return {
-        **code_commit(),
-        "elicit_jax": versions.get("elicit-jax", "unknown"),
-        "versions": versions,
-        "command": shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else "",
-        "python": platform.python_version(),
-        "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-    }
-
-
-def provenance_line(prov: Mapping[str, Any]) -> str:
-    """One line saying where a result came from (the first line of every report)."""
-    if not prov:
-        return "Provenance: not recorded (made before elicit-jax recorded provenance)."
-    dirty = prov.get("dirty")
-    state = " (uncommitted changes)" if dirty else "" if dirty is False else " (tree unknown)"
-    libs = ", ".join(
-        f"{k} {v}" for k, v in dict(prov.get("versions", {})).items() if k != "elicit-jax"
-    )
-    made = dict(prov.get("result_commits") or {})
-    own = str(prov.get("commit", "unknown")) + ("+dirty" if dirty else "")
-    results = ""
-    if made and set(made) != {own}:
-        parts = ", ".join(
-            f"`{c[:12]}{'+dirty' * c.endswith('+dirty')}` ({n})" for c, n in made.items()
-        )
-        results = (
-            f" The evaluations were made at code {parts}: cached stages carried the run "
-            "across versions."
-        )
-    return (
-        f"Provenance: code `{str(prov.get('commit', 'unknown'))[:12]}`{state}, elicit-jax "
-        f"{prov.get('elicit_jax', '?')} ({libs}); command `{prov.get('command', '?')}`; "
-        f"made {prov.get('time', '?')}.{results}"
-    )
-
-
-def runtime_settings() -> dict[str, Any]:
-    """Settings outside the config that can change numerics: XLA flags, the XLA CPU thread
-    count (results are bit-identical only for the same machine and thread count), CPUs."""
-    return {
-        "XLA_FLAGS": os.environ.get("XLA_FLAGS", ""),
-        "PJRT_NPROC": os.environ.get("PJRT_NPROC", ""),
-        "cpus": available_cpus(),
-        "machine": platform.machine(),
-    }
 
 
 def now_utc() -> str:
@@ -227,160 +112,6 @@ def dumps(obj: Any) -> str:
         raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
 
     return json.dumps(obj, default=default, indent=1, sort_keys=True)
-
-
-def _host_tag() -> str:
-    return hashlib.sha256(platform.node().encode()).hexdigest()[:8]
-
-
-def _temp_prefix(path: Path) -> str:
-    """``.<name>.p<pid>-<host>.``: temporaries say which process on which machine owns them."""
-    return f".{path.name}.p{os.getpid()}-{_host_tag()}."
-
-
-_TEMP_SUFFIX = re.compile(r"^(?:p(\d+)-([0-9a-f]{8})\..*\.tmp|old-(\d+))$")
-"""What follows ``.<name>.`` in a temporary's name (see :func:`_temp_prefix`)."""
-
-
-def clean_stale_temporaries(path: str | Path) -> list[Path]:
-    """Remove temporaries of ``path`` left by killed writers; returns what was removed.
-
-    Only temporaries written on this machine by processes that no longer exist are removed
-    (``.<name>.p<pid>-<host>.*.tmp`` and ``.<name>.old-<pid>``), so a concurrent writer's
-    work in progress is never touched.
-    """
-    path = Path(path)
-    if not path.parent.is_dir():
-        return []
-    prefix = f".{path.name}."
-    removed = []
-    for p in path.parent.iterdir():
-        m = _TEMP_SUFFIX.match(p.name[len(prefix) :]) if p.name.startswith(prefix) else None
-        if not m:
-            continue
-        pid = int(m.group(1) or m.group(3))
-        if m.group(2) not in (None, _host_tag()) or process_alive(pid):
-            continue
-        if p.is_dir():
-            shutil.rmtree(p, ignore_errors=True)
-        else:
-            p.unlink(missing_ok=True)
-        removed.append(p)
-    return removed
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary sibling path; rename it onto ``path`` only if the block succeeds.
-
-    Works for files and directories. On error the temporary is removed and ``path`` is
-    untouched, so no half-written artifact is ever visible; temporaries a killed writer left
-    behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
-    written (read-only directory, a file in the way) is an :class:`ElicitError` naming
-    ``path``, not the temporary; so is an existing directory where a file was written (a
-    directory is only ever replaced by a directory).
-    """
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        clean_stale_temporaries(path)
-        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
-    except OSError as e:
-        raise ElicitError(f"cannot write here ({e.strerror or e})", path) from e
-    target = tmp / path.name
-    try:
-        yield target
-        if path.is_dir() and not path.is_symlink() and not target.is_dir():
-            raise ElicitError(
-                "is an existing directory; refusing to replace it with a file (nothing written)",
-                path,
-            )
-        if path.is_dir() and not path.is_symlink():
-            old = path.with_name(f".{path.name}.old-{os.getpid()}")
-            os.replace(path, old)
-            os.replace(target, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(target, path)
-    except OSError as e:
-        if e.filename and str(e.filename).startswith(str(tmp)):
-            raise ElicitError(f"cannot write ({e.strerror or e})", path) from e
-        raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-
-
-def refuse_overwriting_inputs(
-    outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
-) -> None:
-    """Raise when an output would replace an input, a directory holding one, or a file
-    inside an input directory (a run, a LeRobot dataset).
-
-    Args:
-      outputs: paths about to be written.
-      inputs: paths being read (``None`` entries are ignored).
-    """
-    ins = [Path(p).resolve() for p in inputs if p is not None]
-    for out in outputs:
-        o = Path(out).resolve()
-        for i in ins:
-            if o == i or o in i.parents:
-                what = "is" if o == i else "holds"
-                raise ElicitError(
-                    f"refusing to write here: this path {what} the input {i}; choose another "
-                    "output",
-                    out,
-                )
-            if i in o.parents and i.is_dir():
-                raise ElicitError(
-                    f"refusing to write here: this path is inside the input directory {i}; "
-                    "choose an output outside it",
-                    out,
-                )
-
-
-def check_outputs(
-    outputs: Iterable[str | Path | None],
-    inputs: Iterable[str | Path | None] = (),
-    *,
-    overwrite: bool = False,
-    replaceable: Callable[[Path], bool] | None = None,
-) -> None:
-    """The one rule for every path a command writes, checked before any work is done.
-
-    - an output that is, holds or lies inside an input is refused
-      (:func:`refuse_overwriting_inputs`);
-    - an existing directory is refused, always, unless ``replaceable`` says it holds an
-      artifact of the kind being written (and then only with ``overwrite``): a run, a folder
-      of notes, a dataset is never deleted to make room for an output;
-    - an existing file is refused unless ``overwrite``.
-
-    Args:
-      outputs: paths about to be written (``None`` entries are ignored).
-      inputs: paths being read (``None`` entries are ignored).
-      overwrite: the user passed ``--overwrite``.
-      replaceable: for outputs that are directories, whether an existing directory holds
-        an artifact of this kind that may be replaced.
-
-    Raises:
-      ElicitError: naming the output and what to do instead.
-    """
-    outs = [Path(p) for p in outputs if p is not None]
-    refuse_overwriting_inputs(outs, inputs)
-    for out in outs:
-        if out.is_dir() and not out.is_symlink():
-            if replaceable is None or not replaceable(out):
-                raise ElicitError(
-                    "is an existing directory; elicit-jax never replaces a directory with an "
-                    "output: give a file path (e.g. inside it, or beside it)",
-                    out,
-                )
-        elif not (out.exists() or out.is_symlink()):
-            continue
-        if not overwrite:
-            raise ElicitError(
-                "already exists; pass --overwrite to replace it, or choose another path", out
-            )
 
 
 def holds_artifact(*kinds: str) -> Callable[[Path], bool]:

@@ -66,6 +66,19 @@ class PairedDiff:
         return self.n > 1 and (self.low > 0 or self.high < 0)
 
 
+def sample_std(values: Sequence[float] | np.ndarray) -> float:
+    """The spread every reported table uses: the sample std (ddof 1), 0.0 below two values.
+
+    Args:
+      values: the numbers (success rates of seeds, episode lengths, ...).
+
+    Returns:
+      ``std(values, ddof=1)``, or 0.0 for fewer than two values (no spread, never NaN).
+    """
+    v = np.asarray(values, np.float64)
+    return float(v.std(ddof=1)) if v.size > 1 else 0.0
+
+
 def t_quantile(df: float, level: float = LEVEL) -> float:
     """Two-sided Student t quantile ``t((1 + level) / 2, df)``."""
     from scipy.stats import t

@@ -636,14 +636,14 @@ class SessionInputs:
     def session_config(self, operator: str, **overrides):
         """A square-nut ``SessionConfig`` on these inputs for ``operator``: 1 practice, 2
         prompt and 2 demonstration episodes, at most 4 episodes; ``overrides`` replace fields."""
+        from elicit_jax.compat.threshold_source import Thresholds
         from elicit_jax.elicit.config import SessionConfig
 
         base = dict(
             task="square-nut",
             policy=str(self.policy),
             base_demos=str(self.base),
-            lambda_=self.lam,
-            eta=self.eta,
+            thresholds=Thresholds(self.lam, self.eta, "given"),
             operator=operator,
             demos=2,
             practice=1,

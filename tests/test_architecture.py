@@ -26,6 +26,8 @@ LAYERS = {
     "sharding": 1,
     "artifact": 2,
     "render": 2,
+    "provenance": 2,
+    "output_rules": 2,
     "data": 3,
     "policy": 4,
     "sim": 5,
@@ -58,7 +60,7 @@ PRINTING_ALLOWED = {
     "elicit_jax.pipeline.runner": "the stage graph's progress bars and summary table",
     "elicit_jax.pipeline.ray_runner": "the Ray driver's progress bars and messages",
     "elicit_jax.pipeline.run": "builds the default console; prints the plan and result tables",
-    "elicit_jax.pipeline.stages": "nested progress bars on the console passed down",
+    "elicit_jax.pipeline.stages_policy": "nested progress bars on the console passed down",
     "elicit_jax.pipeline.elicitation.stages": "nested progress bars on the console passed down",
 }
 

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import jax
 import numpy as np
 import pytest
 
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.data.demos import fields_from_sizes, from_episodes
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
@@ -250,24 +252,84 @@ def test_events_are_json_ready():
 
 
 def test_session_config_checks_and_round_trip():
-    base = dict(task="t", policy="p", base_demos="b", lambda_=0.4, eta=0.05, operator="x:y")
+    given = Thresholds(0.4, 0.05, "given")
+    base = dict(task="t", policy="p", base_demos="b", thresholds=given, operator="x:y")
     c = SessionConfig(**base)
     assert SessionConfig.from_dict(c.to_dict()) == c
     assert c.episode_limit == 3 + 5 * 10
     moved = SessionConfig(**{**base, "policy": "elsewhere", "demos": 20})
     assert c.differences(moved) == []  # input paths are compared by content; demos may grow
     assert c.differences(SessionConfig(**{**base, "mode": "naive"})) == ["mode"]
+    tighter = SessionConfig(**{**base, "thresholds": Thresholds(0.3, 0.05, "given")})
+    assert c.differences(tighter) == ["lambda"]
     for bad in (
         {"mode": "nosy"},
         {"demos": 0},
-        {"lambda_": 0.0},
-        {"eta": float("nan")},
+        {"thresholds": Thresholds(0.0, 0.05, "given")},
+        {"thresholds": Thresholds(0.4, float("nan"), "given")},
+        {"thresholds": (0.4, 0.05)},
         {"operator": "noname"},
         {"reject_count": -2},
         {"retrieval": "cosine"},
     ):
         with pytest.raises(ElicitError):
             SessionConfig(**{**base, **bad})
+    for bad in ({"lambda": 0.0}, {"eta": "x"}, {"thresholds": 0.4}, {"lambd": 1.0}):
+        with pytest.raises(ElicitError):
+            SessionConfig.from_dict({**c.to_dict(), **bad})
+
+
+# A session header's config as the code before SessionConfig carried a Thresholds value wrote
+# it (dumps of SessionConfig(..., lambda_=0.35, eta=0.045, thresholds_file=...).to_dict()).
+STORED_CONFIG = """{
+ "accept_fraction": 0.05,
+ "base_demos": "/data/base.parquet",
+ "batch": 5,
+ "dagger": false,
+ "ddof": 0,
+ "demos": 10,
+ "eta": 0.045,
+ "fixed_base": false,
+ "horizon": 0,
+ "lambda": 0.35,
+ "likelihood": "ensemble-mean",
+ "max_episodes": 0,
+ "mode": "informed",
+ "operator": "scripted:conflict-flip-pause",
+ "policy": "/data/runs/base",
+ "policy_seed": null,
+ "practice": 3,
+ "prompt": 5,
+ "reject_count": 3,
+ "retrieval": "l2",
+ "seed": 0,
+ "show": [
+  "prompt",
+  "feedback"
+ ],
+ "task": "reach-pillar",
+ "thresholds_file": "/data/thresholds.json",
+ "which": "best",
+ "window": 10,
+ "windows": 3
+}"""
+
+
+def test_a_stored_session_header_loads_and_is_written_back_the_same():
+    from elicit_jax.artifact import dumps
+
+    c = SessionConfig.from_dict(json.loads(STORED_CONFIG))
+    t = c.thresholds
+    assert (t.lam, t.eta, t.file, t.source) == (
+        0.35, 0.045, Path("/data/thresholds.json"), "file /data/thresholds.json"
+    )  # fmt: skip
+    assert c.score_config().lambda_ == 0.35 and c.score_config().eta == 0.045
+    assert (c.show, c.batch, c.reject_count) == (("prompt", "feedback"), 5, 3)
+    assert dumps(c.to_dict()) == STORED_CONFIG  # new headers keep the layout, byte for byte
+    no_file = {**json.loads(STORED_CONFIG), "thresholds_file": None}
+    assert SessionConfig.from_dict(no_file).thresholds == Thresholds(0.35, 0.045, "given")
+    resolved = Thresholds(0.2, 0.1, "preset x")  # the caller's thresholds replace the stored
+    assert SessionConfig.from_dict(no_file, thresholds=resolved).to_dict()["lambda"] == 0.2
 
 
 def test_trend_by_hand():

@@ -157,6 +157,7 @@ def test_watch_a_lerobot_folder_that_grows(setup, tmp_path, monkeypatch, capsys)
 
 
 def test_a_file_still_being_written_is_not_read(setup, tmp_path):
+    from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     inbox = tmp_path / "inbox"
@@ -171,8 +172,7 @@ def test_a_file_still_being_written_is_not_read(setup, tmp_path):
             inbox=str(inbox),
             policy=str(setup / "rm" / "run"),
             base_demos=str(setup / "rm" / "base.parquet"),
-            lambda_=0.1,
-            eta=10.0,
+            thresholds=Thresholds(0.1, 10.0, "given"),
             settle=1.0,
         ),
         echo=messages.append,

@@ -69,6 +69,7 @@ def test_a_file_of_random_bytes_named_npz(run, tmp_path):
 
 
 def test_watch_errors_name_the_item(run, tmp_path):
+    from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     inbox = tmp_path / "inbox"
@@ -82,8 +83,7 @@ def test_watch_errors_name_the_item(run, tmp_path):
         inbox=str(inbox),
         policy=str(run / "run"),
         base_demos=str(run / "demos.parquet"),
-        lambda_=0.4,
-        eta=0.05,
+        thresholds=Thresholds(0.4, 0.05, "given"),
         import_options=(("obs_keys", ("a", "b")),),
         settle=0.0,
     )

@@ -65,7 +65,7 @@ def test_train_refuses_to_replace_another_run(work, tmp_path):
 
 
 def test_temporaries_of_killed_writers_are_cleaned(tmp_path):
-    from elicit_jax.artifact import _temp_prefix
+    from elicit_jax.output_rules import _temp_prefix
 
     out = tmp_path / "run"
     mine = _temp_prefix(out)  # .run.p<pid>-<host>.

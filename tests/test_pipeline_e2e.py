@@ -180,8 +180,9 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
     lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
     header, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
-    assert header["thresholds_source"].startswith("provisional")  # scored before the fit
+    assert header["thresholds_source"].startswith("the pipeline's threshold fit")  # after it
     budget = int(is_incompatible(pairs["likelihood"], pairs["novelty"], lam, eta).sum())
+    assert int(np.asarray(pairs["incompatible"]).sum()) == budget
     deminf = read_episode_scores(out / "curation/reach-pillar/deminf-conflict-right.parquet")
     cum = np.cumsum(deminf.length[np.argsort(deminf.score, kind="stable")])
     want = int(cum[np.searchsorted(cum, budget)]) if budget else 0
@@ -249,3 +250,43 @@ def test_tiny_models_study_trains_and_evaluates_mdn_and_lstm(tmp_path):
     }
     md = outcome.report_md.read_text()
     assert "reach-pillar: model comparison" in md and "Naive − Base" in md
+
+
+@pytest.mark.slow
+def test_tiny_pipeline_over_two_collections(tmp_path):
+    """Every stage again on a second collection of the demo sets; D_new scored under the
+    fitted thresholds, so the filter drops exactly the pairs its scores call incompatible."""
+    import numpy as np
+    import pandas as pd
+
+    from elicit_jax.compat.measures import is_incompatible
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(TINY + '\n[collections]\nseeds = [0, 1]\nmethods = ["base", "naive"]\n')
+    out = tmp_path / "run"
+    first = run(spec, out)
+    assert first.result.skipped == [] and len(first.result.ran) == 16 + 6
+    data = gather(out)
+    assert {(r.collection, r.method) for r in data.results} == {
+        (0, "base"), (0, "naive"), (0, "filtered"), (1, "base"), (1, "naive"),
+    }  # fmt: skip
+    starts = [
+        set(pd.read_parquet(out / f"data/{c}reach-pillar/base.parquet")["init_seed"])
+        for c in ("", "c1/")
+    ]
+    assert starts[0] and starts[1] and not starts[0] & starts[1]  # another collection
+    text = first.report_md.read_text()
+    assert "across 2 collections [0, 1]" in text and "## collection 1: reach-pillar" in text
+    assert [r.collection for r in data.thresholds] == [0]  # collection 1 filters nothing
+
+    lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
+    _, scores = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
+    expected = is_incompatible(
+        np.asarray(scores["likelihood"]), np.asarray(scores["novelty"]), lam, eta
+    )
+    assert np.array_equal(np.asarray(scores["incompatible"], bool), expected)
+    header = read_header(out / "filtered/reach-pillar/mlp/filtered-conflict-right")
+    assert header["pairs_dropped"] == int(expected.sum())
+    assert run(spec, out).result.ran == []

@@ -121,11 +121,11 @@ def test_selection_is_validated():
         selection_meta({"selection": "best"}, 0)
 
 
-def _tiny_run(tmp_path: Path) -> Path:
+def _tiny_run(tmp_path: Path, text: str = SPEC) -> Path:
     """A study's run directory: the real plan and manifest; each evaluate stage's Parquet
     holds made-up rollouts (its successes depend on method, seed and checkpoint)."""
     spec_path = tmp_path / "tiny.toml"
-    spec_path.write_text(SPEC)
+    spec_path.write_text(text)
     spec = load_spec(spec_path)
     graph = build_graph(spec, resolve_config)
     run = tmp_path / "run"
@@ -182,6 +182,26 @@ def test_report_rebuilds_byte_for_byte_from_its_folder_alone(tmp_path):
     # in place, twice: still the same report
     rebuild_report(folder)
     assert (folder / "report.md").read_text() == text
+
+
+def test_a_two_collection_study_rebuilds_its_across_collections_table(tmp_path):
+    run = _tiny_run(tmp_path, SPEC + "\n[collections]\nseeds = [0, 1]\n")
+    md, _ = render_run_report(run, tmp_path / "report")
+    folder = md.parent
+    shutil.rmtree(run)
+    text = md.read_text()
+    frame = pd.read_parquet(folder / ROLLOUTS_FILE)
+    assert frame.columns[0] == "collection" and sorted(frame["collection"].unique()) == [0, 1]
+    assert len(frame[frame["collection"] == 0]) == len(frame[frame["collection"] == 1])
+    assert "## reach-pillar — mlp: across 2 collections [0, 1] × training seeds" in text
+    assert "## collection 0: reach-pillar — mlp" in text and "## collection 1: " in text
+    assert "two-level percentile bootstrap (10000 draws, seed 0)" in text
+    assert "Sign agreement: in " in text and "collections agree in sign" in text
+    assert "reach-pillar (collection 1)" in text  # rows of the later collection name it
+    rebuild_report(folder, tmp_path / "again")
+    for p in folder.rglob("*"):
+        if p.is_file() and p.name != "artifact.json":
+            assert (tmp_path / "again" / p.relative_to(folder)).read_bytes() == p.read_bytes(), p
 
 
 def test_a_changed_raw_result_changes_the_rebuilt_report(tmp_path):

@@ -118,13 +118,19 @@ def test_summarize_by_hand():
         }
     ).astype({"success": bool, "unstable": bool})
     best = summarize(rows, "best").iloc[0]
-    # seed 0: a 50%, b 100% -> b; seed 1: a 0%, b 50% -> b; mean 75, std (ddof 0) 25
+    # seed 0: a 50%, b 100% -> b; seed 1: a 0%, b 50% -> b; mean 75; std over seeds with
+    # ddof 1 (as the study tables): sqrt(((100-75)^2 + (50-75)^2) / (2-1)) = sqrt(1250)
     assert best.checkpoint == "s0:b,s1:b"
-    assert (best.success_mean, best.success_std) == (75.0, 25.0)
+    assert best.success_mean == 75.0
+    assert best.success_std == pytest.approx(1250**0.5)  # 35.36, not ddof 0's 25
     assert best.mean_length == pytest.approx((5.5 + 8.5) / 2)
     assert best.unstable == 0  # the diverged rollout was in seed 1's checkpoint a
     per = summarize(rows, "all").set_index("checkpoint")
     assert per.loc["a", "success_mean"] == 25.0 and per.loc["b", "success_mean"] == 75.0
+    # checkpoint a: seeds 50% and 0% -> sqrt((25^2 + 25^2) / 1)
+    assert per.loc["a", "success_std"] == pytest.approx(1250**0.5)
+    one = summarize(rows[rows.seed == 0], "best").iloc[0]
+    assert (one.n_seeds, one.success_std) == (1, 0.0)  # one seed: no spread, never NaN
 
 
 def test_mjx_and_c_backends_agree_with_the_policy_in_the_loop(work):

@@ -172,3 +172,72 @@ def test_key_differences_and_wrong_backend():
     with pytest.raises(ElicitError, match="--backend robosuite"):
         resolve_backend("mujoco", "robosuite-square")
     assert resolve_backend("auto", "robosuite-round") == "robosuite"
+
+
+def test_elicit_session_on_robosuite_square_end_to_end(work):
+    """collect → train → score → fit-thresholds → elicit with the scripted base operator:
+    practice, prompt, a demonstration scored live, written like a MuJoCo task's session and
+    replayed exactly; the scene the browser gets is drawn from primitives only."""
+    from elicit_jax.elicit.replay import replay_episode
+    from elicit_jax.elicit.store import SessionStore
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.web.scene import body_poses, scene_description
+
+    d = work["dir"]
+    _ok(["score", "--policy", str(d / "run"), "--demos", str(d / "base.parquet"),
+         "--lambda", "0.4", "--eta", "0.05", "-o", str(d / "scores.parquet")])  # fmt: skip
+    _ok(["fit-thresholds", "--scores", str(d / "scores.parquet"), "--lambda", "0.4",
+         "--eta", "0.05", "-o", str(d / "thresholds.json")])  # fmt: skip
+    res = _ok(["elicit", "--task", "robosuite-square", "--policy", str(d / "run"),
+               "--base-demos", str(d / "base.parquet"), "--thresholds", str(d / "thresholds.json"),
+               "--operator", "scripted:base", "--practice", "1", "--prompt", "1", "--demos", "1",
+               "--max-episodes", "3", "-o", str(d / "session")])  # fmt: skip
+    out = " ".join(res.output.split())
+    assert "e0000 practice PRACTICE" in out and "e0001 demonstration ACCEPTED" in out
+    store = SessionStore(d / "session")
+    assert store.header()["task"] == "robosuite-square"
+    practice, demo = store.read_episode(0), store.read_episode(1)
+    assert practice.verdict == "practice" and demo.verdict == "accepted" and demo.success
+    assert demo.n_scored == demo.length and np.isfinite(demo.compatibility).all()
+    assert demo.qpos.shape == (demo.length, 23) and demo.obs.shape == (demo.length, 23)
+    assert read_header(store.demos_path)["n_episodes"] == 1
+    task = make_task("robosuite-square")
+    replay = replay_episode(task, demo)  # the same robosuite environment, reused
+    assert np.array_equal(replay["qpos"], demo.qpos) and bool(replay["success"])
+
+    scene = scene_description(task.mj_model, task.name)
+    types = {it["type"] for it in scene["items"]}
+    assert types <= {"plane", "box", "cylinder", "sphere", "capsule"} and "box" in types
+    assert all(it["kind"] == "geom" for it in scene["items"])  # robosuite's sites stay hidden
+    named = {scene["bodies"][it["body"]] for it in scene["items"]}
+    assert {"table", "peg1", "SquareNut_main", "robot0_link4", "gripper0_right_leftfinger"} <= named
+    assert scene["gripper"] == "gripper0_right_eef" and scene["origin"] == (0.0, 0.0, 0.82)
+    import mujoco
+
+    data = mujoco.MjData(task.mj_model)
+    data.qpos[:] = demo.qpos[0]
+    mujoco.mj_kinematics(task.mj_model, data)
+    poses = body_poses(data, scene["origin"])
+    table = scene["bodies"].index("table")
+    assert abs(poses[table, 2] + 0.025) < 1e-6  # table top (0.82 up) drawn at height 0
+
+
+def test_session_environment_matches_workers_and_leaves_numpy_alone(pool):
+    """The session's in-process environment starts from the same initial state as a worker
+    given the same seed, puts NumPy's global generator back, and is reused once closed."""
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.rollout_robosuite import PoolBatch
+    from elicit_jax.sim.single import control_period, open_env
+
+    task = make_task("robosuite-square")
+    np.random.seed(123)
+    expected = np.random.random(3)
+    np.random.seed(123)
+    with open_env(task) as env:
+        mine = env.reset_seeds(np.array([11]))[0].copy()
+    assert np.array_equal(np.random.random(3), expected)
+    with open_env(task) as again:
+        assert again is env  # given back, taken again: built once per process
+    workers = PoolBatch(pool).reset_seeds(np.array([11, 12]))
+    assert np.allclose(mine, workers[0], atol=1e-6) and not np.allclose(mine, workers[1])
+    assert control_period(task) == 0.05

@@ -7,7 +7,7 @@ import pytest
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.runtime import configure_logging
-from elicit_jax.stats import paired_difference
+from elicit_jax.stats import paired_difference, sample_std
 
 
 def test_paired_difference_per_collection_seed_and_mean():
@@ -76,3 +76,18 @@ def test_configure_logging_writes_records_to_the_file_only(tmp_path, capfd):
         logger.handlers[:] = saved[0]
         logger.setLevel(saved[1])
         logger.propagate = saved[2]
+
+
+def test_reported_spreads_use_ddof_1(tmp_path):
+    # lengths 2, 4, 6: mean 4, squared deviations 4 + 0 + 4 = 8, / (3 - 1) -> std 2 (ddof 0: 1.633)
+    assert sample_std([2, 4, 6]) == pytest.approx(2.0)
+    assert sample_std([7]) == 0.0 and sample_std([]) == 0.0  # no spread, never NaN
+    import pandas as pd
+
+    from elicit_jax.cli.info_demos import operator_stats
+
+    rows = {"episode": [0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2], "operator": ["a"] * 12}
+    path = tmp_path / "d.parquet"
+    pd.DataFrame({**rows, "success": [True] * 12}).to_parquet(path)
+    (stats,) = [r for r in operator_stats(path) if r["operator"] == "a"]
+    assert (stats["mean_length"], stats["std_length"]) == (4.0, pytest.approx(2.0))

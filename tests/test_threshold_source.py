@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from elicit_jax.compat.threshold_source import resolve_thresholds
+from elicit_jax.compat.threshold_source import resolve_thresholds, task_thresholds
 from elicit_jax.compat.thresholds import write_thresholds
 from elicit_jax.compat.trust import Verdict
 from elicit_jax.errors import ElicitError
@@ -68,3 +68,19 @@ def test_a_file_without_a_recorded_verdict_is_noted(tmp_path):
     line = resolve_thresholds(_file(tmp_path, {"trust": bad}), None, None).verdict_line()
     assert line.startswith("warning: ") and "one demonstration per set" in line
 
+
+
+def test_without_thresholds_score_takes_the_tasks_preset_or_borrows_square_nuts():
+    t, [note] = task_thresholds("NutAssemblyRound")
+    assert (t.pair, t.source) == ((0.35, 0.05), "preset round-nut (task NutAssemblyRound)")
+    assert note == "thresholds: paper preset round-nut (λ=0.35, η=0.05) for task NutAssemblyRound"
+    t, [note] = task_thresholds("my-task")
+    assert t.pair == (0.4, 0.05) and t.source.startswith("borrowed: square-nut preset")
+    assert note.startswith("warning: task 'my-task' has no paper preset")
+    t, [note] = task_thresholds("hammer-drawer", action_scale="std")  # presets are raw units
+    assert t.pair == (0.35, 0.06)
+    assert t.source == (
+        "placeholder, not valid for --action-scale std scores: preset hammer-drawer "
+        "(task hammer-drawer) (raw units)"
+    )
+    assert note.startswith("warning: --action-scale std: the paper presets are in raw")

@@ -7,6 +7,7 @@ from elicit_jax.cli import (
     demos_cmds,  # noqa: F401
     elicit_cmds,  # noqa: F401
     pipeline_cmds,  # noqa: F401
+    score_cmd,  # noqa: F401
     serve_cmd,  # noqa: F401
     sim_cmds,  # noqa: F401
     train_cmd,  # noqa: F401

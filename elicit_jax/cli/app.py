@@ -138,6 +138,14 @@ app = typer.Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
+
+def command_group(name: str, help: str, panel: str) -> typer.Typer:
+    """A group of subcommands (``elicit-jax NAME ...``) registered on :data:`app`."""
+    group = typer.Typer(help=help, no_args_is_help=True, cls=OrderedGroup)
+    app.add_typer(group, name=name, rich_help_panel=panel)
+    return group
+
+
 _state: dict = {"debug": False, "log": None}
 
 

@@ -6,15 +6,12 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import DATA, OrderedGroup, app
+from elicit_jax.cli.app import DATA, command_group
 from elicit_jax.cli.outputs import OVERWRITE
 
-demos_app = typer.Typer(
-    help="List, select (subsets, splits) and concatenate demonstration files.",
-    no_args_is_help=True,
-    cls=OrderedGroup,
+demos_app = command_group(
+    "demos", "List, select (subsets, splits) and concatenate demonstration files.", DATA
 )
-app.add_typer(demos_app, name="demos", rich_help_panel=DATA)
 
 _EPISODES = "Episode ids and ranges, e.g. 0-4,7 (ids as `elicit-jax demos list` shows)."
 

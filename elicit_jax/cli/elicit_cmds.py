@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from elicit_jax.cli import data_cmds
+from elicit_jax.cli import data_options as do
 from elicit_jax.cli import session_options as so
+from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import ELICIT, app
-from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
+from elicit_jax.cli.params import from_params, with_flags
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.elicit.watch import WatchConfig
 
 
 def _stored_config(out: Path) -> dict[str, Any]:
@@ -23,47 +27,26 @@ def _stored_config(out: Path) -> dict[str, Any]:
 
 
 @app.command("elicit", rich_help_panel=ELICIT)
+@with_flags(so.SESSION_FLAGS, before="resume")
+@with_flags(th.FLAGS_AND_PRESET, before="operator")
 def elicit_cmd(
     ctx: typer.Context,
     out: Path = typer.Option(..., "-o", "--out", help="Session directory (created or resumed)."),
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
-    preset: str | None = so.PRESET,
     operator: str = typer.Option(
         None,
         "--operator",
         help="Who demonstrates: scripted:STYLE (a task's scripted operator) or "
         "person:STYLE[,trait=value,...] (a simulated person, docs/people.md).",
     ),
-    mode: str = so.MODE,
-    show: str = so.SHOW,
-    demos: int = so.DEMOS,
-    batch: int = so.BATCH,
-    fixed_base: bool = so.FIXED_BASE,
-    dagger: bool = so.DAGGER,
-    practice: int = so.PRACTICE,
-    prompt: int = so.PROMPT,
-    accept_fraction: float = so.ACCEPT_FRACTION,
-    reject_count: int = so.REJECT_COUNT,
-    window: int = so.WINDOW,
-    windows: int = so.WINDOWS,
-    retrieval: str = so.RETRIEVAL,
-    likelihood: str = so.LIKELIHOOD,
-    ddof: int = so.DDOF,
-    which: str = so.WHICH,
-    policy_seed: int = so.POLICY_SEED,
-    seed: int = so.SEED,
-    max_episodes: int = so.MAX_EPISODES,
-    horizon: int = so.HORIZON,
     resume: bool = typer.Option(
         False, "--resume", help="Continue the session in OUT with its recorded settings."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Start the session in OUT again."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress output."),
+    **flags: Any,
 ) -> None:
     """Run an elicitation session: practice, prompt, demonstrations with live M, feedback.
 
@@ -79,11 +62,7 @@ def elicit_cmd(
 
     given = so.given(ctx.params)
     # live scoring is in raw action units (docs/thresholds.md)
-    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
-    resolved = None if chosen is None else chosen.pair
-    if resolved is not None:
-        given.update({"lambda": resolved[0], "eta": resolved[1]})
-        given["thresholds_file"] = None if thresholds is None else str(thresholds)
+    chosen = th.from_params(ctx.params, action_scale="none")
     if resume:
         config_dict = {**_stored_config(out), **given}
     else:
@@ -92,24 +71,23 @@ def elicit_cmd(
             for k in ("task", "policy", "base_demos", "operator")
             if k not in given
         ]
-        if resolved is None:
+        if chosen is None:
             missing.append("thresholds (--thresholds, --lambda/--eta or --preset)")
         if missing:
             raise ElicitError(f"missing {', '.join(missing)} (or --resume an existing session)")
         config_dict = given
-    config = SessionConfig.from_dict(config_dict)
+    config = SessionConfig.from_dict(config_dict, thresholds=chosen)
     elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
 
 
 @app.command("watch", rich_help_panel=ELICIT)
+@with_flags(do.IMPORT_FLAGS)
+@with_flags(th.FLAGS_AND_PRESET, before="out")
 def watch_cmd(
+    ctx: typer.Context,
     inbox: Path = typer.Argument(..., help="Folder where demonstrations land."),
     policy: Path = typer.Option(..., "--policy", help="Policy to score against."),
     base_demos: Path = typer.Option(..., "--base-demos", help="D_base (for feedback)."),
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
-    preset: str | None = so.PRESET,
     out: Path = typer.Option(None, "-o", "--out", help="Pages and log [INBOX/verdicts]."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
     reject_count: int = typer.Option(None, "--reject-count", help="Reject above N pairs."),
@@ -124,16 +102,7 @@ def watch_cmd(
     poll: float = typer.Option(1.0, "--poll", help="Seconds between scans."),
     once: bool = typer.Option(False, "--once", help="Stop when everything present is judged."),
     timeout: float = typer.Option(None, "--timeout", help="Stop after this many seconds."),
-    fmt: str = data_cmds._FORMAT,
-    obs_keys: str = data_cmds._OBS_KEYS,
-    operator: str = data_cmds._OPERATOR,
-    operators_from_masks: str = data_cmds._OPERATORS_FROM_MASKS,
-    filter_key: str = data_cmds._FILTER_KEY,
-    task: str = data_cmds._TASK,
-    clip_actions: bool = data_cmds._CLIP,
-    warn_actions: bool = data_cmds._WARN,
-    action_bounds: str = data_cmds._ACTION_BOUNDS,
-    skip_bad_episodes: bool = data_cmds._SKIP_BAD,
+    **flags: Any,
 ) -> None:
     """Give a verdict and feedback for each demonstration that lands in INBOX.
 
@@ -144,57 +113,32 @@ def watch_cmd(
     Example: elicit-jax watch INBOX/ --policy runs/base --base-demos base.parquet
     --thresholds t.json
     """
+    from elicit_jax.elicit.watch import Watcher
+
+    watcher = Watcher(_watch_config(ctx.params), echo=typer.echo)
+    typer.echo(f"watching {inbox} (pages and log in {watcher.out}; Ctrl-C stops)")
+    n = watcher.run()
+    typer.echo(f"judged {n} demonstrations")
+
+
+def _watch_config(params: dict[str, Any]) -> WatchConfig:
+    """``watch``'s flags as a WatchConfig: thresholds resolved (in raw action units: live
+    scoring is, docs/thresholds.md), the import flags checked as ``import`` checks them."""
     import dataclasses
 
-    from elicit_jax.elicit.watch import WatchConfig, Watcher
+    from elicit_jax.elicit.watch import WatchConfig
 
-    # live scoring is in raw action units (docs/thresholds.md)
-    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
-    resolved = None if chosen is None else chosen.pair
-    if resolved is None:
+    p = params
+    chosen = th.from_params(p, action_scale="none")
+    if chosen is None:
         raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
-    imp = data_cmds.import_config(
-        inbox,
-        "",
-        fmt=fmt,
-        obs_keys=obs_keys,
-        operator=operator,
-        operators_from_masks=operators_from_masks,
-        filter_key=filter_key,
-        task=task,
-        clip_actions=clip_actions,
-        warn_actions=warn_actions,
-        action_bounds=action_bounds,
-        skip_bad_episodes=skip_bad_episodes,
-    )
+    imp = do.import_config(p["inbox"], "", p)
     options = tuple(
         (f.name, getattr(imp, f.name))
         for f in dataclasses.fields(imp)
         if f.name not in ("source", "out")
     )
-    config = WatchConfig(
-        inbox=str(inbox),
-        policy=str(policy),
-        base_demos=str(base_demos),
-        lambda_=resolved[0],
-        eta=resolved[1],
-        out=None if out is None else str(out),
-        which=which,
-        policy_seed=policy_seed,
-        likelihood=likelihood,
-        ddof=ddof,
-        accept_fraction=accept_fraction,
-        reject_count=reject_count,
-        window=window,
-        windows=windows,
-        retrieval=retrieval,
-        import_options=options,
-        settle=settle,
-        poll=poll,
-        once=once,
-        timeout=timeout,
-    )
-    watcher = Watcher(config, echo=typer.echo)
-    typer.echo(f"watching {inbox} (pages and log in {watcher.out}; Ctrl-C stops)")
-    n = watcher.run()
-    typer.echo(f"judged {n} demonstrations")
+    paths = {
+        k: None if p[k] is None else str(p[k]) for k in ("inbox", "policy", "base_demos", "out")
+    }
+    return from_params(WatchConfig, p, **paths, thresholds=chosen, import_options=options)

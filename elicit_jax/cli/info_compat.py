@@ -11,14 +11,10 @@ import numpy as np
 
 def _kv(title: str, rows: list[tuple[str, Any]]) -> None:
     from rich.console import Console
-    from rich.table import Table
 
-    table = Table(title=title, show_header=False, title_justify="left")
-    table.add_column(style="bold")
-    table.add_column(overflow="fold")
-    for k, v in rows:
-        table.add_row(k, "-" if v is None else str(v))
-    Console().print(table)
+    from elicit_jax.cli.info_demos import kv_table
+
+    Console().print(kv_table(title, rows))
 
 
 def _inputs(header: dict[str, Any]) -> list[tuple[str, Any]]:

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.stats import sample_std
 
 
 def _console() -> Any:
@@ -16,7 +17,8 @@ def _console() -> Any:
     return Console()
 
 
-def _kv_table(title: str, rows: list[tuple[str, Any]]) -> Any:
+def kv_table(title: str, rows: list[tuple[str, Any]]) -> Any:
+    """A two-column table of (name, value) rows (``None`` shown as ``-``)."""
     from rich.table import Table
 
     table = Table(title=title, show_header=False, title_justify="left")
@@ -90,11 +92,38 @@ def operator_stats(path: str | Path) -> list[dict[str, Any]]:
                 "episodes": int(sel.sum()),
                 "steps": int(n.sum()),
                 "mean_length": float(n.mean()),
-                "std_length": float(n.std()),
+                "std_length": sample_std(n),
                 "success_rate": float(ep_ok[sel].mean()),
             }
         )
     return rows
+
+
+def operator_table(path: Path, header: dict[str, Any], title: str, spread: bool) -> Any:
+    """The table of episodes per operator (and 'all'): counts, steps, length, success.
+
+    Args:
+      path: the demos artifact.
+      header: its header (whether it recorded success).
+      title: the table's title.
+      spread: also the length's std, and the 'all' row in bold (``info``; ``import`` shows
+        the plain table of what it wrote).
+    """
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left")
+    cols = ("operator", "episodes", "steps", "length mean", "length std", "success")
+    for col in cols if spread else tuple(c for c in cols if c != "length std"):
+        table.add_column(col, justify="left" if col == "operator" else "right")
+    recorded = success_recorded(header)
+    for r in operator_stats(path):
+        std = [f"{r['std_length']:.1f}"] if spread else []
+        cells = [r["operator"], str(r["episodes"]), str(r["steps"]), f"{r['mean_length']:.1f}"]
+        bold = spread and r["operator"] == "all"
+        table.add_row(
+            *cells, *std, success_text(r["success_rate"], recorded), style="bold" if bold else None
+        )
+    return table
 
 
 def describe_demos(path: Path, header: dict[str, Any]) -> None:
@@ -105,7 +134,7 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
     console.print(f"[bold]{path}[/]: demonstrations (schema v{header.get('schema_version')})")
     low, high = _bound_text(header.get("action_low")), _bound_text(header.get("action_high"))
     console.print(
-        _kv_table(
+        kv_table(
             "overview",
             [
                 ("task", header.get("task")),
@@ -130,23 +159,9 @@ def describe_demos(path: Path, header: dict[str, Any]) -> None:
     for name, (a, b) in header.get("obs_fields", {}).items():
         fields.add_row(name, f"{a}:{b}", str(b - a))
     console.print(fields)
-    ops = Table(title="episodes per operator", title_justify="left")
-    for col in ("operator", "episodes", "steps", "length mean", "length std", "success"):
-        ops.add_column(col, justify="left" if col == "operator" else "right")
-    recorded = success_recorded(header)
-    for r in operator_stats(path):
-        ops.add_row(
-            r["operator"],
-            str(r["episodes"]),
-            str(r["steps"]),
-            f"{r['mean_length']:.1f}",
-            f"{r['std_length']:.1f}",
-            success_text(r["success_rate"], recorded),
-            style="bold" if r["operator"] == "all" else None,
-        )
-    console.print(ops)
+    console.print(operator_table(path, header, "episodes per operator", spread=True))
     prov = dict(header.get("provenance", {}))
-    console.print(_kv_table("provenance", sorted(prov.items())))
+    console.print(kv_table("provenance", sorted(prov.items())))
 
 
 def describe_episode_list(path: Path, header: dict[str, Any]) -> None:
@@ -159,7 +174,7 @@ def describe_episode_list(path: Path, header: dict[str, Any]) -> None:
     shown = ", ".join(map(str, names[:12])) + (" ..." if len(names) > 12 else "")
     source = header.get("source", {})
     console.print(
-        _kv_table(
+        kv_table(
             "selection",
             [
                 ("episodes", header.get("n_episodes")),
@@ -187,13 +202,13 @@ def describe_robomimic_file(path: Path) -> None:
         lengths = [int(f["data"][n]["actions"].shape[0]) for n in names]
         console.print(f"[bold]{path}[/]: robomimic dataset (not yet imported)")
         console.print(
-            _kv_table(
+            kv_table(
                 "overview",
                 [
                     ("task", task_name(f, path)),
                     ("demos", len(names)),
                     ("steps", sum(lengths)),
-                    ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                    ("length mean/std", f"{np.mean(lengths):.1f} / {sample_std(lengths):.1f}"),
                     ("action shape", first["actions"].shape[1:]),
                 ],
             )
@@ -224,14 +239,14 @@ def describe_lerobot_folder(path: Path) -> None:
     console = _console()
     console.print(f"[bold]{path}[/]: LeRobot dataset {info['codebase_version']} (not yet imported)")
     console.print(
-        _kv_table(
+        kv_table(
             "overview",
             [
                 ("robot", info.get("robot_type")),
                 ("fps", info.get("fps")),
                 ("episodes", len(rows)),
                 ("frames", sum(lengths)),
-                ("length mean/std", f"{np.mean(lengths):.1f} / {np.std(lengths):.1f}"),
+                ("length mean/std", f"{np.mean(lengths):.1f} / {sample_std(lengths):.1f}"),
                 ("tasks", " | ".join(read_tasks(path, info).values())),
             ],
         )
@@ -260,4 +275,4 @@ def describe_export(path: Path, header: dict[str, Any]) -> None:
         ("per operator", ", ".join(f"{k}: {v}" for k, v in counts.items()) or None),
     ]
     rows += [("note", n) for n in header.get("notes", [])]
-    _console().print(_kv_table("export", rows))
+    _console().print(kv_table("export", rows))

@@ -28,7 +28,7 @@ def describe_session(path: Path, header: dict[str, Any]) -> None:
         ("phase", session_phase(config, progress)),
         ("task / operator", f"{config.task} / {config.operator}"),
         ("mode", config.mode + (" + HG-DAgger" if config.dagger else "")),
-        ("thresholds", f"λ = {config.lambda_:.4g}, η = {config.eta:.4g}"),
+        ("thresholds", f"λ = {config.thresholds.lam:.4g}, η = {config.thresholds.eta:.4g}"),
         ("rule", config.rule().describe()),
         ("episodes", f"{c.episodes} ({c.practice} practice)"),
         ("accepted", f"{c.accepted} of {config.demos} wanted"),

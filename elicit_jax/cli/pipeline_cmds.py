@@ -6,14 +6,13 @@ from pathlib import Path
 
 import typer
 
-from elicit_jax.cli.app import PIPELINES, OrderedGroup, app
+from elicit_jax.cli.app import PIPELINES, app, command_group
 
-pipeline_app = typer.Typer(
-    help="Run a pipeline definition (collect → train → score → fit → filter → train → evaluate).",
-    no_args_is_help=True,
-    cls=OrderedGroup,
+pipeline_app = command_group(
+    "pipeline",
+    "Run a pipeline definition (collect → train → score → fit → filter → train → evaluate).",
+    PIPELINES,
 )
-app.add_typer(pipeline_app, name="pipeline", rich_help_panel=PIPELINES)
 
 _PROFILE_HELP = "paper (the paper's sizes) or cpu (shrunk to fit a 2-core machine)."
 _TASKS_HELP = "Comma-separated tasks of the definition to run [all]."

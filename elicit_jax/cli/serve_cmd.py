@@ -80,33 +80,36 @@ def serve_cmd(
     --thresholds thresholds.json --sessions sessions/
 
     Example: elicit-jax serve --demo   (reach-pillar, nothing else needed)
+
+    robosuite tasks (robosuite-square, robosuite-round) need the robosuite extra; each
+    operator's environment runs in the server's process.
     """
-    from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.web.serve import ServeConfig, serve, with_person_horizon
+    from elicit_jax.web.serve import serve
 
     given = so.given(ctx.params)
     chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
-    resolved = None if chosen is None else chosen.pair
     if demo_dir is not None and not demo:
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
-        from elicit_jax.web.demo import DemoRecipe, demo_inputs
+        thresholds, chosen = _demo_inputs(given, demo_dir, policy, base_demos, chosen)
+    server = {"sessions": str(sessions), "host": host, "port": port, "token": token}
+    server |= {"max_operators": max_operators, "admin_token": admin_token}
+    config = _serve_config(given, chosen, thresholds, allow_hosts=tuple(allow_host), **server)
+    serve(config, echo=typer.echo, summary=_print_summary)
 
-        clash = [
-            flag
-            for flag, value in (("--policy", policy), ("--base-demos", base_demos))
-            if value is not None
-        ] + (["thresholds"] if resolved is not None else [])
-        if clash:
-            raise ElicitError(f"--demo brings its own inputs; drop {', '.join(clash)}")
-        if given.get("task", DEMO_TASK) != DEMO_TASK:
-            raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
-        inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
-        thresholds = inputs.thresholds
-        chosen = thresholds_from_flags(thresholds, None, None)
-        resolved = None if chosen is None else chosen.pair
-        given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
-        given["base_demos"] = str(inputs.base_demos)
+
+def _serve_config(
+    given: dict[str, Any], chosen: Any, thresholds: Path | None, **server: Any
+) -> Any:
+    """The ``ServeConfig`` of the given flags (``server``: its fields other than the session).
+
+    Raises:
+      ElicitError: an input or the thresholds missing.
+    """
+    from elicit_jax.elicit.config import SessionConfig
+    from elicit_jax.web.serve import ServeConfig, with_person_horizon
+
+    resolved = None if chosen is None else chosen.pair
     missing = [
         f"--{k.replace('_', '-')}" for k in ("task", "policy", "base_demos") if k not in given
     ]
@@ -117,18 +120,36 @@ def serve_cmd(
     given |= {"lambda": resolved[0], "eta": resolved[1], "operator": "browser:_"}
     given["thresholds_file"] = None if thresholds is None else str(thresholds)
     session = SessionConfig.from_dict(given)
-    config = ServeConfig(
-        # a person at a keyboard needs longer than the task's horizon, unless told otherwise
-        session=session if "horizon" in given else with_person_horizon(session),
-        sessions=str(sessions),
-        host=host,
-        port=port,
-        token=token,
-        max_operators=max_operators,
-        admin_token=admin_token,
-        allow_hosts=tuple(allow_host),
+    # a person at a keyboard needs longer than the task's horizon, unless told otherwise
+    return ServeConfig(
+        session=session if "horizon" in given else with_person_horizon(session), **server
     )
-    serve(config, echo=typer.echo, summary=_print_summary)
+
+
+def _demo_inputs(
+    given: dict[str, Any], demo_dir: Path | None, policy: Any, base_demos: Any, chosen: Any
+) -> tuple[Path, Any]:
+    """``--demo``: the built-in inputs (built once, cached) go into ``given``; returns the
+    thresholds file and the thresholds read from it.
+
+    Raises:
+      ElicitError: an input flag or another task given with ``--demo``.
+    """
+    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+
+    clash = [
+        flag
+        for flag, value in (("--policy", policy), ("--base-demos", base_demos))
+        if value is not None
+    ] + (["thresholds"] if chosen is not None else [])
+    if clash:
+        raise ElicitError(f"--demo brings its own inputs; drop {', '.join(clash)}")
+    if given.get("task", DEMO_TASK) != DEMO_TASK:
+        raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
+    inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
+    given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
+    given["base_demos"] = str(inputs.base_demos)
+    return inputs.thresholds, thresholds_from_flags(inputs.thresholds, None, None)
 
 
 def _print_summary(hub: OperatorHub) -> None:

@@ -12,11 +12,11 @@ from typing import Any
 import typer
 
 from elicit_jax.cli.app import check_seed
+from elicit_jax.cli.threshold_options import PRESET  # noqa: F401  (serve spells it so.PRESET)
 
 TASK = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`).")
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
-PRESET = typer.Option(None, "--preset", help="Paper thresholds of a task: square-nut, ...")
 MODE = typer.Option(None, "--mode", help="informed (default) or naive (control).")
 SHOW = typer.Option(
     None, "--show", help="Informed mode: parts shown, comma-separated [prompt,indicator,feedback]."
@@ -51,7 +51,33 @@ MAX_EPISODES = typer.Option(
 HORIZON = typer.Option(None, "--horizon", help="Steps per episode [the task's].")
 
 
-THRESHOLD_FIELDS = ("lambda_", "eta", "thresholds_file")
+SESSION_FLAGS = (
+    ("mode", str, MODE),
+    ("show", str, SHOW),
+    ("demos", int, DEMOS),
+    ("batch", int, BATCH),
+    ("fixed_base", bool, FIXED_BASE),
+    ("dagger", bool, DAGGER),
+    ("practice", int, PRACTICE),
+    ("prompt", int, PROMPT),
+    ("accept_fraction", float, ACCEPT_FRACTION),
+    ("reject_count", int, REJECT_COUNT),
+    ("window", int, WINDOW),
+    ("windows", int, WINDOWS),
+    ("retrieval", str, RETRIEVAL),
+    ("likelihood", str, LIKELIHOOD),
+    ("ddof", int, DDOF),
+    ("which", str, WHICH),
+    ("policy_seed", int, POLICY_SEED),
+    ("seed", int, SEED),
+    ("max_episodes", int, MAX_EPISODES),
+    ("horizon", int, HORIZON),
+)
+"""The protocol's settings as (parameter name, type, option), in ``--help`` order: a command
+adds them with :func:`elicit_jax.cli.params.with_flags` and reads them with :func:`given`."""
+
+THRESHOLD_FIELDS = ("thresholds",)
+"""SessionConfig fields the thresholds flags resolve (through ``thresholds_from_flags``)."""
 
 
 def given(params: dict[str, Any]) -> dict[str, Any]:

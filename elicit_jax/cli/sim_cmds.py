@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from elicit_jax.cli.app import DATA, HAND_BACK, INSPECT, app, check_seed, log_path
 from elicit_jax.cli.outputs import OVERWRITE, policy_dirs
+from elicit_jax.cli.params import from_params
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from elicit_jax.sim.evaluate import EvalConfig
+    from elicit_jax.sim.trajectories import TrajectoryConfig
 
 
 @app.command(rich_help_panel=INSPECT)
@@ -35,6 +43,7 @@ def tasks() -> None:
 
 @app.command(rich_help_panel=DATA)
 def collect(
+    ctx: typer.Context,
     task: str = typer.Option("square-nut", "--task", help="Task name (see `elicit-jax tasks`)."),
     operator: str = typer.Option("base", "--operator", help="Scripted operator name."),
     episodes: int = typer.Option(50, "--episodes", help="Successful demonstrations to keep."),
@@ -64,14 +73,7 @@ def collect(
     from elicit_jax.sim.collect import collect as run
 
     check_outputs([out], overwrite=overwrite)
-    config = CollectConfig(
-        task=task,
-        operator=operator,
-        episodes=episodes,
-        seed=seed,
-        max_attempts=max_attempts,
-        threads=threads,
-    )
+    config = from_params(CollectConfig, ctx.params)
     t0 = time.perf_counter()
     with Progress(transient=True) as bar:
         tid = bar.add_task(f"{task} / {operator}", total=episodes)
@@ -85,6 +87,7 @@ def collect(
 
 @app.command(rich_help_panel=HAND_BACK)
 def evaluate(
+    ctx: typer.Context,
     policy: list[str] = typer.Option(
         ..., "--policy", help="Run directory, or LABEL=DIR (same label = seeds); repeatable."
     ),
@@ -132,54 +135,76 @@ def evaluate(
     import time
 
     from rich.console import Console
-    from rich.progress import Progress
 
     from elicit_jax.artifact import check_outputs
-    from elicit_jax.sim.evaluate import (
-        EvalConfig,
-        evaluate_policies,
-        expand_policies,
-        resolve_backend,
-    )
+    from elicit_jax.sim.evaluate import EvalConfig
 
     check_outputs([out, trajectories], policy_dirs(policy), overwrite=overwrite)
-    config = EvalConfig(
-        task=task,
-        rollouts=rollouts,
-        seed=seed,
-        backend=backend,
-        horizon=horizon,
-        checkpoints=tuple(checkpoint),
-        select=select,
-        threads=threads,
-        env_from=str(env_from or ""),
-        workers=workers,
+    config = from_params(
+        EvalConfig, ctx.params, checkpoints=tuple(checkpoint), env_from=str(env_from or "")
     )
-    traj = None
-    if trajectories is not None:
-        from elicit_jax.sim.trajectories import TrajectoryConfig
-
-        traj = TrajectoryConfig(out=str(trajectories), action_noise=action_noise)
-    elif action_noise:
-        raise ElicitError("--action-noise only applies with --trajectories")
+    traj = _trajectory_config(trajectories, action_noise)
     console = Console()
-    chosen = resolve_backend(backend, task, config.env_from)
-    reason = " (auto: JAX runs on CPU)" if backend == "auto" and chosen == "mujoco" else ""
-    names = {"mujoco": "C MuJoCo", "mjx": "MJX", "robosuite": "robosuite (worker processes)"}
-    console.print(f"backend: {names[chosen]}{reason}")
-    if env_from is not None:
-        task = f"{env_from.name}'s env"
-    n = len(expand_policies(policy, config.checkpoints))
+    console.print(_backend_line(config))
+    label = task if env_from is None else f"{env_from.name}'s env"
     t0 = time.perf_counter()
+    n, summary = _evaluate_with_bar(policy, config, out, traj, label)
+    print_summary(console, summary)
+    console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
+    for note in _evaluation_notes(config, summary):
+        console.print(note)
+
+
+def _evaluate_with_bar(
+    policy: list[str],
+    config: EvalConfig,
+    out: Path | None,
+    traj: TrajectoryConfig | None,
+    label: str,
+) -> tuple[int, pd.DataFrame]:
+    """Run the evaluation under a progress bar; the number of policies and the summary."""
+    from rich.progress import Progress
+
+    from elicit_jax.sim.evaluate import evaluate_policies, expand_policies
+
+    n = len(expand_policies(policy, config.checkpoints))
     with Progress(transient=True) as bar:
-        tid = bar.add_task(f"{task}: {n} policies x {rollouts} rollouts", total=n)
+        tid = bar.add_task(f"{label}: {n} policies x {config.rollouts} rollouts", total=n)
         _, summary = evaluate_policies(
             policy, config, out, progress=lambda _ref, _rate: bar.advance(tid), trajectories=traj
         )
-    print_summary(console, summary)
-    console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
-    if select == "best" and (len(checkpoint) > 1 or "all" in checkpoint):
-        console.print(
+    return n, summary
+
+
+def _trajectory_config(trajectories: Path | None, action_noise: float) -> TrajectoryConfig | None:
+    """``--trajectories`` (with its ``--action-noise``) as a TrajectoryConfig, or None."""
+    if trajectories is None:
+        if action_noise:
+            raise ElicitError("--action-noise only applies with --trajectories")
+        return None
+    from elicit_jax.sim.trajectories import TrajectoryConfig
+
+    return TrajectoryConfig(out=str(trajectories), action_noise=action_noise)
+
+
+def _backend_line(config: EvalConfig) -> str:
+    """Which simulator the rollouts run on, and why when ``auto`` chose it."""
+    from elicit_jax.sim.evaluate import resolve_backend
+
+    chosen = resolve_backend(config.backend, config.task, config.env_from)
+    auto = config.backend == "auto" and chosen == "mujoco"
+    reason = " (auto: JAX runs on CPU)" if auto else ""
+    names = {"mujoco": "C MuJoCo", "mjx": "MJX", "robosuite": "robosuite (worker processes)"}
+    return f"backend: {names[chosen]}{reason}"
+
+
+def _evaluation_notes(config: EvalConfig, summary: pd.DataFrame) -> list[str]:
+    """What the user should know about the numbers above: a checkpoint chosen on the same
+    rollouts (biased upwards), rollouts whose physics diverged."""
+    notes = []
+    checkpoints = config.checkpoints
+    if config.select == "best" and (len(checkpoints) > 1 or "all" in checkpoints):
+        notes.append(
             "note: --select best chose each seed's checkpoint on these same rollouts, so the "
             "success above is biased upwards; for an unbiased number evaluate the chosen "
             "checkpoints again with another --seed (the pipelines choose on held-out rollouts: "
@@ -187,10 +212,11 @@ def evaluate(
         )
     unstable = int(summary["unstable"].sum())
     if unstable:
-        console.print(
+        notes.append(
             f"{unstable} rollout(s) diverged (the physics became unstable) and count as "
             f"failures; MuJoCo's messages are in the log: {log_path()}"
         )
+    return notes
 
 
 def print_summary(console: object, summary: object) -> None:

@@ -1,4 +1,4 @@
-"""The thresholds flags (``--thresholds``, ``--lambda``, ``--eta``) every command shares.
+"""The thresholds flags the commands share: ``--thresholds``, ``--lambda``/``--eta``, ``--preset``.
 
 Declared once so ``score``, ``filter``, ``map``, ``elicit``, ``serve`` and ``watch`` spell and
 document them the same way; :func:`thresholds_from_flags` resolves them through
@@ -7,7 +7,9 @@ document them the same way; :func:`thresholds_from_flags` resolves them through
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -16,28 +18,49 @@ from elicit_jax.compat.threshold_source import Thresholds, resolve_thresholds
 THRESHOLDS = typer.Option(None, "--thresholds", help="A thresholds.json from fit-thresholds.")
 LAMBDA = typer.Option(None, "--lambda", help="Likelihood-error threshold λ.")
 ETA = typer.Option(None, "--eta", help="Novelty threshold η.")
+PRESET = typer.Option(
+    None, "--preset", help="Paper thresholds: square-nut, round-nut or hammer-drawer."
+)
+FLAGS = (
+    ("thresholds", Path | None, THRESHOLDS),
+    ("lambda_", float | None, LAMBDA),
+    ("eta", float | None, ETA),
+)
+"""The thresholds flags as (parameter name, type, option): a command adds them with
+:func:`elicit_jax.cli.params.with_flags` and resolves them with :func:`from_params`."""
+FLAGS_AND_PRESET = (*FLAGS, ("preset", str | None, PRESET))
+"""The same with ``--preset`` (``score``, ``elicit``, ``serve``, ``watch``)."""
+
+
+def from_params(params: Mapping[str, Any], action_scale: str | None = None) -> Thresholds | None:
+    """:func:`thresholds_from_flags` of a command's parameters (``ctx.params``).
+
+    Args:
+      params: the command's parameters: those of :data:`FLAGS` (and ``preset`` if it has it).
+      action_scale: the scale of the scores they apply to (None: no check).
+
+    Returns:
+      The thresholds, or None when no flag gives them.
+    """
+    flags = (params["thresholds"], params["lambda_"], params["eta"], params.get("preset"))
+    return thresholds_from_flags(*flags, action_scale=action_scale)
 
 
 def thresholds_from_flags(
-    thresholds: Path | None,
-    lam: float | None,
-    eta: float | None,
-    preset: str | None = None,
-    action_scale: str | None = None,
+    *flags: Path | float | str | None, action_scale: str | None = None
 ) -> Thresholds | None:
     """Resolve the thresholds flags; a file's recorded trust verdict goes to stderr.
 
     Args:
-      thresholds: ``--thresholds``.
-      lam: ``--lambda``.
-      eta: ``--eta``.
-      preset: ``--preset``, for the commands that have it.
+      *flags: ``--thresholds``, ``--lambda``, ``--eta`` and, for the commands that have it,
+        ``--preset``, as :func:`~elicit_jax.compat.threshold_source.resolve_thresholds`
+        takes them.
       action_scale: the scale of the scores they apply to, to check units (None: no check).
 
     Returns:
       The thresholds, or None when no flag gives them.
     """
-    resolved = resolve_thresholds(thresholds, lam, eta, preset, action_scale)
+    resolved = resolve_thresholds(*flags, action_scale=action_scale)  # type: ignore[arg-type]
     line = resolved.verdict_line() if resolved is not None else None
     if line is not None:
         typer.echo(line, err=True)

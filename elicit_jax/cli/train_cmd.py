@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from elicit_jax.cli.app import POLICY, app
+from elicit_jax.cli.params import field_params
 
 
 def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
@@ -25,6 +26,7 @@ def _int_list(text: str | None, flag: str) -> tuple[int, ...] | None:
 
 @app.command(rich_help_panel=POLICY)
 def train(
+    ctx: typer.Context,
     demos: Path = typer.Option(..., "--demos", help="Training demonstrations (Parquet)."),
     out: Path = typer.Option(..., "--out", help="Run directory to write (one seed<k>/ per seed)."),
     model: str = typer.Option("mlp", "--model", help="mlp (ensemble), mdn or lstm."),
@@ -81,20 +83,12 @@ def train(
 
     config = TrainConfig.from_profile(
         profile,
-        model=model,
-        epochs=epochs,
-        hidden=_int_list(hidden, "--hidden"),
-        seeds=_int_list(seeds, "--seeds"),
-        ensemble_size=ensemble_size,
-        lr=lr,
-        batch_size=batch_size,
-        checkpoint_every=checkpoint_every,
-        val_fraction=val_fraction,
-        dropout=dropout,
-        seq_len=seq_len,
-        bootstrap=bootstrap,
-        grad_clip=grad_clip,
-        vmap_seeds=False if sequential_seeds else None,
+        **field_params(TrainConfig, ctx.params)
+        | {
+            "hidden": _int_list(hidden, "--hidden"),
+            "seeds": _int_list(seeds, "--seeds"),
+            "vmap_seeds": False if sequential_seeds else None,
+        },
     )
     train_policy(
         read_demos(demos), config, out, inputs={"demos": demos}, quiet=quiet, overwrite=overwrite

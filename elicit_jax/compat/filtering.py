@@ -259,24 +259,15 @@ def filter_demos(
     Returns:
       A :class:`FilterResult`.
     """
-    import pyarrow as pa
-
     from elicit_jax.compat.score_file import read_scores
-    from elicit_jax.data.demos import concat_demos, read_demos, write_demos
+    from elicit_jax.data.demos import read_demos, write_demos
 
     demos_path = Path(demos_path)
     refuse_overwriting_inputs(
         [out_path, log_path(out_path)],
         [scores_path, demos_path, base_path, *([export.source] if export else [])],
     )
-    if export is not None:
-        if config.level != "episode" or base_path is not None:
-            raise ElicitError(
-                "exporting to robomimic/LeRobot needs --level episode and no --base (a mask "
-                "or episode list selects whole demos of one source dataset)"
-            )
-        if export.format not in ("robomimic", "lerobot"):
-            raise ElicitError(f"unknown export format '{export.format}' (robomimic or lerobot)")
+    _check_export(export, config, base_path)
     header, scores = read_scores(scores_path)
     demos = read_demos(demos_path)
     check_scores_match(header, scores, demos, demos_path)
@@ -286,26 +277,74 @@ def filter_demos(
     reasons = duplicate_reasons(demos, dups, drop, reason)
     drop = drop | drop_rows(demos, dups)
     inputs: dict[str, Path] = {"scores": Path(scores_path), "demos": demos_path}
+    if base_path is not None:
+        inputs["base"] = Path(base_path)
+    new, out = _kept_demos(demos, drop, config, base)
+    cfg = dataclasses.asdict(config)
+    record = {"filter": cfg} | ({"duplicates_of_base": dups} if dups else {})
+    write_demos(out_path, out, config=record, inputs=inputs, seed=config.seed)
+    lp = _write_drop_log(out_path, demos, scores, drop, reasons, cfg, inputs)
+    return FilterResult(
+        Path(out_path),
+        lp,
+        demos.n_steps,
+        int(drop.sum()),
+        demos.n_episodes,
+        new.n_episodes if new is not None else 0,
+        reason,
+        None if export is None else _export_kept(out_path, export),
+        dups,
+    )
+
+
+def _check_export(export: ExportSpec | None, config: FilterConfig, base_path: Any) -> None:
+    """An export selects whole demos of one source dataset: episode level, no base."""
+    if export is None:
+        return
+    if config.level != "episode" or base_path is not None:
+        raise ElicitError(
+            "exporting to robomimic/LeRobot needs --level episode and no --base (a mask "
+            "or episode list selects whole demos of one source dataset)"
+        )
+    if export.format not in ("robomimic", "lerobot"):
+        raise ElicitError(f"unknown export format '{export.format}' (robomimic or lerobot)")
+
+
+def _kept_demos(demos: Any, drop: np.ndarray, config: FilterConfig, base: Any) -> tuple[Any, Any]:
+    """``(new, out)``: the kept new demos (None when all are dropped beside a base) and what
+    is written: the base, kept whole and placed first, then the kept new ones."""
+    from elicit_jax.data.demos import concat_demos
+
     new = None
-    if not drop.all() or base_path is None:
+    if not drop.all() or base is None:
         new = apply_drop(demos, drop, config.pair_mode if config.level == "pair" else "renumber")
         new = dataclasses.replace(
             new, extra={**new.extra, "subset": np.full(new.n_steps, "new", dtype=object)}
         )
-    out = new
-    if base is not None:
-        base_extra = {
-            **base.extra,
-            PRE_EPISODE: base.episode.astype(np.int64),
-            PRE_STEP: base.step.astype(np.int32),
-            "subset": np.full(base.n_steps, "base", dtype=object),
-        }
-        parts = [dataclasses.replace(base, extra=base_extra)] + ([new] if new is not None else [])
-        out = concat_demos(parts, renumber=True)
-        inputs["base"] = Path(base_path)
-    cfg = dataclasses.asdict(config)
-    record = {"filter": cfg} | ({"duplicates_of_base": dups} if dups else {})
-    write_demos(out_path, out, config=record, inputs=inputs, seed=config.seed)
+    if base is None:
+        return new, new
+    base_extra = {
+        **base.extra,
+        PRE_EPISODE: base.episode.astype(np.int64),
+        PRE_STEP: base.step.astype(np.int32),
+        "subset": np.full(base.n_steps, "base", dtype=object),
+    }
+    parts = [dataclasses.replace(base, extra=base_extra)] + ([new] if new is not None else [])
+    return new, concat_demos(parts, renumber=True)
+
+
+def _write_drop_log(
+    out_path: str | Path,
+    demos: Any,
+    scores: dict[str, np.ndarray],
+    drop: np.ndarray,
+    reasons: np.ndarray,
+    cfg: dict[str, Any],
+    inputs: dict[str, Path],
+) -> Path:
+    """Write every dropped pair, with its scores and reason, beside ``out_path``."""
+    import pyarrow as pa
+
     log = pa.table(
         {
             "episode": pa.array(demos.episode[drop]),
@@ -323,28 +362,20 @@ def filter_demos(
         log,
         make_header(LOG_KIND, 1, config=cfg, inputs=inputs, n_dropped=int(drop.sum())),
     )
-    exported = None
-    if export is not None:
-        from elicit_jax.data.export import ExportConfig, export_dataset
+    return lp
 
-        exported = export_dataset(
-            ExportConfig(
-                selection=str(out_path),
-                format=export.format,
-                out=str(export.out),
-                mask_key=export.mask_key,
-                source=export.source,
-                overwrite=export.overwrite,
-            )
+
+def _export_kept(out_path: str | Path, export: ExportSpec) -> dict[str, Any]:
+    """Hand the written selection to the dataset exporter (a robomimic mask, a LeRobot set)."""
+    from elicit_jax.data.export import ExportConfig, export_dataset
+
+    return export_dataset(
+        ExportConfig(
+            selection=str(out_path),
+            format=export.format,
+            out=str(export.out),
+            mask_key=export.mask_key,
+            source=export.source,
+            overwrite=export.overwrite,
         )
-    return FilterResult(
-        Path(out_path),
-        lp,
-        demos.n_steps,
-        int(drop.sum()),
-        demos.n_episodes,
-        new.n_episodes if new is not None else 0,
-        reason,
-        exported,
-        dups,
     )

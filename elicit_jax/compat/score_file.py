@@ -160,73 +160,41 @@ def score_file(
     Returns:
       A :class:`ScoreResult`.
     """
-    import pyarrow.parquet as pq
-
     demos_path, out_path = Path(demos_path), Path(out_path)
     refuse_overwriting_inputs([out_path, episodes_path(out_path)], [demos_path, policy_path])
-    header = read_header(demos_path)
-    if header.get("kind") != "demos":
-        raise ElicitError(
-            f"is a '{header.get('kind')}' artifact, expected demonstrations", demos_path
-        )
-    pf = pq.ParquetFile(demos_path)
-    missing = [c for c in (*_CORE, "success") if c not in pf.schema_arrow.names]
-    if missing:
-        raise ElicitError(f"missing column(s) {', '.join(missing)}", demos_path)
-    import pyarrow as pa
-
-    for name in ("obs", "action"):
-        if not pa.types.is_fixed_size_list(pf.schema_arrow.field(name).type):
-            raise ElicitError(f"column '{name}' must be a fixed-size list of float32", demos_path)
-    obs_dim = pf.schema_arrow.field("obs").type.list_size
-    action_dim = pf.schema_arrow.field("action").type.list_size
-    spans = header.get("obs_fields") or {}
-    fields = tuple(k for k, _ in sorted(spans.items(), key=lambda kv: kv[1][0]))
-    check_dims(policy, obs_dim, action_dim, str(demos_path), fields)
+    header, pf = _open_demos(demos_path, policy)
     passthrough = _passthrough(header, pf.schema_arrow)
+    action_dim = pf.schema_arrow.field("action").type.list_size
     schema = _scores_schema(action_dim, [(n, pf.schema_arrow.field(n).type) for n in passthrough])
     inputs = {"demos": demos_path} | ({"policy": policy_path} if policy_path else {})
-    cfg = config_dict(config)
     common = {
-        "config": cfg,
+        "config": config_dict(config),
         "inputs": inputs,
         "thresholds": {"lambda": config.lambda_, "eta": config.eta},
-        "obs_dim": obs_dim,
+        "obs_dim": pf.schema_arrow.field("obs").type.list_size,
         "action_dim": action_dim,
         "task": header.get("task", "unknown"),
         "policy_kind": str(policy_spec(policy, "kind", "mlp")),
         "policy": dict(policy_info or {}),
         "thresholds_source": thresholds_source or "given",
     }
-    scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=pf.metadata.num_rows)
-    schema = schema.with_metadata({HEADER_KEY: dumps(scores_header).encode()})
-    acc = EpisodeAccumulator(config.accept_fraction)
-    batches = read_demo_batches(demos_path, config.chunk_size, (*_CORE, *passthrough))
     n_total = pf.metadata.num_rows
+    scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=n_total)
+    schema = schema.with_metadata({HEADER_KEY: dumps(scores_header).encode()})
+    batches = read_demo_batches(demos_path, config.chunk_size, (*_CORE, *passthrough))
+    scored = score_batches(
+        policy,
+        batches,
+        config,
+        str(demos_path),
+        n_total,
+        policy_source=str(policy_path or "<policy>"),
+        bounds=(header.get("action_low", -1.0), header.get("action_high", 1.0)),
+    )
     ep_path = episodes_path(out_path)
     shown = progress(n_total) if progress is not None else contextlib.nullcontext(_no_op)
     with atomic_path(out_path) as tmp, shown as advance:
-        with pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
-            pending: list[Any] = []
-            scored = score_batches(
-                policy,
-                batches,
-                config,
-                str(demos_path),
-                n_total,
-                policy_source=str(policy_path or "<policy>"),
-                bounds=(header.get("action_low", -1.0), header.get("action_high", 1.0)),
-            )
-            for out in scored:
-                pending.append(_arrow_table(out, schema))
-                if sum(t.num_rows for t in pending) >= ROW_GROUP:
-                    writer.write_table(pa.concat_tables(pending))
-                    pending = []
-                acc.add(out)
-                advance(len(out["episode"]))
-            if pending:
-                writer.write_table(pa.concat_tables(pending))
-        episodes = acc.columns()
+        episodes = _write_scores(tmp, schema, scored, config.accept_fraction, advance)
         ep_header = make_header(
             EPISODES_KIND,
             SCHEMA_VERSION,
@@ -236,6 +204,59 @@ def score_file(
         )
         write_parquet(ep_path, episodes_table(episodes), ep_header)
     return ScoreResult(out_path, ep_path, n_total, episodes)
+
+
+def _open_demos(demos_path: Path, policy: Any) -> tuple[dict[str, Any], Any]:
+    """The header and Parquet file of a demonstrations artifact the policy can score: the
+    right kind, the core columns, fixed-size obs/action lists of the policy's dimensions."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    header = read_header(demos_path)
+    if header.get("kind") != "demos":
+        raise ElicitError(
+            f"is a '{header.get('kind')}' artifact, expected demonstrations", demos_path
+        )
+    pf = pq.ParquetFile(demos_path)
+    missing = [c for c in (*_CORE, "success") if c not in pf.schema_arrow.names]
+    if missing:
+        raise ElicitError(f"missing column(s) {', '.join(missing)}", demos_path)
+    for name in ("obs", "action"):
+        if not pa.types.is_fixed_size_list(pf.schema_arrow.field(name).type):
+            raise ElicitError(f"column '{name}' must be a fixed-size list of float32", demos_path)
+    obs_dim = pf.schema_arrow.field("obs").type.list_size
+    action_dim = pf.schema_arrow.field("action").type.list_size
+    spans = header.get("obs_fields") or {}
+    fields = tuple(k for k, _ in sorted(spans.items(), key=lambda kv: kv[1][0]))
+    check_dims(policy, obs_dim, action_dim, str(demos_path), fields)
+    return header, pf
+
+
+def _write_scores(
+    tmp: Path,
+    schema: Any,
+    scored: Iterator[dict[str, np.ndarray]],
+    accept_fraction: float,
+    advance: Callable[[int], None],
+) -> dict[str, np.ndarray]:
+    """Write the scored batches to ``tmp`` in row groups of about :data:`ROW_GROUP` rows;
+    the per-episode summary columns."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    acc = EpisodeAccumulator(accept_fraction)
+    with pq.ParquetWriter(tmp, schema, compression="zstd") as writer:
+        pending: list[Any] = []
+        for out in scored:
+            pending.append(_arrow_table(out, schema))
+            if sum(t.num_rows for t in pending) >= ROW_GROUP:
+                writer.write_table(pa.concat_tables(pending))
+                pending = []
+            acc.add(out)
+            advance(len(out["episode"]))
+        if pending:
+            writer.write_table(pa.concat_tables(pending))
+    return acc.columns()
 
 
 def read_scores(

@@ -102,3 +102,44 @@ def resolve_thresholds(
             )
         return Thresholds(*PRESETS[preset], f"preset {preset}")
     return None
+
+
+def task_thresholds(task: str, action_scale: str = "none") -> tuple[Thresholds, list[str]]:
+    """The thresholds to score with when none are given, and what to tell the user.
+
+    The paper preset of ``task``; a task without one borrows square-nut's values (a warning
+    says so, and the source records it). Scores in ``std`` units get the preset only as a
+    placeholder: the presets are in raw action units.
+
+    Args:
+      task: the demonstrations' task.
+      action_scale: the scale of the scores (``none`` or ``std``).
+
+    Returns:
+      The thresholds (their ``source`` says which and why) and the lines for stderr.
+    """
+    from elicit_jax.compat.measures import PRESETS, preset_for_task
+
+    name = preset_for_task(task)
+    if name is not None:
+        lam, eta = PRESETS[name]
+        source = f"preset {name} (task {task})"
+        note = f"thresholds: paper preset {name} (λ={lam}, η={eta}) for task {task}"
+    else:
+        lam, eta = PRESETS["square-nut"]
+        source = f"borrowed: square-nut preset, not fitted for task {task} (it has no preset)"
+        note = (
+            f"warning: task '{task}' has no paper preset; M and accept/reject use square-nut's "
+            f"λ={lam}, η={eta}, borrowed, not fitted for it. Fit your own "
+            "(elicit-jax fit-thresholds) and pass --thresholds to filter and map."
+        )
+    if action_scale != "std":
+        return Thresholds(lam, eta, source), [note]
+    note = (
+        "warning: --action-scale std: the paper presets are in raw action units, so M and "
+        "accept/reject in this file are placeholders, not verdicts; ℓ and ν are std-scaled. "
+        "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
+        "filter and map."
+    )
+    source = f"placeholder, not valid for --action-scale std scores: {source} (raw units)"
+    return Thresholds(lam, eta, source), [note]

@@ -102,17 +102,13 @@ def load_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
     if fmt != "robomimic" and (cfg.operators_from_masks or cfg.filter_key):
         raise ElicitError("--operators-from-masks and --filter-key apply to robomimic files only")
     unit = (-1.0, 1.0)
+    # what every importer takes; an .npz file has one 'obs' array, so no obs keys
+    common = {"operator": cfg.operator, "task": cfg.task, "finite": not cfg.skip_bad_episodes}
     if fmt == "lerobot":
         from elicit_jax.data.lerobot import import_lerobot
 
-        demos = import_lerobot(
-            cfg.source,
-            obs_keys=cfg.obs_keys,
-            operator=cfg.operator,
-            task=cfg.task,
-            action_bounds=unit if cfg.action_bounds == "unit" else None,
-            finite=not cfg.skip_bad_episodes,
-        )
+        bounds = unit if cfg.action_bounds == "unit" else None
+        demos = import_lerobot(cfg.source, obs_keys=cfg.obs_keys, action_bounds=bounds, **common)
         return _skip_bad(demos, cfg.source) if cfg.skip_bad_episodes else demos
     if fmt == "robomimic":
         from elicit_jax.data.robomimic import import_robomimic
@@ -120,26 +116,18 @@ def load_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
         demos = import_robomimic(
             cfg.source,
             obs_keys=cfg.obs_keys,
-            operator=cfg.operator,
             operators_from_masks=cfg.operators_from_masks,
             filter_key=cfg.filter_key,
-            task=cfg.task,
             action_bounds=unit,
             progress=progress,
-            finite=not cfg.skip_bad_episodes,
+            **common,
         )
     else:
         from elicit_jax.data.npz import import_npz
 
         if cfg.obs_keys:
             raise ElicitError("--obs-keys does not apply to .npz files (one 'obs' array)")
-        demos = import_npz(
-            cfg.source,
-            operator=cfg.operator,
-            task=cfg.task,
-            action_bounds=unit,
-            finite=not cfg.skip_bad_episodes,
-        )
+        demos = import_npz(cfg.source, action_bounds=unit, **common)
     if cfg.skip_bad_episodes:
         demos = _skip_bad(demos, cfg.source)
     return _data_bounds(demos, cfg.action_bounds)

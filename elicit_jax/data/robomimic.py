@@ -170,6 +170,46 @@ def read_demo(
     return ep, tuple(p.shape[1] for p in parts)
 
 
+def _selected_names(f: Any, path: str | Path, filter_key: str | None) -> list[str]:
+    """The demos to import, in demo_N order: all, or those ``mask/<filter_key>`` lists."""
+    names = demo_names(f, path)
+    if filter_key is None:
+        return names
+    wanted = set(read_mask(f, filter_key, path))
+    unknown = sorted(wanted - set(names))
+    if unknown:
+        raise ElicitError(f"mask/{filter_key} lists missing demo {unknown[0]}", path)
+    names = [n for n in names if n in wanted]
+    if not names:
+        raise ElicitError(f"mask/{filter_key} lists no demos", path)
+    return names
+
+
+def _read_demos(
+    f: Any,
+    path: str | Path,
+    names: list[str],
+    obs_keys: tuple[str, ...],
+    progress: Progress | None,
+) -> tuple[list[dict[str, Any]], tuple[int, ...] | None, dict[str, str]]:
+    """Each demo's episode columns, the obs keys' sizes (the same in every demo) and each
+    demo's content digest."""
+    iterator: Iterable[str] = names
+    if progress is not None:
+        iterator = progress(names, f"reading {Path(path).name}")
+    episodes, sizes, digests = [], None, {}
+    for name in iterator:
+        ep, widths = read_demo(f, path, name, obs_keys)
+        digests[name] = episode_digest(ep["obs"], ep["action"], ep.get("reward"))
+        if sizes is not None and widths != sizes:
+            raise ElicitError(
+                f"data/{name}: obs key sizes {widths} differ from {names[0]}'s {sizes}", path
+            )
+        episodes.append(ep)
+        sizes = widths
+    return episodes, sizes, digests
+
+
 def import_robomimic(
     path: str | Path,
     *,
@@ -204,33 +244,13 @@ def import_robomimic(
     """
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
     with open_hdf5(path) as f:
-        names = demo_names(f, path)
-        if filter_key is not None:
-            wanted = set(read_mask(f, filter_key, path))
-            unknown = sorted(wanted - set(names))
-            if unknown:
-                raise ElicitError(f"mask/{filter_key} lists missing demo {unknown[0]}", path)
-            names = [n for n in names if n in wanted]
-            if not names:
-                raise ElicitError(f"mask/{filter_key} lists no demos", path)
+        names = _selected_names(f, path, filter_key)
         labels = (
             _operator_labels(f, path, names, operators_from_masks, operator)
             if operators_from_masks
             else [operator] * len(names)
         )
-        iterator: Iterable[str] = names
-        if progress is not None:
-            iterator = progress(names, f"reading {Path(path).name}")
-        episodes, sizes, digests = [], None, {}
-        for name in iterator:
-            ep, widths = read_demo(f, path, name, obs_keys)
-            digests[name] = episode_digest(ep["obs"], ep["action"], ep.get("reward"))
-            if sizes is not None and widths != sizes:
-                raise ElicitError(
-                    f"data/{name}: obs key sizes {widths} differ from {names[0]}'s {sizes}", path
-                )
-            episodes.append(ep)
-            sizes = widths
+        episodes, sizes, digests = _read_demos(f, path, names, obs_keys, progress)
         env_task = task_name(f, path)
         env = env_args(f, path)
     has_rewards = all("reward" in ep for ep in episodes)

@@ -11,11 +11,13 @@ import dataclasses
 import math
 import zlib
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from elicit_jax.compat.measures import check_thresholds
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.errors import ElicitError
 
 MODES = ("informed", "naive")
@@ -23,7 +25,9 @@ SHOW_PARTS = ("prompt", "indicator", "feedback")
 """The parts of the informed interface: the prompt, the live indicator, post-hoc feedback."""
 RETRIEVALS = ("l2", "dtw")
 PATH_FIELDS = ("policy", "base_demos", "thresholds_file")
-"""Fields naming input files: a resumed session compares the files' hashes, not the paths."""
+"""Settings naming input files: a resumed session compares the files' hashes, not the paths."""
+STORED_THRESHOLDS = ("lambda", "eta", "thresholds_file")
+"""The keys a session header stores its :class:`Thresholds` under (see ``to_dict``)."""
 EXTENDABLE = ("demos", "max_episodes")
 """Settings a resumed session may change (ask for more demonstrations or episodes)."""
 
@@ -36,9 +40,8 @@ class SessionConfig:
       task: simulated task name.
       policy: base policy checkpoint (run or seed directory).
       base_demos: the base demonstrations D_base (demos artifact).
-      lambda_: likelihood-error threshold λ.
-      eta: novelty threshold η.
-      thresholds_file: the thresholds artifact λ, η came from, if any.
+      thresholds: λ and η, and the thresholds file they came from, if any (stored in the
+        session header as ``lambda``, ``eta`` and ``thresholds_file``).
       operator: operator spec, e.g. ``scripted:conflict-flip-pause``.
       mode: ``informed`` (prompt, live indicator, feedback, the rule applied) or ``naive``
         (the paper's control: practice only; the rule is computed and recorded, not applied).
@@ -68,10 +71,8 @@ class SessionConfig:
     task: str
     policy: str
     base_demos: str
-    lambda_: float
-    eta: float
+    thresholds: Thresholds
     operator: str
-    thresholds_file: str | None = None
     mode: str = "informed"
     show: tuple[str, ...] = SHOW_PARTS
     demos: int = 10
@@ -121,7 +122,9 @@ class SessionConfig:
         for ok, msg in checks:
             if not ok:
                 raise ElicitError(msg)
-        check_thresholds(self.lambda_, self.eta)
+        if not isinstance(self.thresholds, Thresholds):
+            raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
+        check_thresholds(self.thresholds.lam, self.thresholds.eta)
         self.rule()  # validates the fraction and the count
         self.score_config()
 
@@ -147,8 +150,8 @@ class SessionConfig:
         return ScoreConfig(
             likelihood=self.likelihood,  # type: ignore[arg-type]
             ddof=self.ddof,
-            lambda_=self.lambda_,
-            eta=self.eta,
+            lambda_=self.thresholds.lam,
+            eta=self.thresholds.eta,
             accept_fraction=self.accept_fraction,
         )
 
@@ -158,29 +161,72 @@ class SessionConfig:
         (``seed * 100000 + attempt``) and a resumed session repeats its own."""
         return zlib.crc32(f"session|{self.seed}|{episode}".encode()) & 0x7FFFFFFF
 
+    def with_absolute_paths(self) -> SessionConfig:
+        """The config with its input paths made absolute (a session resumes from anywhere)."""
+        t = self.thresholds
+        if t.file is not None:
+            t = dataclasses.replace(t, file=Path(t.file).absolute())
+        return dataclasses.replace(
+            self,
+            policy=str(Path(self.policy).absolute()),
+            base_demos=str(Path(self.base_demos).absolute()),
+            thresholds=t,
+        )
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (``lambda_`` written as ``lambda``)."""
-        d = dataclasses.asdict(self)
-        d["lambda"] = d.pop("lambda_")
+        """JSON-ready dict, as the session header stores it: the thresholds as ``lambda``,
+        ``eta`` and ``thresholds_file`` (the layout sessions have always been written in)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        t = d.pop("thresholds")
         d["show"] = list(self.show)
+        d |= {"lambda": t.lam, "eta": t.eta}
+        d["thresholds_file"] = None if t.file is None else str(t.file)
         return d
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> SessionConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+    def from_dict(
+        cls, data: Mapping[str, Any], thresholds: Thresholds | None = None
+    ) -> SessionConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error.
+
+        Args:
+          data: the settings, the thresholds as :data:`STORED_THRESHOLDS` (``lambda_`` is
+            read as ``lambda``).
+          thresholds: thresholds resolved by the caller; they replace those in ``data``.
+        """
         d = dict(data)
-        if "lambda" in d:
-            d["lambda_"] = d.pop("lambda")
-        unknown = set(d) - {f.name for f in dataclasses.fields(cls)}
+        stored = {k: d.pop(k, None) for k in STORED_THRESHOLDS}
+        if "lambda_" in d:
+            stored["lambda"] = d.pop("lambda_")
+        if thresholds is None:
+            thresholds = stored_thresholds(
+                stored["lambda"], stored["eta"], stored["thresholds_file"]
+            )
+        settings = {f.name for f in dataclasses.fields(cls)} - {"thresholds"}
+        unknown = set(d) - settings
         if unknown:
             raise ElicitError(f"unknown session config key(s): {', '.join(sorted(unknown))}")
-        return cls(**d)
+        return cls(**d, thresholds=thresholds)
 
     def differences(self, other: SessionConfig) -> list[str]:
         """Names of the settings (not input paths) that differ from ``other``."""
         a, b = self.to_dict(), other.to_dict()
         skip = (*PATH_FIELDS, *EXTENDABLE)
         return sorted(k for k in a if k not in skip and a[k] != b.get(k))
+
+
+def stored_thresholds(lam: Any, eta: Any, file: str | None) -> Thresholds:
+    """The :class:`Thresholds` a session header records (λ, η and the file they came from).
+
+    Raises:
+      ElicitError: λ or η missing, not numbers, or not finite and > 0.
+    """
+    if lam is None or eta is None:
+        raise ElicitError("session config without thresholds (lambda and eta)")
+    lam, eta = check_thresholds(lam, eta)
+    if file is None:
+        return Thresholds(lam, eta, "given")
+    return Thresholds(lam, eta, f"file {file}", file=Path(file))
 
 
 PERSON_MARGIN = 4.0

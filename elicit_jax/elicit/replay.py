@@ -1,9 +1,9 @@
-"""Exact replay of recorded session episodes on C MuJoCo.
+"""Exact replay of recorded session episodes (C MuJoCo, or the task's robosuite environment).
 
 An episode file holds the initial-state seed, the applied actions and the simulator state
 (``qpos``, ``qvel``) each step started from. :func:`replay_episode` re-runs the actions from
-the seeded initial state and returns the states it passes through (C MuJoCo is
-deterministic: they equal the recorded ones bit for bit); :func:`set_state` puts a
+the seeded initial state and returns the states it passes through (MuJoCo is deterministic
+and robosuite's controller too: they equal the recorded ones bit for bit); :func:`set_state` puts a
 simulator at any recorded step, e.g. to render the frames of a feedback window.
 """
 
@@ -21,10 +21,10 @@ def replay_episode(task: Any, record: Any) -> dict[str, np.ndarray]:
       ``qpos (T, nq)`` and ``qvel (T, nv)`` each step started from, ``obs (T, O)``, and
       ``success`` (bool) after the last step.
     """
-    from elicit_jax.sim.rollout_mujoco import BatchSim
+    from elicit_jax.sim.single import open_env
 
     qpos, qvel, obs = [], [], []
-    with BatchSim(task, 1, threads=1) as sim:
+    with open_env(task) as sim:
         sim.reset_seeds(np.array([record.init_seed]))
         for a in np.asarray(record.action, np.float64):
             d = sim.datas[0]
@@ -33,7 +33,7 @@ def replay_episode(task: Any, record: Any) -> dict[str, np.ndarray]:
             obs.append(sim.obs[0].copy())
             sim.step(a[None])
         success = bool(sim.success[0])
-    nq, nv = task.mj_model.nq, task.mj_model.nv
+        nq, nv = sim.model.nq, sim.model.nv
     return {
         "qpos": np.array(qpos).reshape(-1, nq),
         "qvel": np.array(qvel).reshape(-1, nv),

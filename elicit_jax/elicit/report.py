@@ -171,11 +171,13 @@ def _trend_text(demos: list[dict[str, Any]]) -> str:
 
 
 def _settings(c: Any) -> list[list[Any]]:
+    """The session's settings, as (setting, value) rows."""
+    t = c.thresholds
     return [
         ["task", c.task],
         ["operator", c.operator],
         ["mode", c.mode + (" + HG-DAgger" if c.dagger else "")],
-        ["thresholds", f"λ = {c.lambda_:.4g}, η = {c.eta:.4g} ({c.thresholds_file or 'given'})"],
+        ["thresholds", f"λ = {t.lam:.4g}, η = {t.eta:.4g} ({t.file or 'given'})"],
         ["rule", c.rule().describe()],
         ["batches", f"retrain every {c.batch}" if c.batch else "no retraining"],
         ["scoring", "fixed base" if c.fixed_base else "latest π_new"],

@@ -162,7 +162,8 @@ class Session:
     @property
     def sim_data(self) -> Any:
         """The current episode's MuJoCo ``MjData`` (to read, e.g. body poses to draw; never
-        write it), or None before :meth:`start` and after the session ends."""
+        write it), or None before :meth:`start` and after the session ends. For a robosuite
+        task it is the robosuite environment's own data."""
         return None if self._sim is None else self._sim.datas[0]
 
     def add_listener(self, listener: Listener) -> None:
@@ -255,10 +256,10 @@ class Session:
         self._begin(kind)
 
     def _begin(self, kind: str) -> None:
-        from elicit_jax.sim.rollout_mujoco import BatchSim
+        from elicit_jax.sim.single import open_env
 
-        if self._sim is None:
-            self._sim = BatchSim(self.setup.task, 1, threads=1)
+        if self._sim is None:  # C MuJoCo, or a robosuite environment in this process
+            self._sim = open_env(self.setup.task)
         self._index = self.progress.next_index
         self._kind = kind
         self._indicator = kind == DEMONSTRATION and self.config.shown("indicator")
@@ -335,7 +336,7 @@ class Session:
         buf = self._buf
         n, dim_o, dim_a = len(buf["obs"]), self.setup.obs_dim, self.setup.action_dim
         score = np.array(buf["score"], np.float64).reshape(n, 5)
-        nq, nv = self.setup.task.mj_model.nq, self.setup.task.mj_model.nv
+        nq, nv = self._sim.model.nq, self._sim.model.nv
         return EpisodeRecord(
             index=self._index,
             kind=self._kind,
@@ -365,8 +366,8 @@ class Session:
                 "seconds": time.perf_counter() - self._t0,
                 "unstable": bool(self._sim.unstable[0]),
                 "gave_up": gave_up,
-                "lambda": self.config.lambda_,
-                "eta": self.config.eta,
+                "lambda": self.config.thresholds.lam,
+                "eta": self.config.thresholds.eta,
             },
         )
 

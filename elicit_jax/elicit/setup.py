@@ -2,9 +2,8 @@
 
 :func:`open_session` validates the inputs (task, base demonstrations, policy, thresholds,
 operator) before touching the output directory, then creates the session directory or
-resumes the one there. A directory holding another kind of artifact, or a session started
-with other settings or other input files, is refused with one line saying what differs
-(``--overwrite`` starts that session again; it never replaces anything but a session).
+resumes the one there (:mod:`elicit_jax.elicit.session_dir`). A robosuite task is opened
+like any other; its environment is built in this process when the first episode begins.
 """
 
 from __future__ import annotations
@@ -15,18 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import (
-    make_header,
-    matches_recorded,
-    read_header,
-    refuse_overwriting_inputs,
-)
+from elicit_jax.artifact import make_header, read_header
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import PRACTICE, PromptEpisode, PromptEvent, RetrainEvent
 from elicit_jax.elicit.explain import explain_episode, summary_text
 from elicit_jax.elicit.live import LiveScorer, check_live_policy
 from elicit_jax.elicit.progress import Progress
 from elicit_jax.elicit.rules import AcceptRule
+from elicit_jax.elicit.session_dir import absolute_inputs, open_store, session_inputs
 from elicit_jax.elicit.store import SCHEMA_VERSION, SESSION_KIND, EpisodeRecord, SessionStore
 from elicit_jax.errors import ElicitError
 
@@ -278,65 +273,53 @@ def task_action_names(task: Any) -> tuple[str, ...]:
     return tuple(ACTION_NAMES)
 
 
-def _absolute_inputs(config: SessionConfig) -> SessionConfig:
-    """The config with its input paths made absolute (a session resumes from anywhere)."""
-    paths = {k: getattr(config, k) for k in ("policy", "base_demos", "thresholds_file")}
-    return dataclasses.replace(
-        config, **{k: str(Path(v).absolute()) for k, v in paths.items() if v is not None}
+def _load(config: SessionConfig) -> dict[str, Any]:
+    """Load and check the task, base demonstrations, policy and operator of ``config``."""
+    from elicit_jax.data.demos import read_demos
+    from elicit_jax.elicit import people  # noqa: F401  (registers the person: operators)
+    from elicit_jax.elicit.operators import OperatorContext, make_session_operator
+    from elicit_jax.policy.checkpoint import check_compatible, load_checkpoint
+    from elicit_jax.sim.env import make_task
+
+    # a robosuite task is a task like any other here: its environment is built (in this
+    # process) when the first episode begins
+    task = make_task(config.task, **({"horizon": config.horizon} if config.horizon else {}))
+    base = read_demos(config.base_demos)
+    loaded = load_checkpoint(config.policy, config.which, seed=config.policy_seed)
+    policy = loaded.policy
+    _check_inputs(config, task, base, policy)
+    check_compatible(policy, base, config.base_demos)
+    return {
+        "task": task,
+        "base": base,
+        "policy": policy,
+        "seed": loaded.seed,
+        "train_config": loaded.train_config() if config.batch else None,
+        "operator": make_session_operator(
+            config.operator, OperatorContext(task, base, config.dagger)
+        ),
+    }
+
+
+def _header(config: SessionConfig, inputs: dict[str, str], loaded: dict[str, Any]) -> dict:
+    """The session directory's self-describing header."""
+    from elicit_jax.policy.checkpoint import policy_spec
+
+    task, base, train_config = loaded["task"], loaded["base"], loaded["train_config"]
+    return make_header(
+        SESSION_KIND,
+        SCHEMA_VERSION,
+        config=config.to_dict(),
+        inputs=inputs,
+        seed=config.seed,
+        task=task.name,
+        task_config=dataclasses.asdict(task.config),
+        obs_fields={f.name: [f.start, f.stop] for f in base.obs_fields},
+        action_names=list(task_action_names(task)),
+        policy_model=policy_spec(loaded["policy"]),
+        policy_seed=loaded["seed"],
+        train_config=None if train_config is None else train_config.to_dict(),
     )
-
-
-def _inputs(config: SessionConfig) -> dict[str, str]:
-    out = {"policy": config.policy, "base_demos": config.base_demos}
-    if config.thresholds_file:
-        out["thresholds"] = config.thresholds_file
-    return out
-
-
-def _open_store(
-    root: Path,
-    config: SessionConfig,
-    inputs: dict[str, str],
-    header: dict[str, Any],
-    overwrite: bool,
-) -> tuple[SessionStore, bool]:
-    """Create the session directory or check the one there; returns (store, resumed)."""
-    store = SessionStore(root)
-    if root.exists() and not root.is_dir():
-        raise ElicitError("is a file, not a session directory", root)
-    for name, p in inputs.items():
-        if Path(p).resolve().is_relative_to(root.resolve()):
-            raise ElicitError(f"the {name} input lies inside the session directory", p)
-    refuse_overwriting_inputs([root], inputs.values())
-    if root.is_dir() and any(root.iterdir()):
-        try:
-            old = store.header()
-        except ElicitError as e:
-            why = str(e).removeprefix(f"{e.path}: ") if e.path else str(e)
-            raise ElicitError(
-                f"holds no elicitation session ({why}); choose another output directory", root
-            ) from e
-        diffs = config.differences(SessionConfig.from_dict(old.get("config", {})))
-        recorded = old.get("inputs", {})
-        diffs += [
-            f"{k} file"
-            for k, p in inputs.items()
-            if not matches_recorded(recorded.get(k, {}).get("sha256"), p)
-        ]
-        if not overwrite and diffs:
-            raise ElicitError(
-                f"holds a session with different settings ({', '.join(diffs)}); re-run with its "
-                "settings to resume it, or pass --overwrite to start it again",
-                root,
-            )
-        if not overwrite:
-            store.clean_temporaries()
-            if old.get("config") != header["config"]:  # more demos or episodes asked for
-                store.create({**old, "config": header["config"]})
-            return store, True
-        store.wipe()
-    store.create(header)
-    return store, False
 
 
 def open_session(
@@ -360,47 +343,17 @@ def open_session(
       ``(setup, operator, resumed)`` with the operator named by ``config.operator``.
     """
     from elicit_jax.compat.feedback import normalizer
-    from elicit_jax.data.demos import read_demos
-    from elicit_jax.elicit import people  # noqa: F401  (registers the person: operators)
-    from elicit_jax.elicit.operators import OperatorContext, make_session_operator
-    from elicit_jax.policy.checkpoint import check_compatible, load_checkpoint, policy_spec
-    from elicit_jax.sim.env import make_task
 
     if resume and overwrite:
         raise ElicitError("choose one of --resume and --overwrite")
-    config = _absolute_inputs(config)
-    task = make_task(config.task, **({"horizon": config.horizon} if config.horizon else {}))
-    if getattr(task, "backend", "") == "robosuite":
-        raise ElicitError(
-            f"task '{task.name}' runs on robosuite, which sessions (elicit, serve) do not "
-            "support yet: use collect and evaluate"
-        )
-    base = read_demos(config.base_demos)
-    loaded = load_checkpoint(config.policy, config.which, seed=config.policy_seed)
-    policy, seed = loaded.policy, loaded.seed
-    _check_inputs(config, task, base, policy)
-    check_compatible(policy, base, config.base_demos)
-    train_config = loaded.train_config() if config.batch else None
-    operator = make_session_operator(config.operator, OperatorContext(task, base, config.dagger))
+    config = absolute_inputs(config)
+    loaded = _load(config)
+    task, base, policy = loaded["task"], loaded["base"], loaded["policy"]
     root = Path(out)
     if resume and not (root / "artifact.json").exists():
         raise ElicitError("holds no session to resume", root)
-    inputs = _inputs(config)
-    header = make_header(
-        SESSION_KIND,
-        SCHEMA_VERSION,
-        config=config.to_dict(),
-        inputs=inputs,
-        seed=config.seed,
-        task=task.name,
-        task_config=dataclasses.asdict(task.config),
-        obs_fields={f.name: [f.start, f.stop] for f in base.obs_fields},
-        action_names=list(task_action_names(task)),
-        policy_model=policy_spec(policy),
-        policy_seed=seed,
-        train_config=None if train_config is None else train_config.to_dict(),
-    )
-    store, resumed = _open_store(root, config, inputs, header, overwrite)
+    inputs = session_inputs(config)
+    store, resumed = open_store(root, config, inputs, _header(config, inputs, loaded), overwrite)
     setup = SessionSetup(
         config=config,
         store=store,
@@ -408,7 +361,7 @@ def open_session(
         base=base,
         base_policy=policy,
         policy=policy,
-        train_config=train_config,
+        train_config=loaded["train_config"],
         scorer=LiveScorer(
             config.score_config(),
             policy,
@@ -420,4 +373,4 @@ def open_session(
         quiet=quiet,
         stats=normalizer(base.obs),
     )
-    return setup, operator, resumed
+    return setup, loaded["operator"], resumed

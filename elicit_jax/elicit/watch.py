@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.errors import ElicitError
 
 IGNORED_SUFFIXES = (".tmp", ".part", ".partial", ".crdownload", ".lock")
@@ -51,7 +52,7 @@ class WatchConfig:
       out: where pages and the verdict log go (default ``inbox/verdicts``).
       policy, which, policy_seed: the policy to score against.
       base_demos: D_base (retrieval for feedback).
-      lambda_, eta: thresholds.
+      thresholds: λ and η, with where they came from.
       likelihood, ddof: score definitions.
       accept_fraction, reject_count: the accept/reject rule.
       window, windows, retrieval: feedback settings.
@@ -65,8 +66,7 @@ class WatchConfig:
     inbox: str
     policy: str
     base_demos: str
-    lambda_: float
-    eta: float
+    thresholds: Thresholds
     out: str | None = None
     which: str = "best"
     policy_seed: int | None = None
@@ -171,7 +171,7 @@ class Watcher:
       handled: ``(item, signature)`` of items read (or failed) as they are now.
     """
 
-    def __init__(self, config: WatchConfig, echo: Callable[[str], None] = print) -> None:
+    def __init__(self, config: WatchConfig, echo: Callable[[str], None]) -> None:
         from elicit_jax.compat.feedback import normalizer
         from elicit_jax.data.demos import read_demos
         from elicit_jax.elicit.live import check_live_policy
@@ -289,8 +289,8 @@ class Watcher:
         config = ScoreConfig(
             likelihood=c.likelihood,  # type: ignore[arg-type]
             ddof=c.ddof,
-            lambda_=c.lambda_,
-            eta=c.eta,
+            lambda_=c.thresholds.lam,
+            eta=c.thresholds.eta,
             accept_fraction=c.accept_fraction,
         )
         todo = []
@@ -348,7 +348,7 @@ class Watcher:
             summary=[
                 ("verdict", text),
                 ("rule", self.rule.describe()),
-                ("thresholds", f"λ = {c.lambda_:.4g}, η = {c.eta:.4g}"),
+                ("thresholds", f"λ = {c.thresholds.lam:.4g}, η = {c.thresholds.eta:.4g}"),
                 ("length", f"{length} steps (base mean {self._base_length():.0f})"),
                 ("policy", c.policy),
             ],

@@ -2,8 +2,8 @@
 
 A study's report folder holds, beside ``report.md``:
 
-* ``rollouts.parquet`` — one row per evaluation rollout: the policy cell (task, model, method,
-  operator, study, λ point), training seed, checkpoint, evaluation seed and its role
+* ``rollouts.parquet`` — one row per evaluation rollout: the policy cell (collection, task,
+  model, method, operator, study, λ point), training seed, checkpoint, evaluation seed and its role
   (``select``: rollouts the checkpoint is chosen on; ``report``: rollouts whose success is
   reported), rollout index, initial-state seed, success and length;
 * ``report-data.json`` — everything else the report shows (threshold fits, filter counts,
@@ -49,7 +49,7 @@ STUDY_DATA_KIND = "study-report-data"
 SELECTIONS = ("heldout", "reported")
 SELECT_SEED_OFFSET = 100
 """Default selection seed of held-out selection: the reported evaluation seed + this."""
-CELL_KEYS = ("task", "model", "method", "operator", "study", "point")
+CELL_KEYS = ("collection", "task", "model", "method", "operator", "study", "point")
 SELECTION_TEXT = {
     "heldout": "**Checkpoint selection: held-out.** Each training seed's checkpoint is chosen "
     "on the rollouts of one evaluation seed (initial states) and its success is reported on "
@@ -123,6 +123,7 @@ def cell_frame(config: Mapping[str, Any], path: str | Path) -> Any:
     role = np.where(frame["eval_seed"].to_numpy() == report_seed, "report", "select")
     point = config.get("point")
     return frame.assign(
+        collection=np.int32(config.get("collection", 0)),
         task=config["evaluate"]["task"],
         model=config["model"],
         method=config["method"],
@@ -143,7 +144,8 @@ def empty_rollouts() -> Any:
 
     return pd.DataFrame(
         {
-            **{k: pd.Series(dtype=str) for k in CELL_KEYS if k != "point"},
+            **{k: pd.Series(dtype=str) for k in CELL_KEYS if k not in ("point", "collection")},
+            "collection": pd.Series(dtype=np.int32),
             "point": pd.Series(dtype=np.int32),
             "selection": pd.Series(dtype=str),
             "training_seed": pd.Series(dtype=np.int32),
@@ -206,6 +208,7 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
                 selection=str(first["selection"]),
                 eval_seeds=tuple(sorted({int(s) for s in g["eval_seed"]})),
                 select_success=float(best["success"]),
+                collection=int(first["collection"]),
             )
         )
     return rows
@@ -326,7 +329,10 @@ def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
         raise ElicitError(f"{DATA_FILE} is a '{header.get('kind')}' artifact", folder)
     if read_header(folder / ROLLOUTS_FILE).get("kind") != ROLLOUTS_KIND:
         raise ElicitError(f"{ROLLOUTS_FILE} is not a study rollout table", folder)
-    return header, pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
+    frame = pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
+    if header["kind"] == DATA_KIND and "collection" not in frame:  # kept before [collections]
+        frame.insert(0, "collection", np.int32(0))
+    return header, frame
 
 
 def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> ReportData:

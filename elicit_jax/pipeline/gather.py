@@ -8,6 +8,7 @@ report of a partial run is still correct about what it shows.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -202,6 +203,32 @@ def training_note(train: Mapping[str, Any]) -> str:
     )
 
 
+def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -> None:
+    """Add what one finished stage (not an evaluation) contributes to the report's ``rows``,
+    each row marked with the stage's collection."""
+    kind, cfg = stage["kind"], stage["config"]
+    collection = int(cfg.get("collection", 0))
+
+    def mark(row: Any) -> Any:
+        return dataclasses.replace(row, collection=collection)
+
+    if kind == "collect":
+        rows["lengths"] += [mark(r) for r in _length_rows(stage, path)]
+    elif kind == "fit-thresholds":
+        rows["thresholds"].append(mark(_threshold_row(stage, path)))
+    elif kind == "lambda-valley":
+        rows["thresholds"].append(mark(_valley_row(stage, path)))
+    elif kind in ("filter", "curate"):
+        rows["filters"].append(mark(_filter_row(stage, path)))
+    elif kind in ("deminf", "demo-score", "cupid", "quality"):
+        rows["curation"].append(mark(_curation_row(stage, path)))
+    elif kind == "lambda-point":
+        rows["points"].append(_lambda_point(stage, path))
+    elif kind == "map":
+        where = f"{cfg['task']}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
+        rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
+
+
 def gather(run_dir: str | Path) -> ReportData:
     """Everything the report shows, read from ``run_dir``'s finished artifacts."""
     return gather_with_rollouts(run_dir)[0]
@@ -216,7 +243,8 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
     manifest = read_manifest(run_dir)
     cfg = manifest["config"]
     frames = []
-    thresholds, lengths, filters, maps, curation, points = [], [], [], [], [], []
+    rows: dict[str, list] = {k: [] for k in ("thresholds", "lengths", "filters", "curation")}
+    rows |= {"points": [], "maps": []}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
     for stage in manifest["stages"]:
@@ -226,25 +254,10 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
             continue
         if not path.exists():
             missing.append(stage["id"])
-            continue
-        kind = stage["kind"]
-        if kind == "collect":
-            lengths += _length_rows(stage, path)
-        elif kind == "fit-thresholds":
-            thresholds.append(_threshold_row(stage, path))
-        elif kind == "lambda-valley":
-            thresholds.append(_valley_row(stage, path))
-        elif kind in ("filter", "curate"):
-            filters.append(_filter_row(stage, path))
-        elif kind in ("deminf", "demo-score", "cupid", "quality"):
-            curation.append(_curation_row(stage, path))
-        elif kind == "lambda-point":
-            points.append(_lambda_point(stage, path))
-        elif kind == "map":
-            c = stage["config"]
-            maps.append((f"{c['task']}, {c['model']}: compatibility map per operator", str(path)))
-        elif kind == "evaluate":
+        elif stage["kind"] == "evaluate":
             frames.append(cell_frame(stage["config"], path))
+        else:
+            _gather_stage(stage, path, rows)
     notes = [training_note(configs.get("train", {}))] if configs.get("train") else []
     if missing:
         notes.append(
@@ -262,12 +275,12 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
         spec_text=cfg.get("spec_text", ""),
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
-        lambda_points=tuple(points),
-        curation=tuple(curation),
-        thresholds=tuple(thresholds),
-        lengths=tuple(lengths),
-        filters=tuple(filters),
-        maps=tuple(maps),
+        lambda_points=tuple(rows["points"]),
+        curation=tuple(rows["curation"]),
+        thresholds=tuple(rows["thresholds"]),
+        lengths=tuple(rows["lengths"]),
+        filters=tuple(rows["filters"]),
+        maps=tuple(rows["maps"]),
         configs=configs,
         versions=manifest.get("versions", {}),
         notes=tuple(notes),

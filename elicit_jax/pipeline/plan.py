@@ -4,10 +4,14 @@ Per task: collect D_base, one D_new per operator and the two contrast sets (held
 demos = compatible; demos of the known-conflicting operator = incompatible), each with its own
 collection seed so the contrast sets never overlap a D_new. Per task × model: train the base
 policy (all seeds in one stage: the policy library vmaps over seeds); per operator train on
-D_base ∪ D_new (naive); score D_new and the contrast sets with the first seed's base policy, fit
-(λ, η) on the contrast scores, filter D_new (M-filter and baseline filters), retrain on
-D_base ∪ filtered (all seeds), evaluate every policy (all seeds and checkpoints); draw the
-maps; one report.
+D_base ∪ D_new (naive); score the contrast sets with the first seed's base policy, fit (λ, η)
+on their scores, score each D_new under the fitted (λ, η), filter D_new (M-filter and baseline
+filters), retrain on D_base ∪ filtered (all seeds), evaluate every policy (all seeds and
+checkpoints); draw the maps; one report.
+
+A ``[collections]`` table repeats every task's chain, from collection to evaluation, on other
+collections of the same demo sets (:func:`collection_specs`): collection 0 keeps the ids and
+outputs of a single-collection study, collection ``c`` has ``c<c>/`` in its own.
 
 The curation baselines add, per operator, a ``deminf`` stage (per task: DemInf needs no
 policy) or a ``demo-score`` stage (per task × model: it rolls out the naive policy of that
@@ -19,20 +23,40 @@ held-out seeds and evaluated on held-out initial states.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import dataclasses
 from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.curation_stages import cupid_plan, per_demo_source, quality_plan
 from elicit_jax.pipeline.graph import Graph, Stage
+from elicit_jax.pipeline.plan_cell import (
+    Cell,
+    ConfigResolver,
+    demo_score_stage,
+    sensitivity_stages,
+)
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
 
 FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
 M_FILTER_METHODS = tuple(m for m in FILTER_METHODS if m not in CURATION_METHODS)
 COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
-
-ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
+COLLECTION_STRIDE = 100
+"""Collection ``c`` collects with seeds ``collect_seed + COLLECTION_STRIDE · c + offset``."""
+REPORT_KINDS = (
+    "collect",
+    "fit-thresholds",
+    "evaluate",
+    "map",
+    "filter",
+    "curate",
+    "deminf",
+    "demo-score",
+    "cupid",
+    "quality",
+    "lambda-point",
+    "lambda-valley",
+)
 
 
 def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
@@ -93,7 +117,7 @@ def threshold_stages(
 
 
 def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Graph:
-    """The stage graph of ``spec``.
+    """The stage graph of ``spec``: each collection's per-task chains, then one report.
 
     Args:
       spec: the parsed definition.
@@ -101,28 +125,9 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
         library's full config here (validating field names), so a changed default re-runs.
     """
     stages: list[Stage] = []
-    needs_scores = any(m in FILTER_METHODS for m in spec.methods)
-    for task in spec.tasks:
-        stages += _collect_stages(spec, task, resolve, needs_scores)
-        stages += _deminf_stages(spec, task, resolve)
-        stages += quality_plan(spec, task, resolve)
-        for model in spec.models:
-            stages += _cell_stages(spec, task, model, needs_scores, resolve)
-    report_kinds = (
-        "collect",
-        "fit-thresholds",
-        "evaluate",
-        "map",
-        "filter",
-        "curate",
-        "deminf",
-        "demo-score",
-        "cupid",
-        "quality",
-        "lambda-point",
-        "lambda-valley",
-    )
-    report_inputs = {s.id: s.id for s in stages if s.kind in report_kinds}
+    for number, sub in collection_specs(spec):
+        stages += collection_stages(sub, number, resolve)
+    report_inputs = {s.id: s.id for s in stages if s.kind in REPORT_KINDS}
     stages.append(
         Stage(
             id="report",
@@ -142,6 +147,84 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
         )
     )
     return Graph(stages)
+
+
+def collection_specs(spec: PipelineSpec) -> list[tuple[int, PipelineSpec]]:
+    """Each collection of the study and the spec its stages are planned from.
+
+    Without ``[collections]``: the definition's one collection (number 0). With it: per
+    collection seed ``c``, the definition with ``collect_seed`` moved by
+    ``COLLECTION_STRIDE · c`` (every demo set of a collection has its own seeds, disjoint from
+    every other collection's); the first collection runs the full ``methods`` and the
+    λ-sensitivity study, the others the ``[collections] methods``.
+    """
+    coll = spec.collections
+    if coll is None:
+        return [(0, spec)]
+    most = max(len(t.operators) for t in spec.tasks)
+    if NEW_SEED_OFFSET + most > COLLECTION_STRIDE:
+        raise ElicitError(
+            f"[collections] supports at most {COLLECTION_STRIDE - NEW_SEED_OFFSET} operators "
+            "per task (each D_new needs its own collection seed)",
+            spec.source,
+        )
+    out = []
+    for i, c in enumerate(coll.seeds):
+        first = i == 0
+        out.append(
+            (
+                c,
+                dataclasses.replace(
+                    spec,
+                    collect_seed=spec.collect_seed + COLLECTION_STRIDE * c,
+                    methods=spec.methods if first else coll.methods,
+                    sensitivity=spec.sensitivity if first else None,
+                    collections=None,
+                ),
+            )
+        )
+    return out
+
+
+def collection_stages(spec: PipelineSpec, number: int, resolve: ConfigResolver) -> list[Stage]:
+    """Every task's stages in collection ``number`` (``spec`` is that collection's, from
+    :func:`collection_specs`). Collection 0 keeps the stage ids, outputs and configs of a
+    single-collection study; collection ``c`` puts ``c<c>/`` after the first part of every id
+    and output (``collect/c1/square-nut/base``, ``data/c1/square-nut/base.parquet``) and records
+    ``collection = c`` in every config."""
+    if number != 0:
+        inner = resolve
+
+        def resolve(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+            return inner(kind, {**raw, "collection": number})
+
+    stages: list[Stage] = []
+    needs_scores = any(m in FILTER_METHODS for m in spec.methods)
+    for task in spec.tasks:
+        stages += _collect_stages(spec, task, resolve, needs_scores)
+        stages += _deminf_stages(spec, task, resolve)
+        stages += quality_plan(spec, task, resolve)
+        for model in spec.models:
+            stages += _cell_stages(spec, task, model, needs_scores, resolve)
+    return stages if number == 0 else [in_collection(s, number) for s in stages]
+
+
+def in_collection(stage: Stage, number: int) -> Stage:
+    """``stage`` moved into collection ``number``: ``c<number>/`` after the first part of its
+    id, output and input ids (a map: ``maps/c<number>-<name>.png``, as reports keep maps side
+    by side under their file names)."""
+
+    def move(path: str, sep: str = "/") -> str:
+        head, _, rest = path.partition("/")
+        return f"{head}/c{number}{sep}{rest}"
+
+    return dataclasses.replace(
+        stage,
+        id=move(stage.id),
+        output=move(stage.output, "-" if stage.kind == "map" else "/"),
+        inputs={k: move(v) for k, v in stage.inputs.items()},
+        label=f"c{number}: {stage.label}",
+    )
 
 
 def _collect_stages(
@@ -203,109 +286,10 @@ def _deminf_stages(spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver) 
     ]
 
 
-class _Cell:
-    """Stage builders of one task × model cell."""
-
-    def __init__(
-        self, spec: PipelineSpec, task: TaskSpec, model: str, resolve: ConfigResolver
-    ) -> None:
-        self.spec, self.task, self.model, self.resolve = spec, task, model, resolve
-        self.t = task.name
-        self.cell = f"{task.name}/{model}"
-        self.where = {"task": task.name, "model": model}
-
-    def train(
-        self,
-        method: str,
-        op: str | None,
-        extra: Mapping[str, str],
-        seeds: tuple[int, ...] | None = None,
-        prefix: str = "",
-        meta: Mapping[str, Any] | None = None,
-    ) -> Stage:
-        seeds = seeds or self.spec.seeds
-        suffix = prefix + (method if op is None else f"{method}/{op}")
-        raw = {**self.spec.section("train"), **self.where, "seeds": list(seeds)}
-        raw |= {"profile": self.spec.profile, "method": method, "operator": op, **(meta or {})}
-        return Stage(
-            id=f"train/{self.cell}/{suffix}",
-            kind="train",
-            output=f"policies/{self.cell}/{suffix.replace('/', '-')}",
-            config=self.resolve("train", raw),
-            inputs={"demos0": f"collect/{self.t}/base", **extra},
-            label=f"train {self.t} {self.model} {suffix} (seeds {_seeds(seeds)})",
-        )
-
-    def evaluate(
-        self,
-        train_stage: Stage,
-        method: str,
-        op: str | None,
-        held_out: bool = False,
-        prefix: str = "",
-        meta: Mapping[str, Any] | None = None,
-    ) -> Stage:
-        """Evaluate every seed and checkpoint of a training run (the held-out study: its seeds
-        and initial states)."""
-        sens = self.spec.sensitivity
-        seeds = sens.seeds if held_out and sens else self.spec.seeds
-        suffix = prefix.replace("/", "-") + (method if op is None else f"{method}-{op}")
-        raw = {**self.spec.section("evaluate"), **self.where, "seeds": list(seeds)}
-        raw |= {"profile": self.spec.profile, "method": method, "operator": op, **(meta or {})}
-        if held_out and sens:
-            raw["seed"] = sens.eval_seed
-        return Stage(
-            id=f"evaluate/{self.cell}/{suffix}",
-            kind="evaluate",
-            output=f"evals/{self.cell}/{suffix}.parquet",
-            config=self.resolve("evaluate", raw),
-            inputs={"policy": train_stage.id},
-            label=f"evaluate {self.t} {self.model} {suffix}",
-        )
-
-    def filter(
-        self, method: str, op: str, score: Stage, thresholds: str, prefix: str = ""
-    ) -> Stage:
-        """An M-filter or baseline filter of one D_new under the thresholds of a stage."""
-        return Stage(
-            id=f"filter/{self.cell}/{prefix}{method}/{op}",
-            kind="filter",
-            output=f"filtered/{self.cell}/{prefix.replace('/', '-')}{method}-{op}",
-            config=self.resolve(
-                "filter",
-                {**self.spec.section("filter"), **self.where, "method": method, "operator": op},
-            ),
-            inputs={"scores": score.id, "thresholds": thresholds, "demos": self.new(op)},
-            seed=self.spec.collect_seed,
-            label=f"filter {self.t} {self.model} {op} ({prefix}{method})",
-        )
-
-    def curate(self, method: str, op: str, scores: str, score: Stage, fit: Stage) -> Stage:
-        """DemInf / Demo-SCORE cut of one D_new: own rule, or the M-filter's budget."""
-        raw = {**self.where, "method": method, "operator": op}
-        raw |= {"filter": self.spec.section("filter"), "deminf": self.spec.section("deminf")}
-        return Stage(
-            id=f"filter/{self.cell}/{method}/{op}",
-            kind="curate",
-            output=f"filtered/{self.cell}/{method}-{op}",
-            config=self.resolve("curate", raw),
-            inputs={
-                "episode_scores": scores,
-                "scores": score.id,
-                "thresholds": fit.id,
-                "demos": self.new(op),
-            },
-            label=f"curate {self.t} {self.model} {op} ({method})",
-        )
-
-    def new(self, op: str) -> str:
-        return f"collect/{self.t}/new/{op}"
-
-
 def _cell_stages(
     spec: PipelineSpec, task: TaskSpec, model: str, needs_scores: bool, resolve: ConfigResolver
 ) -> list[Stage]:
-    c = _Cell(spec, task, model, resolve)
+    c = Cell(spec, task, model, resolve)
     stages: list[Stage] = []
     base = c.train("base", None, {})
     stages += [base, c.evaluate(base, "base", None)]
@@ -327,14 +311,14 @@ def _cell_stages(
             kind="score",
             output=f"scores/{c.cell}/new-{op}",
             config=resolve("score", {**score_raw, "set": op}),
-            inputs={"policy": base.id, "demos0": c.new(op)},
+            inputs={"policy": base.id, "demos0": c.new(op), "thresholds": fit.id},
             label=f"score {c.t} {model} D_new of {op}",
         )
         stages.append(score)
         map_inputs[f"scores:{op}"] = score.id
         demo_score = None
         if any(m.startswith("demo-score") for m in spec.methods):
-            demo_score = _demo_score_stage(c, op, naive[op])
+            demo_score = demo_score_stage(c, op, naive[op])
             stages.append(demo_score)
         cupid = None
         if any(m.startswith("cupid") for m in spec.methods):
@@ -380,59 +364,5 @@ def _cell_stages(
     )
     sens = spec.sensitivity
     if sens is not None and (not sens.tasks or task.name in sens.tasks):
-        stages += _sensitivity_stages(c, scores, fit)
+        stages += sensitivity_stages(c, scores, fit)
     return stages
-
-
-def _demo_score_stage(c: _Cell, op: str, naive: Stage) -> Stage:
-    raw = {**c.spec.section("demo_score"), **c.where, "operator": op}
-    raw |= {"policy_seed": c.spec.seeds[0]}
-    return Stage(
-        id=f"demo-score/{c.cell}/{op}",
-        kind="demo-score",
-        output=f"curation/{c.cell}/demo-score-{op}.parquet",
-        config=c.resolve("demo-score", raw),
-        inputs={"policy": naive.id, "demos": c.new(op)},
-        label=f"demo-score {c.t} {c.model} D_new of {op} (rollouts of its naive policy)",
-    )
-
-
-def _sensitivity_stages(c: _Cell, scores: Mapping[str, Stage], fit: Stage) -> list[Stage]:
-    """Base, naive and M-filtered at each λ point, on held-out training and evaluation seeds."""
-    sens = c.spec.sensitivity
-    assert sens is not None
-    ops = sens.operators or c.task.operators
-    unknown = [op for op in ops if op not in c.task.operators]
-    if unknown:
-        raise ElicitError(
-            f"[sensitivity] operators {', '.join(unknown)} are not operators of {c.t}"
-        )
-    seeds = sens.seeds
-    meta = {"study": "sensitivity"}
-    base = c.train("base", None, {}, seeds, "heldout/", meta)
-    stages = [base, c.evaluate(base, "base", None, True, "heldout/", meta)]
-    for op in ops:
-        naive = c.train("naive", op, {"demos1": c.new(op)}, seeds, "heldout/", meta)
-        stages += [naive, c.evaluate(naive, "naive", op, True, "heldout/", meta)]
-    for k in range(sens.points):
-        point = Stage(
-            id=f"lambda-point/{c.cell}/{k}",
-            kind="lambda-point",
-            output=f"thresholds/{c.cell}-lambda{k}.json",
-            config=c.resolve("lambda-point", {**c.where, "point": k, "points": sens.points}),
-            inputs={"thresholds": fit.id},
-            label=f"λ point {k + 1}/{sens.points} of {c.t} {c.model}",
-        )
-        stages.append(point)
-        prefix = f"heldout/lambda{k}/"
-        for op in ops:
-            filt = c.filter("filtered", op, scores[op], point.id, prefix)
-            point_meta = {**meta, "point": k}
-            trained = c.train("filtered", op, {"demos1": filt.id}, seeds, prefix, point_meta)
-            held = c.evaluate(trained, "filtered", op, True, prefix, point_meta)
-            stages += [filt, trained, held]
-    return stages
-
-
-def _seeds(seeds: tuple[int, ...]) -> str:
-    return ",".join(str(s) for s in seeds)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, dumps, provenance_line
+from elicit_jax.pipeline.across import across_note, across_tables
 from elicit_jax.pipeline.evidence import (
     DATA_FILE,
     ROLLOUTS_FILE,
@@ -48,7 +49,7 @@ CPU_NOTE = (
 def _sections(data: ReportData) -> list[tuple[str, Any]]:
     """Ordered (title, content) blocks shared by both renderers; content is a Table, text,
     a list of maps or a code block (``("code", text)``)."""
-    blocks: list[tuple[str, Any]] = []
+    blocks: list[tuple[str, Any]] = list(across_tables(data))
     diffs = difference_tables(data)
     for (title, table), diff in zip(results_tables(data), diffs, strict=True):
         blocks += [(title, table), diff]
@@ -124,6 +125,7 @@ def _intro(data: ReportData) -> list[str]:
     if data.results or data.heldout:
         lines.append(f"Differences between policies: {INTERVAL_NOTE}")
         lines.append(STD_NOTE)
+        lines += across_note(data)
     return lines
 
 

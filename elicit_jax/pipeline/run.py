@@ -130,8 +130,8 @@ def run_pipeline(
     note = " — CPU profile: shrunk networks/epochs, not the paper's sizes" * (spec.profile == "cpu")
     console.print(
         f"[bold]{spec.name}[/] ({spec.profile} profile{note}): {len(graph)} stages, "
-        f"{len(spec.tasks)} task(s) × {len(spec.models)} model(s) × {len(spec.seeds)} seed(s) "
-        f"→ {run_dir}"
+        f"{len(spec.tasks)} task(s) × {len(spec.models)} model(s) × {len(spec.seeds)} seed(s)"
+        f"{_collections_note(spec)} → {run_dir}"
     )
     run_dir.mkdir(parents=True, exist_ok=True)
     if config.ray is not None:
@@ -192,9 +192,16 @@ def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str,
     return out
 
 
+def _collections_note(spec: Any) -> str:
+    coll = getattr(spec, "collections", None)
+    return "" if coll is None else f" × {len(coll.seeds)} collections {list(coll.seeds)}"
+
+
 def print_results(run_dir: Path, console: Any) -> None:
     """Print the run's result tables (paper layout) from its finished artifacts, each followed
-    by its differences from Naive with their paired 95% intervals (as in the report)."""
+    by its differences from Naive with their paired 95% intervals, after the across-collections
+    tables of a study over several collections (as in the report)."""
+    from elicit_jax.pipeline.across import across_tables
     from elicit_jax.pipeline.tables import difference_tables, models_table, results_tables
 
     if _is_study(run_dir):
@@ -202,7 +209,7 @@ def print_results(run_dir: Path, console: Any) -> None:
     data = gather(run_dir)
     results = results_tables(data)
     paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
-    _print_tables(paired + models_table(data), data.notes, console)
+    _print_tables(across_tables(data) + paired + models_table(data), data.notes, console)
 
 
 def _print_tables(tables: list, notes: Any, console: Any) -> None:

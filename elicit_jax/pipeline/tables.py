@@ -1,164 +1,72 @@
-"""Report content: the data a report shows and the tables built from it.
+"""Report content: the tables of results built from :class:`ReportData`.
 
-:class:`ReportData` holds everything a report shows (gathered from a run directory by
-:mod:`elicit_jax.pipeline.gather`); the ``*_table`` functions turn it into ``(header, rows)``
-tables in the paper's layout, which :mod:`elicit_jax.pipeline.report` renders.
+The ``*_table(s)`` functions turn the data into ``(header, rows)`` tables in the paper's
+layout, which :mod:`elicit_jax.pipeline.report` renders: success per policy, paired
+differences, model comparison, λ sensitivity, rollout lengths. With several collections
+(``[collections]``) each collection gets its own results and difference tables; the pooled
+table is :mod:`elicit_jax.pipeline.across`'s. The tables of fits, filters and curation are in
+:mod:`elicit_jax.pipeline.tables_fit`; the rows in :mod:`elicit_jax.pipeline.report_rows`
+(both re-exported here for the modules that read them from this one).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
-from elicit_jax.pipeline.findings import Findings
+from elicit_jax.pipeline.report_rows import (
+    METHOD_LABELS,
+    CurationRow,
+    FilterRow,
+    LambdaPoint,
+    LengthRow,
+    ReportData,
+    ResultRow,
+    Table,
+    ThresholdRow,
+    task_label,
+)
+from elicit_jax.pipeline.tables_fit import (
+    curation_table,
+    decisions_table,
+    filter_table,
+    length_table,
+    threshold_table,
+    trust_text,
+)
 from elicit_jax.stats import PairedDiff, format_diff, paired_t_interval
 
-METHOD_LABELS = {
-    "base": "Base",
-    "naive": "Naive",
-    "filtered": "M-Filtered",
-    "filtered-episode": "M-Filtered (episodes)",
-    "random": "Random filter",
-    "longest": "Drop longest",
-    "shortest": "Drop shortest",
-    "likelihood": "Likelihood-only",
-    "novelty": "Novelty-only",
-    "filtered-valley": "M-Filtered (valley λ)",
-    "deminf": "DemInf",
-    "deminf-matched": "DemInf (M's amount)",
-    "demo-score": "Demo-SCORE",
-    "demo-score-matched": "Demo-SCORE (M's amount)",
-    "cupid": "CUPID",
-    "cupid-matched": "CUPID (M's amount)",
-    "quality": "Quality flags",
-    "quality-matched": "Quality flags (M's amount)",
-}
+__all__ = [
+    "METHOD_LABELS",
+    "CurationRow",
+    "FilterRow",
+    "LambdaPoint",
+    "LengthRow",
+    "ReportData",
+    "ResultRow",
+    "Table",
+    "ThresholdRow",
+    "curation_table",
+    "decisions_table",
+    "difference_tables",
+    "filter_table",
+    "length_table",
+    "mean_std",
+    "models_table",
+    "results_tables",
+    "rollout_length_table",
+    "sensitivity_tables",
+    "threshold_table",
+    "trust_text",
+]
+
 INTERVAL_NOTE = (
     "95% interval of the difference, paired by training seed and initial states (every policy "
     "is evaluated on the same seeded initial states): Student's t over the per-seed differences "
     "(see docs/pipelines.md); * marks an interval that excludes 0."
 )
-
-
-@dataclasses.dataclass(frozen=True)
-class ResultRow:
-    """Success of one trained policy (one seed), at its selected checkpoint."""
-
-    task: str
-    model: str
-    method: str
-    operator: str | None
-    seed: int
-    success: float
-    mean_length: float
-    n_rollouts: int
-    checkpoint: str
-    init_states: str = ""
-    study: str = "main"
-    point: int | None = None
-    selection: str = "reported"
-    eval_seeds: tuple[int, ...] = ()
-    select_success: float | None = None
-
-
-@dataclasses.dataclass(frozen=True)
-class ThresholdRow:
-    """A threshold fit and the contrast sets it was fitted on."""
-
-    task: str
-    model: str
-    lambda_: float
-    eta: float
-    compatible: str
-    incompatible: str
-    metrics: Mapping[str, Any]
-
-
-@dataclasses.dataclass(frozen=True)
-class LengthRow:
-    """Demonstration lengths of one demo set."""
-
-    task: str
-    name: str
-    operator: str
-    n_episodes: int
-    mean_length: float
-    std_length: float
-
-
-@dataclasses.dataclass(frozen=True)
-class FilterRow:
-    """What one filter kept of one D_new."""
-
-    task: str
-    model: str
-    method: str
-    operator: str
-    pairs_kept: int
-    pairs_total: int
-    episodes_kept: int
-    episodes_total: int
-    note: str = ""
-
-
-@dataclasses.dataclass(frozen=True)
-class CurationRow:
-    """Per-demonstration scores of one curation baseline on one D_new."""
-
-    task: str
-    model: str | None
-    method: str
-    operator: str
-    scores: tuple[float, ...]
-    threshold: float | None
-    trusted: bool
-    report: Mapping[str, Any]
-
-
-@dataclasses.dataclass(frozen=True)
-class LambdaPoint:
-    """One λ of the sensitivity study: point k of the fit's margin range."""
-
-    task: str
-    model: str
-    point: int
-    lambda_: float
-    fitted: float
-    low: float
-    high: float
-
-
-@dataclasses.dataclass(frozen=True)
-class ReportData:
-    """Everything a report shows."""
-
-    pipeline: str
-    profile: str
-    description: str
-    run_dir: str
-    spec_text: str
-    results: tuple[ResultRow, ...]
-    thresholds: tuple[ThresholdRow, ...] = ()
-    lengths: tuple[LengthRow, ...] = ()
-    filters: tuple[FilterRow, ...] = ()
-    curation: tuple[CurationRow, ...] = ()
-    heldout: tuple[ResultRow, ...] = ()
-    lambda_points: tuple[LambdaPoint, ...] = ()
-    maps: tuple[tuple[str, str], ...] = ()
-    figures: tuple[tuple[str, str], ...] = ()
-    configs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
-    notes: tuple[str, ...] = ()
-    findings: Findings | None = None
-    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    raw_results: bool = False
-
-
-Table = tuple[list[str], list[list[str]]]
 
 
 STD_NOTE = (
@@ -198,13 +106,37 @@ def _cells(results: Sequence[ResultRow]) -> dict[tuple, list[float]]:
     return out
 
 
+def collections_of(results: Sequence[ResultRow]) -> list[int]:
+    """The collections ``results`` come from, in the order they first appear."""
+    return list(dict.fromkeys(r.collection for r in results))
+
+
+def per_collection(data: ReportData) -> list[tuple[str, ReportData]]:
+    """``data`` cut by collection, each with a title prefix (none for a single collection)."""
+    colls = collections_of(data.results)
+    if len(colls) <= 1:
+        return [("", data)]
+    return [
+        (
+            f"collection {c}: ",
+            dataclasses.replace(data, results=tuple(r for r in data.results if r.collection == c)),
+        )
+        for c in colls
+    ]
+
+
 def results_tables(data: ReportData) -> list[tuple[str, Table]]:
-    """One table per task × model in the paper's layout: rows = operators, columns = methods.
+    """One table per (collection ×) task × model in the paper's layout: rows = operators,
+    columns = methods.
 
     The first row is the base policy (D_base only); each operator row gives π_new trained on
     D_base ∪ D_new (Naive) and on the filtered D_new (M-Filtered, baselines), as success
     rate % mean (std) over seeds.
     """
+    return [(pre + t, table) for pre, d in per_collection(data) for t, table in _results(d)]
+
+
+def _results(data: ReportData) -> list[tuple[str, Table]]:
     cells = _cells(data.results)
     out = []
     for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
@@ -255,6 +187,10 @@ def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
     """Beside each results table: every cell's difference from Naive with its paired 95%
     interval (the Naive column: Naive − Base, does adding this operator's data help?), then
     the M-filters' differences from Base (the paper's claim: filtered ≥ base)."""
+    return [(pre + t, table) for pre, d in per_collection(data) for t, table in _differences(d)]
+
+
+def _differences(data: ReportData) -> list[tuple[str, Table]]:
     rows_of = _rows(data.results)
     out = []
     for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
@@ -288,7 +224,9 @@ def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
 
 
 def models_table(data: ReportData) -> list[tuple[str, Table]]:
-    """Per task with several models: rows = base + operators, columns = models (Naive)."""
+    """Per task with several models: rows = base + operators, columns = models (Naive); the
+    first collection's."""
+    data = per_collection(data)[0][1]
     cells = _cells(data.results)
     out = []
     for task in dict.fromkeys(r.task for r in data.results):
@@ -315,71 +253,6 @@ def models_table(data: ReportData) -> list[tuple[str, Table]]:
             )
         out.append((f"{task}: model comparison, success % mean (std)", (["", *models], rows)))
     return out
-
-
-def curation_table(data: ReportData) -> Table:
-    """What each curation baseline saw: its per-demo scores, its own cut, its diagnostics."""
-    from elicit_jax.curation.demo_score import at_chance
-
-    header = [
-        "task",
-        "model",
-        "operator",
-        "method",
-        "demo scores min / median / max",
-        "own cut",
-        "diagnostics",
-    ]
-    rows = []
-    for c in data.curation:
-        s = np.asarray(c.scores, float)
-        spread = f"{s.min():.3g} / {np.median(s):.3g} / {s.max():.3g}" if s.size else "–"
-        rep = c.report
-        if c.method == "deminf":
-            cut = f"lowest {100 * rep.get('drop_fraction', 0.2):g}% of demos"
-            base = rep.get("base_demo_scores", {})
-            diag = (
-                f"I(S;A) ≈ {rep.get('mi_estimate', math.nan):.3g} nats over "
-                f"{rep.get('n_pairs', '?')} pairs; D_base demos' mean score "
-                f"{base.get('mean', math.nan):.3g}"
-            )
-        elif c.method in ("cupid", "quality"):
-            cut = "–" if c.threshold is None else f"score <= {c.threshold:.3g}"
-            diag = (
-                f"{rep.get('rollouts')} noisy rollouts ({rep.get('rollout_successes')} "
-                f"successes); {rep.get('negative_demos')} demos of negative influence"
-                if c.method == "cupid"
-                else f"{rep.get('flagged')} demos flagged ({rep.get('flags')})"
-            )
-        else:
-            cut = "–" if c.threshold is None else f"score <= {c.threshold:.3g}"
-            ckpts = ", ".join(
-                f"{k['epoch']}: {k['successes']}/{k['rollouts']}"
-                for k in rep.get("checkpoints", [])
-            )
-            diag = f"rollout successes per epoch {ckpts}"
-            if c.trusted:
-                diag += (
-                    f"; trained on epoch {rep.get('chosen_train_epoch')}, validated on "
-                    f"{rep.get('validation_epoch')}: rollout balanced accuracy "
-                    f"{rep.get('validation_balanced_accuracy', math.nan):.2f}"
-                )
-                if at_chance(rep):
-                    diag += " (no better than chance: the ranking carries no signal)"
-        if not c.trusted:
-            diag += f"; NO SIGNAL ({rep.get('why', '')}): nothing dropped"
-        rows.append(
-            [
-                c.task,
-                c.model or "–",
-                c.operator,
-                METHOD_LABELS.get(c.method, c.method),
-                spread,
-                cut,
-                diag,
-            ]
-        )
-    return header, rows
 
 
 def sensitivity_tables(data: ReportData) -> list[tuple[str, Table]]:
@@ -429,111 +302,14 @@ def sensitivity_tables(data: ReportData) -> list[tuple[str, Table]]:
     return out
 
 
-def threshold_table(data: ReportData) -> Table:
-    """λ, η, fit quality and the contrast sets each fit used."""
-    header = [
-        "task",
-        "model",
-        "λ",
-        "η",
-        "balanced acc.",
-        "margin",
-        "leave-one-out acc.",
-        "trust",
-        "compatible set",
-        "incompatible set",
-    ]
-    rows = []
-    for t in data.thresholds:
-        m = t.metrics
-        rows.append(
-            [
-                t.task,
-                t.model,
-                f"{t.lambda_:.4g}",
-                f"{t.eta:.4g}",
-                _num(m.get("balanced_accuracy")),
-                _num(m.get("margin")),
-                _num(m.get("loo_accuracy")),
-                trust_text(m.get("trust")),
-                t.compatible,
-                t.incompatible,
-            ]
-        )
-    return header, rows
-
-
-def trust_text(trust: Mapping[str, Any] | None) -> str:
-    """A fit's trust verdict for a report cell: ``ok``, or the verdict and its reasons."""
-    if not trust:
-        return "–"
-    if trust.get("trustworthy"):
-        return "ok"
-    verdict = "MEANINGLESS (forced)" if trust.get("meaningless") else "NOT TRUSTWORTHY"
-    return f"{verdict}: " + "; ".join(trust.get("problems", []))
-
-
-def decisions_table(data: ReportData) -> Table:
-    """Per fit and contrast operator: incompatible pairs and rejected demos under (λ, η)."""
-    header = ["task", "model", "operator", "pairs", "incompatible pairs", "demos rejected"]
-    rows = []
-    for t in data.thresholds:
-        for op, c in dict(t.metrics.get("per_operator", {})).items():
-            rows.append(
-                [
-                    t.task,
-                    t.model,
-                    op,
-                    str(c["pairs"]),
-                    f"{c['incompatible_pairs']} ({_pct(c['incompatible_pairs'], c['pairs'])})",
-                    f"{c['rejected_episodes']}/{c['episodes']}",
-                ]
-            )
-    return header, rows
-
-
-def filter_table(data: ReportData) -> Table:
-    """Fraction of each D_new that each filter kept."""
-    header = ["task", "model", "operator", "filter", "pairs kept", "episodes kept", "note"]
-    rows = [
-        [
-            f.task,
-            f.model,
-            f.operator,
-            METHOD_LABELS.get(f.method, f.method),
-            f"{f.pairs_kept}/{f.pairs_total} ({_pct(f.pairs_kept, f.pairs_total)})",
-            f"{f.episodes_kept}/{f.episodes_total}",
-            f.note,
-        ]
-        for f in data.filters
-    ]
-    return header, rows
-
-
-def length_table(data: ReportData) -> Table:
-    """Mean demonstration length per operator (steps), with std over episodes."""
-    header = ["task", "demo set", "operator", "episodes", "mean length (std)"]
-    rows = [
-        [
-            r.task,
-            r.name,
-            r.operator,
-            str(r.n_episodes),
-            f"{r.mean_length:.1f} ({r.std_length:.1f})"
-            if r.n_episodes > 1
-            else f"{r.mean_length:.1f} (–)",
-        ]
-        for r in data.lengths
-    ]
-    return header, rows
-
-
 def rollout_length_table(data: ReportData) -> Table:
     """Mean rollout length (steps, until success or the horizon) per policy over seeds, and
     the checkpoint selected for each seed."""
     groups: dict[tuple, list[ResultRow]] = {}
+    multi = len(collections_of(data.results)) > 1
     for r in sorted(data.results, key=lambda r: (r.task, r.model, r.operator or "", r.seed)):
-        groups.setdefault((r.task, r.model, r.method, r.operator), []).append(r)
+        task = task_label(r.task, r.collection, multi)
+        groups.setdefault((task, r.model, r.method, r.operator), []).append(r)
     header = [
         "task",
         "model",
@@ -554,13 +330,3 @@ def rollout_length_table(data: ReportData) -> Table:
         for (t, m, meth, op), rs in groups.items()
     ]
     return header, rows
-
-
-def _num(v: Any) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "–"
-    return f"{v:.3g}" if isinstance(v, float) else str(v)
-
-
-def _pct(a: int, b: int) -> str:
-    return f"{100.0 * a / b:.1f}%" if b else "–"

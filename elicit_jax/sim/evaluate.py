@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.stats import sample_std
 
 ROLLOUTS_KIND = "rollouts"
 ROLLOUTS_SCHEMA_VERSION = 1
@@ -258,8 +259,8 @@ def summarize(rollouts: Any, select: str = "all") -> Any:
 
     A training seed is one checkpoint directory (``path``); runs given the same label pool
     their seeds. Columns: policy, checkpoint, n_seeds, success_mean, success_std (over
-    training seeds, ddof 0; success in percent), mean_length (over all its rollouts), unstable
-    (rollouts whose physics diverged).
+    training seeds, ddof 1 as in the study tables, 0.0 for one seed; success in percent),
+    mean_length (over all its rollouts), unstable (rollouts whose physics diverged).
     """
     import pandas as pd
 
@@ -292,7 +293,7 @@ def summarize(rollouts: Any, select: str = "all") -> Any:
         row.update(
             n_seeds=len(g),
             success_mean=float(g.success.mean()),
-            success_std=float(g.success.std(ddof=0)),
+            success_std=sample_std(g.success),
             mean_length=float(g.length.mean()),
             unstable=int(g.unstable.sum()),
         )

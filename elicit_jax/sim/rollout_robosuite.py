@@ -225,61 +225,85 @@ def rollout_policy(
     import jax
 
     seeds = np.asarray(seeds)
-    n = len(seeds)
     own = pool is None
-    pool = pool or EnvPool(spec, min(workers, n), horizon)
+    pool = pool or EnvPool(spec, min(workers, len(seeds)), horizon)
     w = pool.size
-    out = {
-        "success": np.zeros(n, bool),
-        "steps_to_success": np.full(n, horizon, np.int32),
-        "ret": np.zeros(n),
-        "unstable": np.zeros(n, bool),
-        "init_obs": np.zeros((n, pool.obs_dim)),
-    }
+    slots = _Slots(len(seeds), w, pool.obs_dim, horizon)
     stateless = not jax.tree.leaves(policy.init_carry(1))
-    slot = np.full(w, -1)  # rollout index each worker runs (-1: idle)
-    t_slot = np.zeros(w, np.int64)
-    obs = np.zeros((w, pool.obs_dim), np.float32)
-    nxt, policy_s, env_steps = 0, 0.0, 0
+    policy_s, env_steps = 0.0, 0
     try:
-        while nxt < n or (slot >= 0).any():
-            if (slot < 0).all() or stateless:
-                starts = []
-                for i in np.flatnonzero(slot < 0)[: n - nxt]:
-                    slot[i], t_slot[i] = nxt, 0
-                    starts.append((i, "reset", int(seeds[nxt])))
-                    nxt += 1
-                for (i, _, _), (o, ok, _) in zip(starts, pool.request(starts), strict=True):
-                    if o is None:  # the reset itself failed: an unstable rollout
-                        out["unstable"][slot[i]], slot[i] = True, -1
-                        continue
-                    obs[i] = out["init_obs"][slot[i]] = o
-                    if ok:  # solved at the start: a success in zero steps
-                        out["success"][slot[i]], out["steps_to_success"][slot[i]] = True, 0
-                        slot[i] = -1
+        while slots.next < len(seeds) or slots.busy.any():
+            if not slots.busy.any() or stateless:
+                slots.start(pool, seeds)
                 carry = policy.init_carry(w)
-                if (slot < 0).all():
+                if not slots.busy.any():
                     continue
             t0 = time.perf_counter()
-            carry, action = act(policy, carry, obs)
+            carry, action = act(policy, carry, slots.obs)
             action = np.asarray(action, np.float64)
             policy_s += time.perf_counter() - t0
-            run = [i for i in range(w) if slot[i] >= 0]
-            answers = pool.request([(i, "step", action[i]) for i in run])
+            run = [i for i in range(w) if slots.busy[i]]
+            slots.record(run, pool.request([(i, "step", action[i]) for i in run]))
             env_steps += len(run)
-            for i, (o, ok, finite) in zip(run, answers, strict=True):
-                k = slot[i]
-                t_slot[i] += 1
-                if not finite or o is None:
-                    out["unstable"][k] = True
-                else:
-                    obs[i] = o
-                if ok and not out["unstable"][k]:
-                    out["success"][k], out["steps_to_success"][k] = True, t_slot[i]
-                if ok or out["unstable"][k] or t_slot[i] >= horizon:
-                    slot[i] = -1
     finally:
         if own:
             pool.close()
+    out = slots.out
     out["ret"] = out["success"].astype(np.float64)
     return out | {"policy_seconds": np.float64(policy_s), "env_steps": np.int64(env_steps)}
+
+
+class _Slots:
+    """Which rollout each worker runs and for how many steps, and the rollouts' outcomes:
+    a worker whose rollout ended (success, instability, horizon) takes the next one."""
+
+    def __init__(self, n: int, workers: int, obs_dim: int, horizon: int) -> None:
+        self.out = {
+            "success": np.zeros(n, bool),
+            "steps_to_success": np.full(n, horizon, np.int32),
+            "ret": np.zeros(n),
+            "unstable": np.zeros(n, bool),
+            "init_obs": np.zeros((n, obs_dim)),
+        }
+        self.slot = np.full(workers, -1)  # rollout index each worker runs (-1: idle)
+        self.t_slot = np.zeros(workers, np.int64)
+        self.obs = np.zeros((workers, obs_dim), np.float32)
+        self.horizon = horizon
+        self.next = 0
+
+    @property
+    def busy(self) -> np.ndarray:
+        """Workers running a rollout."""
+        return self.slot >= 0
+
+    def start(self, pool: EnvPool, seeds: np.ndarray) -> None:
+        """Reset every idle worker to the initial state of the next rollout's seed."""
+        out, slot = self.out, self.slot
+        starts = []
+        for i in np.flatnonzero(slot < 0)[: len(seeds) - self.next]:
+            slot[i], self.t_slot[i] = self.next, 0
+            starts.append((i, "reset", int(seeds[self.next])))
+            self.next += 1
+        for (i, _, _), (o, ok, _) in zip(starts, pool.request(starts), strict=True):
+            if o is None:  # the reset itself failed: an unstable rollout
+                out["unstable"][slot[i]], slot[i] = True, -1
+                continue
+            self.obs[i] = out["init_obs"][slot[i]] = o
+            if ok:  # solved at the start: a success in zero steps
+                out["success"][slot[i]], out["steps_to_success"][slot[i]] = True, 0
+                slot[i] = -1
+
+    def record(self, run: list[int], answers: list[Any]) -> None:
+        """Take the workers' answers to one step; free those whose rollout ended."""
+        out = self.out
+        for i, (o, ok, finite) in zip(run, answers, strict=True):
+            k = self.slot[i]
+            self.t_slot[i] += 1
+            if not finite or o is None:
+                out["unstable"][k] = True
+            else:
+                self.obs[i] = o
+            if ok and not out["unstable"][k]:
+                out["success"][k], out["steps_to_success"][k] = True, self.t_slot[i]
+            if ok or out["unstable"][k] or self.t_slot[i] >= self.horizon:
+                self.slot[i] = -1

@@ -1,9 +1,9 @@
 """One operator's session on its own thread, stepped at the task's control rate.
 
-An :class:`OperatorDriver` owns a :class:`~elicit_jax.elicit.session.Session` (C MuJoCo
-physics and the live scorer run here, on the server) and drives it from its thread, the way
-:func:`~elicit_jax.elicit.run.run_session` does but paced: one control step every
-``substeps x timestep`` seconds (50 ms on the shipped tasks), with the browser operator's
+An :class:`OperatorDriver` owns a :class:`~elicit_jax.elicit.session.Session` (the physics —
+C MuJoCo or a robosuite environment — and the live scorer run here, on the server) and drives
+it from its thread, the way :func:`~elicit_jax.elicit.run.run_session` does but paced: one
+control step per control period (50 ms on every shipped task), with the browser operator's
 latest command. Each episode waits for the page's ``start`` (the operator reads the
 instructions, the prompt or the feedback first); a lost connection pauses the episode until
 the page is back. Everything the page needs to redraw itself after a reload — the scene,
@@ -40,7 +40,7 @@ from elicit_jax.elicit.events import (
 from elicit_jax.errors import ElicitError
 from elicit_jax.web import messages
 from elicit_jax.web.protocol import Message, pack_frame
-from elicit_jax.web.scene import body_poses
+from elicit_jax.web.scene import body_poses, scene_origin
 
 OPENING, READY, RUNNING, BUSY, DONE, ERROR = "opening", "ready", "running", "busy", "done", "error"
 
@@ -95,6 +95,7 @@ class OperatorDriver:
         self._frame: bytes | None = None
         self._review: list[str | bytes] = []
         self._clips: Any = None
+        self._origin: Any = None
         self._thread = threading.Thread(target=self._run, name=f"operator-{name}", daemon=True)
 
     # --- control from the server -------------------------------------------------------------
@@ -145,8 +146,7 @@ class OperatorDriver:
     def close_page(self, code: int, reason: str) -> None:
         """Close the attached page's connection with ``code`` and ``reason`` (if one is)."""
         with self._lock:
-            page = self._outbox
-        close = getattr(page, "close", None)
+            close = getattr(self._outbox, "close", None)
         if close is not None:
             close(code, reason)
 
@@ -218,6 +218,7 @@ class OperatorDriver:
     def _open(self) -> None:
         from elicit_jax.elicit.session import Session
         from elicit_jax.elicit.setup import open_session
+        from elicit_jax.sim.single import control_period
         from elicit_jax.web import operator as browser  # registers the ``browser`` kind
         from elicit_jax.web.clips import ClipMaker
 
@@ -226,7 +227,8 @@ class OperatorDriver:
         setup, operator, resumed = open_session(self.config, self.out, quiet=True)
         self.setup, self.operator = setup, operator
         task = setup.task
-        self.period = float(task.config.substeps * task.config.timestep)
+        self.period = control_period(task)
+        self._origin = scene_origin(task)
         self._clips = ClipMaker(task, setup.base)
         operator.listener = self._on_event
         self.session = Session(setup, [operator.on_event])
@@ -281,9 +283,8 @@ class OperatorDriver:
             s.step(action, finish=False)
             self.steps += 1
             self._step = obs.step + 1
-            frame = pack_frame(
-                body_poses(s.sim_data), obs.episode, self._step, self._m, action is not None
-            )
+            poses = body_poses(s.sim_data, self._origin)
+            frame = pack_frame(poses, obs.episode, self._step, self._m, action is not None)
             with self._lock:
                 self._frame = frame
                 self._send(frame, droppable=not s.episode_over)
@@ -336,7 +337,7 @@ class OperatorDriver:
         self._give_up = False
         self.operator.reset(self.config.dagger)
         self._indicators = []
-        frame = pack_frame(body_poses(self.session.sim_data), event.episode, 0)
+        frame = pack_frame(body_poses(self.session.sim_data, self._origin), event.episode, 0)
         self._episode = [messages.event(event)]
         self._frame = frame
         self._sendall([self._episode[0], frame])
@@ -369,7 +370,7 @@ class OperatorDriver:
 
     def _state_message(self) -> str:
         s = self.session
-        progress = None if s is None else s.progress
+        progress = getattr(s, "progress", None)
         return messages.state(
             state=self.state,
             message=self.message,

@@ -14,6 +14,7 @@ access token it prints (``?token=`` on first load, then a same-site cookie) on e
 from __future__ import annotations
 
 import base64
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -54,28 +55,36 @@ class Clips:
         return None if self.maker is None else self.maker.base_episode(episode)
 
 
-def create_review_app(review: Any, token: str, port: int) -> Any:
-    """The Starlette application of one review (see the module docstring)."""
-    from starlette.applications import Starlette
-    from starlette.middleware import Middleware
-    from starlette.requests import Request
-    from starlette.responses import FileResponse, JSONResponse
-    from starlette.routing import Mount, Route
-    from starlette.staticfiles import StaticFiles
+CSP = (
+    "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+    "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
+"""The page's Content-Security-Policy: everything from this server, nothing inline."""
 
-    from elicit_jax.web.access import TOKEN_COOKIE, AccessGuard, access_policy
-    from elicit_jax.web.server import STATIC
 
-    clips = Clips(review.demos)
+def _bad(e: ElicitError) -> Any:
+    from starlette.responses import JSONResponse
 
-    def index(request: Request) -> Any:
-        csp = (
-            "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
-            "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
-        )
+    return JSONResponse({"error": str(e)}, status_code=400)
+
+
+class ReviewRoutes:
+    """The endpoints of one review (the routes of the module docstring), as methods."""
+
+    def __init__(self, review: Any) -> None:
+        self.review = review
+        self.clips = Clips(review.demos)
+
+    def index(self, request: Any) -> Any:
+        """The page; a ``?token=`` becomes the access cookie."""
+        from starlette.responses import FileResponse
+
+        from elicit_jax.web.access import TOKEN_COOKIE
+        from elicit_jax.web.server import STATIC
+
         response = FileResponse(
             STATIC / "review.html",
-            headers={"Cache-Control": "no-store", "Content-Security-Policy": csp},
+            headers={"Cache-Control": "no-store", "Content-Security-Policy": CSP},
         )
         if request.query_params.get("token"):
             response.set_cookie(
@@ -83,27 +92,37 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
             )
         return response
 
-    def bad(e: ElicitError) -> Any:
-        return JSONResponse({"error": str(e)}, status_code=400)
+    def episodes(self, request: Any) -> Any:
+        """The episode table."""
+        from starlette.responses import JSONResponse
 
-    def episodes(request: Request) -> Any:
+        review, task = self.review, self.clips.task
         return JSONResponse(
             {
                 "demos": str(review.config.demos),
-                "task": clips.task.name if clips.task else "",
+                "task": task.name if task else "",
                 "has_m": bool(review.m),
                 "has_quality": bool(review.quality),
                 "episodes": review.episodes(),
             }
         )
 
-    def episode(request: Request) -> Any:
+    def scene(self, request: Any) -> Any:
+        """The task's 3-D scene, or why there is none."""
+        from starlette.responses import JSONResponse
+
+        return JSONResponse(self.clips.scene())
+
+    def episode(self, request: Any) -> Any:
+        """An episode's body poses (base64 float32) and per-step M."""
+        from starlette.responses import JSONResponse
+
         try:
             e = int(request.path_params["episode"])
-            data = review.episode(e)
+            data = self.review.episode(e)
         except (ValueError, ElicitError) as err:
-            return bad(ElicitError(str(err)))
-        poses = clips.poses(e)
+            return _bad(ElicitError(str(err)))
+        poses = self.clips.poses(e)
         return JSONResponse(
             {
                 "episode": e,
@@ -116,35 +135,54 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
             }
         )
 
-    async def flag(request: Request) -> Any:
+    async def flag(self, request: Any) -> Any:
+        """Flag or unflag an episode, with a reason."""
+        from starlette.responses import JSONResponse
+
         try:
             body = await request.json()
-            review.flag(int(body["episode"]), bool(body["flagged"]), str(body.get("reason", "")))
+            flagged = bool(body["flagged"])
+            self.review.flag(int(body["episode"]), flagged, str(body.get("reason", "")))
         except (ValueError, KeyError, TypeError) as err:
-            return bad(ElicitError(f"malformed flag request ({err})"))
+            return _bad(ElicitError(f"malformed flag request ({err})"))
         except ElicitError as err:
-            return bad(err)
-        return JSONResponse({"ok": True, "flagged": len(review.flags)})
+            return _bad(err)
+        return JSONResponse({"ok": True, "flagged": len(self.review.flags)})
 
-    async def export(request: Request) -> Any:
+    async def export(self, request: Any) -> Any:
+        """Write the selection (the review's export)."""
+        from starlette.responses import JSONResponse
+
         try:
             body = await request.json()
             fmt = body.get("format") or None
-            result = review.export(fmt, str(body.get("mask_key") or "reviewed"))
+            result = self.review.export(fmt, str(body.get("mask_key") or "reviewed"))
         except (ValueError, AttributeError) as err:
-            return bad(ElicitError(f"malformed export request ({err})"))
+            return _bad(ElicitError(f"malformed export request ({err})"))
         except ElicitError as err:
-            return bad(err)
+            return _bad(err)
         return JSONResponse(result)
 
+
+def create_review_app(review: Any, token: str, port: int) -> Any:
+    """The Starlette application of one review (see the module docstring)."""
+    from starlette.applications import Starlette
+    from starlette.middleware import Middleware
+    from starlette.routing import Mount, Route
+    from starlette.staticfiles import StaticFiles
+
+    from elicit_jax.web.access import AccessGuard, access_policy
+    from elicit_jax.web.server import STATIC
+
+    r = ReviewRoutes(review)
     return Starlette(
         routes=[
-            Route("/", index),
-            Route("/api/episodes", episodes),
-            Route("/api/scene", lambda request: JSONResponse(clips.scene())),
-            Route("/api/episode/{episode}", episode),
-            Route("/api/flag", flag, methods=["POST"]),
-            Route("/api/export", export, methods=["POST"]),
+            Route("/", r.index),
+            Route("/api/episodes", r.episodes),
+            Route("/api/scene", r.scene),
+            Route("/api/episode/{episode}", r.episode),
+            Route("/api/flag", r.flag, methods=["POST"]),
+            Route("/api/export", r.export, methods=["POST"]),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ],
         middleware=[
@@ -153,8 +191,9 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
     )
 
 
-def serve_review(review: Any, port: int = 0, echo: Any = print) -> None:
-    """Serve ``review`` on 127.0.0.1 until interrupted; prints the URL (with its token)."""
+def serve_review(review: Any, port: int, echo: Callable[[str], None]) -> None:
+    """Serve ``review`` on 127.0.0.1 until interrupted; ``echo`` says the URL (with its
+    token): the CLI passes its printer."""
     import uvicorn
 
     from elicit_jax.web.access import new_token

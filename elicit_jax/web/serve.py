@@ -75,11 +75,14 @@ class ServeConfig:
 
 def preflight(template: SessionConfig) -> None:
     """Open (then delete) a session with ``template``'s settings: the inputs are checked by
-    the session's own code, and the live and prompt scorers are compiled."""
+    the session's own code, the live and prompt scorers are compiled, and the task's scene
+    is described once (a robosuite task builds its environment here, kept for the first
+    operator)."""
     import numpy as np
 
     from elicit_jax.elicit.setup import open_session
     from elicit_jax.web import operator as browser_operator
+    from elicit_jax.web.scene import scene_description
 
     config = dataclasses.replace(template, operator=f"{browser_operator.KIND}:preflight")
     with tempfile.TemporaryDirectory(prefix="elicit-serve-") as tmp:
@@ -88,6 +91,7 @@ def preflight(template: SessionConfig) -> None:
         setup.scorer.score(setup.policy, zeros_o, np.zeros(setup.action_dim, np.float32))
         if config.mode == "informed" and config.prompt:
             setup.prompt_event()
+        scene_description(setup.task.mj_model, setup.task.name)
 
 
 def with_person_horizon(session: SessionConfig) -> SessionConfig:

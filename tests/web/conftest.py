@@ -8,6 +8,7 @@ import os
 import pytest
 from chromium import CHROMIUM_NAMES, FLAGS, find_chromium
 
+from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.elicit.config import SessionConfig
 
 
@@ -46,13 +47,12 @@ def template(demo) -> SessionConfig:
     from elicit_jax.compat.thresholds import read_thresholds
 
     lam, eta, _ = read_thresholds(demo.thresholds)
+    thresholds = Thresholds(lam, eta, f"file {demo.thresholds}", file=demo.thresholds)
     return SessionConfig(
         task="reach-pillar",
         policy=str(demo.policy),
         base_demos=str(demo.base_demos),
-        lambda_=lam,
-        eta=eta,
-        thresholds_file=str(demo.thresholds),
+        thresholds=thresholds,
         operator="browser:_",
         practice=1,
         prompt=2,

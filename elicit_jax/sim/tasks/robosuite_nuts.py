@@ -7,8 +7,16 @@ OSC_POSE controller at 20 Hz, observed through robomimic's low-dimensional keys
 Actions: robosuite's 7 values in [-1, 1] (delta position up to 5 cm per step, delta rotation
 up to 0.5 rad as a world-frame axis-angle, gripper -1 open / +1 closed). Success is
 robosuite's own check. These tasks run on the robosuite backend only (worker processes,
-one environment each: :mod:`elicit_jax.sim.rollout_robosuite`); constructing the task does not
-import robosuite, building an environment does.
+one environment each: :mod:`elicit_jax.sim.rollout_robosuite`); a session (``elicit``,
+``serve``) steps one environment in its own process (:mod:`elicit_jax.sim.single`).
+Constructing the task does not import robosuite, building an environment does (so does
+reading :attr:`RobosuiteTask.mj_model`).
+
+The browser draws the scene from the environment's MuJoCo model (:attr:`scene_hints`, read by
+:mod:`elicit_jax.web.scene`): the table top is moved to height 0, where the page's camera,
+grid and top view look; the arm and gripper are drawn from their collision shapes, one mesh
+per link, each as the box bounding it (the page draws primitives only); robosuite's textured
+materials are drawn in the plain colours given here.
 """
 
 from __future__ import annotations
@@ -54,8 +62,37 @@ class RobosuiteTask(Task):
     peg_symmetry: ClassVar[float] = 0.0
     """Turn (rad) after which the peg looks the same (0: round, any yaw fits)."""
 
+    scene_hints: ClassVar[dict[str, Any]] = {
+        "origin": (0.0, 0.0, 0.82),
+        "home": {"position": (0.0, -1.3, 0.7), "target": (-0.05, 0.0, 0.1)},
+        "meshes": "collision-boxes",
+        "gripper": "gripper0_right_eef",
+        "colours": {
+            "table": (0.72, 0.6, 0.45, 1.0),
+            "peg": (0.45, 0.45, 0.5, 1.0),
+            "SquareNut": (0.85, 0.65, 0.2, 1.0),
+            "RoundNut": (0.85, 0.65, 0.2, 1.0),
+            "robot0": (0.92, 0.92, 0.92, 1.0),
+            "gripper0": (0.3, 0.3, 0.32, 1.0),
+            "fixed_mount0": (0.25, 0.25, 0.25, 1.0),
+            "floor": (0.82, 0.82, 0.8, 1.0),
+            "wall": (0.93, 0.93, 0.92, 1.0),
+        },
+    }
+    """How the browser draws this task (see the module docstring): the world point drawn
+    at the origin, the camera's home, meshes as their collision shapes' bounding boxes, the
+    body the gripper's trail follows, colours by body (or world geom) name prefix."""
+
     def __init__(self, config: TaskConfig | None = None) -> None:
         self.config = config or self.config_cls()
+
+    @property
+    def mj_model(self) -> Any:
+        """The MuJoCo model of this task's robosuite environment (builds one in this process
+        on first use: seconds)."""
+        from elicit_jax.sim.single import robosuite_model
+
+        return robosuite_model(self.spec)
 
     @property
     def obs_fields(self) -> tuple[ObsField, ...]:

@@ -16,6 +16,8 @@ const GOALS = {
   'square-nut': 'Pick up the square nut by its handle and drop it over the square peg.',
   'round-nut': 'Pick up the round nut by its handle and drop it over the round peg.',
   'hammer-drawer': 'Pick up the hammer and put it into the drawer.',
+  'robosuite-square': 'Pick up the square nut by its handle and put it onto the square peg.',
+  'robosuite-round': 'Pick up the round nut by its handle and put it onto the round peg.',
 };
 
 // The operator's secret key: issued by the server at the first visit (a 'key' message) or in
@@ -434,7 +436,7 @@ function applyView(screen) {
 
 // The gripper's positions along a clip (its trail).
 function path(clip) {
-  const b = view.names.indexOf('gripper');
+  const b = view.names.indexOf((view.desc && view.desc.gripper) || 'gripper');
   return b < 0 ? null : clip.map((poses) => [poses[b * 7], poses[b * 7 + 1], poses[b * 7 + 2]]);
 }
 

@@ -177,6 +177,9 @@ export class View {
   build(desc) {
     this.desc = desc;
     this.names = desc.bodies;
+    const home = desc.home;  // a task may say where the camera starts (robosuite's scenes)
+    this.home = home ? { position: new THREE.Vector3(...home.position), target: new THREE.Vector3(...home.target) } : HOME;
+    if (home && !this.homed) { this.homed = true; this.resetCamera(); }
     const lite = this.software && !this.fullQuality;
     const shown = this.instances.map((inst) => inst.shown);
     this.renderer.shadowMap.enabled = !lite;
@@ -187,8 +190,9 @@ export class View {
   }
 
   resetCamera() {
-    this.camera.position.copy(HOME.position);
-    this.controls.target.copy(HOME.target);
+    const home = this.home || HOME;
+    this.camera.position.copy(home.position);
+    this.controls.target.copy(home.target);
     this.controls.update();
     this.dirty();
   }

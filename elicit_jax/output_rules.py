@@ -1,0 +1,173 @@
+"""Writing outputs safely: atomic writes (a temporary sibling renamed into place), the
+clean-up of temporaries killed writers left, and the one rule for every path a command
+writes (never over or inside an input; never a directory; a file only with ``--overwrite``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import platform
+import re
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+from elicit_jax.errors import ElicitError
+from elicit_jax.runtime import process_alive
+
+
+def _host_tag() -> str:
+    return hashlib.sha256(platform.node().encode()).hexdigest()[:8]
+
+
+def _temp_prefix(path: Path) -> str:
+    """``.<name>.p<pid>-<host>.``: temporaries say which process on which machine owns them."""
+    return f".{path.name}.p{os.getpid()}-{_host_tag()}."
+
+
+_TEMP_SUFFIX = re.compile(r"^(?:p(\d+)-([0-9a-f]{8})\..*\.tmp|old-(\d+))$")
+"""What follows ``.<name>.`` in a temporary's name (see :func:`_temp_prefix`)."""
+
+
+def clean_stale_temporaries(path: str | Path) -> list[Path]:
+    """Remove temporaries of ``path`` left by killed writers; returns what was removed.
+
+    Only temporaries written on this machine by processes that no longer exist are removed
+    (``.<name>.p<pid>-<host>.*.tmp`` and ``.<name>.old-<pid>``), so a concurrent writer's
+    work in progress is never touched.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    prefix = f".{path.name}."
+    removed = []
+    for p in path.parent.iterdir():
+        m = _TEMP_SUFFIX.match(p.name[len(prefix) :]) if p.name.startswith(prefix) else None
+        if not m:
+            continue
+        pid = int(m.group(1) or m.group(3))
+        if m.group(2) not in (None, _host_tag()) or process_alive(pid):
+            continue
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary sibling path; rename it onto ``path`` only if the block succeeds.
+
+    Works for files and directories. On error the temporary is removed and ``path`` is
+    untouched, so no half-written artifact is ever visible; temporaries a killed writer left
+    behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
+    written (read-only directory, a file in the way) is an :class:`ElicitError` naming
+    ``path``, not the temporary; so is an existing directory where a file was written (a
+    directory is only ever replaced by a directory).
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        clean_stale_temporaries(path)
+        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
+    except OSError as e:
+        raise ElicitError(f"cannot write here ({e.strerror or e})", path) from e
+    target = tmp / path.name
+    try:
+        yield target
+        if path.is_dir() and not path.is_symlink() and not target.is_dir():
+            raise ElicitError(
+                "is an existing directory; refusing to replace it with a file (nothing written)",
+                path,
+            )
+        if path.is_dir() and not path.is_symlink():
+            old = path.with_name(f".{path.name}.old-{os.getpid()}")
+            os.replace(path, old)
+            os.replace(target, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(target, path)
+    except OSError as e:
+        if e.filename and str(e.filename).startswith(str(tmp)):
+            raise ElicitError(f"cannot write ({e.strerror or e})", path) from e
+        raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def refuse_overwriting_inputs(
+    outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
+) -> None:
+    """Raise when an output would replace an input, a directory holding one, or a file
+    inside an input directory (a run, a LeRobot dataset).
+
+    Args:
+      outputs: paths about to be written.
+      inputs: paths being read (``None`` entries are ignored).
+    """
+    ins = [Path(p).resolve() for p in inputs if p is not None]
+    for out in outputs:
+        o = Path(out).resolve()
+        for i in ins:
+            if o == i or o in i.parents:
+                what = "is" if o == i else "holds"
+                raise ElicitError(
+                    f"refusing to write here: this path {what} the input {i}; choose another "
+                    "output",
+                    out,
+                )
+            if i in o.parents and i.is_dir():
+                raise ElicitError(
+                    f"refusing to write here: this path is inside the input directory {i}; "
+                    "choose an output outside it",
+                    out,
+                )
+
+
+def check_outputs(
+    outputs: Iterable[str | Path | None],
+    inputs: Iterable[str | Path | None] = (),
+    *,
+    overwrite: bool = False,
+    replaceable: Callable[[Path], bool] | None = None,
+) -> None:
+    """The one rule for every path a command writes, checked before any work is done.
+
+    - an output that is, holds or lies inside an input is refused
+      (:func:`refuse_overwriting_inputs`);
+    - an existing directory is refused, always, unless ``replaceable`` says it holds an
+      artifact of the kind being written (and then only with ``overwrite``): a run, a folder
+      of notes, a dataset is never deleted to make room for an output;
+    - an existing file is refused unless ``overwrite``.
+
+    Args:
+      outputs: paths about to be written (``None`` entries are ignored).
+      inputs: paths being read (``None`` entries are ignored).
+      overwrite: the user passed ``--overwrite``.
+      replaceable: for outputs that are directories, whether an existing directory holds
+        an artifact of this kind that may be replaced.
+
+    Raises:
+      ElicitError: naming the output and what to do instead.
+    """
+    outs = [Path(p) for p in outputs if p is not None]
+    refuse_overwriting_inputs(outs, inputs)
+    for out in outs:
+        if out.is_dir() and not out.is_symlink():
+            if replaceable is None or not replaceable(out):
+                raise ElicitError(
+                    "is an existing directory; elicit-jax never replaces a directory with an "
+                    "output: give a file path (e.g. inside it, or beside it)",
+                    out,
+                )
+        elif not (out.exists() or out.is_symlink()):
+            continue
+        if not overwrite:
+            raise ElicitError(
+                "already exists; pass --overwrite to replace it, or choose another path", out
+            )

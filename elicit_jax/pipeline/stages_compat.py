@@ -1,0 +1,218 @@
+"""The compatibility stages: score demonstrations with the base policy, fit (λ, η) on the
+contrast sets, filter each D_new, draw the maps, and the λ variants (the sensitivity study's
+points, the new-data valley rule).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.runner import StageContext
+from elicit_jax.pipeline.stages_policy import DEMOS_FILE, SCORES_FILE
+
+
+def score_stage(ctx: StageContext) -> None:
+    """Score the ``demos*`` inputs (concatenated) with the base policy of ``policy_seed``;
+    with a ``thresholds`` input (each D_new, scored after the fit), its pairs are judged under
+    the fitted (λ, η), otherwise (the contrast sets the fit needs) under the [score] settings'."""
+    from elicit_jax.compat.measures import config_from_dict
+    from elicit_jax.compat.score_file import score_file
+    from elicit_jax.compat.show import scoring_bar
+    from elicit_jax.data.demos import concat_demos, read_demos, write_demos
+    from elicit_jax.policy.checkpoint import load_policy
+
+    cfg = ctx.config
+    which = cfg["checkpoint"]
+    policy = load_policy(
+        ctx.inputs["policy"], int(which) if str(which).isdigit() else which, seed=cfg["policy_seed"]
+    )
+    config, source = _score_thresholds(ctx, config_from_dict(cfg["score"]))
+    names = sorted(n for n in ctx.inputs if n.startswith("demos"))
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        demos = ctx.inputs[names[0]]
+        if len(names) > 1:
+            demos = tmp / DEMOS_FILE
+            parts = [read_demos(ctx.inputs[n]) for n in names]
+            write_demos(demos, concat_demos(parts), inputs={n: ctx.inputs[n] for n in names})
+        result = score_file(
+            policy,
+            demos,
+            tmp / SCORES_FILE,
+            config,
+            policy_path=ctx.inputs["policy"],
+            policy_info={"which": which, "seed": cfg["policy_seed"]},
+            progress=scoring_bar,
+            thresholds_source=source,
+        )
+        header = make_header(
+            "pipeline-scores",
+            1,
+            config=dict(cfg),
+            inputs=dict(ctx.inputs),
+            files=[SCORES_FILE, result.episodes_path.name],
+            n_pairs=result.n_pairs,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def _score_thresholds(ctx: StageContext, config: Any) -> tuple[Any, str]:
+    """The scoring config with the fitted (λ, η) when the stage reads a fit, and where the
+    thresholds came from."""
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    if "thresholds" not in ctx.inputs:
+        return config, (
+            "provisional: the [score] settings' λ and η; the pipeline fits (λ, η) on these "
+            "contrast-set scores, and its filters and maps use the fitted values"
+        )
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    fitted = dataclasses.replace(config, lambda_=float(lam), eta=float(eta))
+    return fitted, f"the pipeline's threshold fit ({ctx.inputs['thresholds']})"
+
+
+def fit_stage(ctx: StageContext) -> None:
+    """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
+    from elicit_jax.compat.fit import FitJob, fit_scores_file
+    from elicit_jax.compat.show import print_report
+    from elicit_jax.compat.thresholds import FitConfig
+
+    cfg = ctx.config
+    job = FitJob(
+        compatible=f"operator:{cfg['compatible_operator']}",
+        incompatible=f"operator:{cfg['incompatible_operator']}",
+        fit=FitConfig(**cfg["fit"]),
+        lambda_=cfg.get("lambda"),
+        eta=cfg.get("eta"),
+        force=bool(cfg.get("force", False)),
+    )
+    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job, show=print_report)
+
+
+def filter_stage(ctx: StageContext) -> None:
+    """Filter one D_new by its scores under the fitted thresholds (M-filter or a baseline).
+
+    When the filter drops every pair (e.g. every demo of a conflicting operator rejected), the
+    output holds no demonstrations file and the retraining uses D_base alone.
+    """
+    import numpy as np
+
+    from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    cfg = FilterConfig(**{**ctx.config["filter"], "lambda_": lam, "eta": eta})
+    scores_path = ctx.inputs["scores"] / SCORES_FILE
+    _, scores = read_scores(scores_path)
+    drop, reason = drop_mask(scores, cfg)
+    counts = {
+        "pairs_in": int(drop.size),
+        "pairs_dropped": int(drop.sum()),
+        "episodes_in": int(np.unique(scores["episode"]).size),
+        "episodes_out": 0,
+    }
+    with atomic_path(ctx.output) as tmp:
+        tmp.mkdir()
+        files = []
+        if not drop.all():
+            result = filter_demos(scores_path, ctx.inputs["demos"], tmp / DEMOS_FILE, cfg)
+            counts["episodes_out"] = result.episodes_out
+            files = [DEMOS_FILE, result.log_path.name]
+        else:
+            reason += "; every pair dropped, so the retraining uses D_base alone"
+        header = make_header(
+            "pipeline-filter",
+            1,
+            config=dict(ctx.config),
+            inputs=dict(ctx.inputs),
+            thresholds={"lambda": lam, "eta": eta},
+            reason=reason,
+            files=files,
+            **counts,
+        )
+        write_json(tmp / "artifact.json", header)
+
+
+def map_stage(ctx: StageContext) -> None:
+    """Draw the compatibility map: held-out base demos and each D_new, one panel each."""
+    import numpy as np
+
+    from elicit_jax.compat.maps import write_png
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import read_thresholds
+
+    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    cols = ("likelihood", "novelty", "operator", "incompatible")
+    _, ref = read_scores(ctx.inputs["scores:contrast"] / SCORES_FILE, cols)
+    keep = np.asarray(ref["operator"]).astype(str) == ctx.config["base_operator"]
+    parts = [{k: np.asarray(v)[keep] for k, v in ref.items()}]
+    parts[0]["operator"] = np.full(int(keep.sum()), f"{ctx.config['base_operator']} (held-out)")
+    for op in ctx.config["operators"]:
+        parts.append(read_scores(ctx.inputs[f"scores:{op}"] / SCORES_FILE, cols)[1])
+    scores = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in cols}
+    write_png(scores, lam, eta, ctx.output, axis=ctx.config.get("axis", "likelihood-error"))
+
+
+def lambda_point_stage(ctx: StageContext) -> None:
+    """Thresholds with λ at point k of ``points`` evenly spaced over the fit's margin range
+    (η as fitted), for the sensitivity study."""
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+
+    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
+    lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
+    if fit.get("method", "fit") != "fit" or lo is None:
+        raise ElicitError(
+            "the λ-sensitivity study needs fitted thresholds with a margin, not manual ones",
+            ctx.inputs["thresholds"],
+        )
+    k, n = int(ctx.config["point"]), int(ctx.config["points"])
+    point = float(lo + (hi - lo) * k / (n - 1))
+    header = make_header(
+        THRESHOLDS_KIND,
+        1,
+        config=dict(ctx.config),
+        inputs={"fit": ctx.inputs["thresholds"]},
+        method="sensitivity-point",
+        report={"point": k, "points": n, "lambda_range": [lo, hi], "fitted_lambda": lam},
+        **{"lambda": point, "eta": eta},
+    )
+    write_json(ctx.output, header)
+
+
+def lambda_valley_stage(ctx: StageContext) -> None:
+    """Thresholds with λ moved, inside the fit's margin, to the sparsest point of the familiar
+    pairs of every D_new (:mod:`elicit_jax.compat.valley`); η as fitted."""
+    import numpy as np
+
+    from elicit_jax.compat.score_file import read_scores
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+    from elicit_jax.compat.valley import valley_lambda
+
+    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
+    lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
+    if fit.get("method", "fit") != "fit" or lo is None:
+        raise ElicitError(
+            "the valley rule moves a fitted λ inside its margin; these thresholds were not fitted",
+            ctx.inputs["thresholds"],
+        )
+    cols = ("likelihood", "novelty")
+    parts = [
+        read_scores(p / SCORES_FILE, cols)[1] for n, p in ctx.inputs.items() if n != "thresholds"
+    ]
+    ell = np.concatenate([p["likelihood"] for p in parts])
+    nu = np.concatenate([p["novelty"] for p in parts])
+    new_lam, report = valley_lambda(ell, nu, eta, lo, hi, lam)
+    header = make_header(
+        THRESHOLDS_KIND,
+        1,
+        config=dict(ctx.config),
+        inputs=dict(ctx.inputs),
+        method="new-data-valley",
+        report=report,
+        **{"lambda": new_lam, "eta": eta},
+    )
+    write_json(ctx.output, header)

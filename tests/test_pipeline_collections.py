@@ -1,0 +1,210 @@
+"""A study over several collections: the [collections] table, its stage graph, the pooled
+statistics (hand-computed), and the across-collections table (no training here)."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+
+import pytest
+
+from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.across import (
+    across_note,
+    across_tables,
+    collections_interval,
+    format_collections_diff,
+    paired_by_collection,
+)
+from elicit_jax.pipeline.plan import COLLECTION_STRIDE, build_graph
+from elicit_jax.pipeline.spec import load_spec, parse_spec
+from elicit_jax.pipeline.tables import ReportData, ResultRow, results_tables
+
+SPEC = """
+[pipeline]
+name = "mini"
+seeds = [0, 1]
+methods = ["base", "naive", "filtered", "random", "longest"]
+[[task]]
+name = "reach-pillar"
+operators = ["a", "b"]
+incompatible_operator = "c"
+[sensitivity]
+points = 2
+seeds = [7]
+eval_seed = 1
+"""
+
+
+def _spec(extra: str = "", profile: str | None = None):
+    text = SPEC + extra
+    return parse_spec(tomllib.loads(text), source="mini.toml", text=text, profile=profile)
+
+
+# --- statistics, by hand ---------------------------------------------------------------------
+
+
+def test_equal_differences_give_a_point_interval():
+    d = collections_interval([[0.2, 0.2, 0.2], [0.2, 0.2]])
+    assert (d.mean, d.low, d.high) == pytest.approx((0.2, 0.2, 0.2))
+    assert d.n_pairs == 5 and d.n_boot == 10_000 and d.agreeing == 2
+
+
+def test_two_constant_collections_bound_the_interval_by_their_values():
+    # Each collection's seeds are all equal, so a draw's pooled mean is 0.1 (both draws the
+    # first collection, P = 1/4), 0.2 (one of each, 1/2) or 0.3 (1/4): the 2.5% and 97.5%
+    # percentiles are exactly the two collections' values.
+    d = collections_interval([[0.1] * 5, [0.3] * 5])
+    assert d.mean == pytest.approx(0.2)
+    assert (d.low, d.high) == pytest.approx((0.1, 0.3))
+    assert d.per_collection == pytest.approx((0.1, 0.3)) and d.agreeing == 2
+    assert d.excludes_zero
+    assert format_collections_diff(d) == "+20.0 [+10.0, +30.0] *; 2/2 collections agree in sign"
+
+
+def test_one_collection_resamples_its_training_seeds_only():
+    # seeds 0 and 1: a draw's mean is 0 (P = 1/4), 0.5 (1/2) or 1 (1/4)
+    d = collections_interval([[0.0, 1.0]])
+    assert d.mean == pytest.approx(0.5) and (d.low, d.high) == pytest.approx((0.0, 1.0))
+    assert not d.excludes_zero
+
+
+def test_sign_disagreement_and_determinism():
+    d = collections_interval([[-0.1, -0.1], [0.3, 0.3], [0.1, 0.2]])
+    assert d.mean == pytest.approx((-0.2 + 0.6 + 0.3) / 6)
+    assert d.agreeing == 2  # the first collection is below 0, the pooled mean above
+    assert d == collections_interval([[-0.1, -0.1], [0.3, 0.3], [0.1, 0.2]])
+    assert d.low < d.mean < d.high
+    single = collections_interval([[0.5]])  # one pair: no spread, no interval claim
+    assert (single.low, single.high) == pytest.approx((0.5, 0.5)) and not single.excludes_zero
+
+
+@pytest.mark.parametrize(
+    "diffs, message",
+    [
+        ([], "no collection"),
+        ([[0.1], []], "collection 1: no paired training seed"),
+        ([[0.1, float("nan")]], "collection 0: a paired difference is not finite"),
+    ],
+)
+def test_bad_inputs_to_the_interval(diffs, message):
+    with pytest.raises(ElicitError, match=message):
+        collections_interval(diffs)
+
+
+# --- the [collections] table ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "table, message",
+    [
+        ("[collections]\nseeds = [0, 1]\nwho = 1", r"\[collections\]: unknown key\(s\) who"),
+        ("[collections]\nseeds = []", "seeds must be a non-empty list"),
+        ("[collections]\nmethods = ['base']", "seeds must be a non-empty list"),
+        ("[collections]\nseeds = [0, 1, 0]", r"seeds are listed twice: \[0, 1, 0\]"),
+        ("[collections]\nseeds = [0, -1]", "non-negative integers"),
+        ("[collections]\nseeds = [0, 1]\nmethods = []", "methods must not be empty"),
+        ("[collections]\nseeds = [0, 1]\nmethods = ['base', 'cupid']", "cupid are not in"),
+        ("[collections]\nseeds = [0, 1]\nmethods = ['naive']", "must include 'base'"),
+        ("[profiles.cpu.collections]\nseeds = 3", "non-empty list"),
+    ],
+)
+def test_bad_collections_tables_fail_with_one_line_naming_the_file(table, message):
+    with pytest.raises(ElicitError, match=message) as err:
+        _spec(table, profile="cpu")
+    assert str(err.value).startswith("mini.toml: ") and "\n" not in str(err.value)
+
+
+def test_profile_overrides_the_collections_table():
+    table = "[collections]\nseeds = [0, 1]\n[profiles.cpu.collections]\nseeds = [0, 1, 2]\n"
+    assert _spec(table, "paper").collections.seeds == (0, 1)
+    cpu = _spec(table, "cpu").collections
+    assert cpu.seeds == (0, 1, 2) and cpu.methods == _spec().methods  # default: every method
+    assert _spec().collections is None
+
+
+def test_collection_zero_keeps_the_study_graph_and_the_others_are_disjoint():
+    plain = build_graph(_spec())
+    multi = build_graph(
+        _spec("[collections]\nseeds = [0, 2]\nmethods = ['base', 'naive', 'filtered']\n")
+    )
+    mine = {s.id: s for s in multi if "/c2/" not in s.id}
+    assert set(mine) == {s.id for s in plain}
+    for s in plain:
+        if s.id != "report":
+            assert (mine[s.id].output, dict(mine[s.id].config), dict(mine[s.id].inputs)) == (
+                s.output,
+                dict(s.config),
+                dict(s.inputs),
+            )
+    c2 = [s for s in multi if "/c2/" in s.id]
+    assert {s.id.split("/")[1] for s in c2} == {"c2"}
+    assert all(s.config["collection"] == 2 and s.label.startswith("c2: ") for s in c2)
+    for s in c2:  # every input of a later collection's stage is inside that collection
+        assert all("/c2/" in dep for dep in s.inputs.values())
+    seeds = {s.config["seed"]: s.id for s in multi if s.kind == "collect"}
+    assert len(seeds) == 2 * 5  # base, holdout, incompatible, 2 × D_new per collection
+    assert sorted(seeds)[5:] == [2 * COLLECTION_STRIDE + o for o in (0, 1, 2, 10, 11)]
+    methods = {s.config["method"] for s in c2 if s.kind == "train"}
+    assert methods == {"base", "naive", "filtered"}  # the first collection also runs the rest
+    assert not any(s.kind == "lambda-point" for s in c2)  # the λ study: first collection only
+    maps = [s.output for s in multi if s.kind == "map"]
+    assert len({m.rsplit("/", 1)[-1] for m in maps}) == 2  # distinct names in a report folder
+    assert set(multi["report"].inputs) >= {s.id for s in c2 if s.kind == "evaluate"}
+
+
+def test_shipped_filtering_cpu_runs_three_collections():
+    spec = load_spec("filtering", "cpu", ("round-nut",))
+    assert spec.collections.seeds == (0, 1, 2)
+    assert spec.collections.methods == (
+        "base", "naive", "filtered", "filtered-episode", "random", "deminf-matched",
+    )  # fmt: skip
+    graph = build_graph(spec)
+    for c in ("c1", "c2"):  # 16 trainings per extra collection: base + 3 operators × 5
+        assert sum(s.kind == "train" and f"/{c}/" in s.id for s in graph) == 16
+    assert load_spec("filtering", "paper").collections is None
+    # D_new is scored under the fitted thresholds, the contrast sets before the fit
+    score = graph["score/round-nut/mlp/mild"]
+    assert score.inputs["thresholds"] == "fit-thresholds/round-nut/mlp"
+    assert "thresholds" not in graph["score/round-nut/mlp/contrast"].inputs
+
+
+# --- the across-collections table -------------------------------------------------------------
+
+
+def _row(collection, method, op, seed, success, states="s"):
+    return ResultRow("t", "mlp", method, op, seed, success, 50.0, 4, "best", states,
+                     collection=collection)  # fmt: skip
+
+
+def _data(rows):
+    return ReportData("p", "cpu", "", "run", "", tuple(rows))
+
+
+def test_across_table_pools_collections_and_pairs_by_seed():
+    rows = []
+    for c, (base, naive) in enumerate([(0.5, 0.25), (0.5, 0.75)]):
+        for s in (0, 1):
+            rows += [_row(c, "base", None, s, base), _row(c, "naive", "op", s, naive)]
+    data = _data(rows)
+    ((title, (header, table)),) = across_tables(data)
+    assert "across 2 collections [0, 1]" in title and "10000 draws" in title
+    assert header[2:] == ["success % mean (std)", "− Naive", "− Base"]
+    assert table[0][:3] == ["–", "Base", "50.0 (0.0)"]
+    # Naive: 25, 25, 75, 75 → mean 50.0, std (ddof 1) 28.9; Naive − Base: −25 in collection 0,
+    # +25 in collection 1 (constant within each): interval [−25, +25], 1 of 2 agrees with 0
+    assert table[1][:3] == ["op", "Naive", "50.0 (28.9)"]
+    assert table[1][4] == "+0.0 [-25.0, +25.0]; 0/2 collections agree in sign"
+    # per-collection tables as before, titled with their collection
+    titles = [t for t, _ in results_tables(data)]
+    assert titles[0].startswith("collection 0: t — mlp") and titles[1].startswith("collection 1")
+    assert "in 0 of 1 paired differences all 2 collections" in across_note(data)[1]
+    assert across_tables(_data(r for r in rows if r.collection == 0)) == []
+
+
+def test_pairs_on_different_initial_states_are_not_compared():
+    a = [_row(0, "naive", "op", 0, 0.5, "x")]
+    b = [_row(0, "base", None, 0, 0.25, "y")]
+    assert paired_by_collection(a, b, [0]) is None
+    b = [dataclasses.replace(b[0], init_states="x")]
+    assert paired_by_collection(a, b, [0]) == [[0.25]]
