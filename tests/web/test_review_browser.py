@@ -9,6 +9,7 @@ import urllib.request
 
 import numpy as np
 import pytest
+from chromium import page_with_errors
 from cli_server import CliServer
 from fixtures_data import cli_ok, robomimic_demo, write_robomimic
 
@@ -79,10 +80,8 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         assert _status(base) == 403  # no token
         assert _status(url, host=f"evil.example:{port}") == 400  # DNS rebinding
         assert _status(url) == 200
-        page = browser.new_page()
+        page, errors = page_with_errors(browser)
         page.set_default_timeout(60_000)
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(url)
         page.wait_for_selector("body[data-ready='true']", timeout=60_000)
         assert page.locator("#episodes tbody tr").count() == 6

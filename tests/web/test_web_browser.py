@@ -19,6 +19,7 @@ import os
 import re
 from pathlib import Path
 
+from chromium import page_with_errors
 from cli_server import CliServer
 
 from elicit_jax.data.demos import read_demos
@@ -87,9 +88,7 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
     server = Server(demo.dir.parent, sessions)
     url = server.start()
     port = int(re.search(r":(\d+)/", url).group(1))
-    page = browser.new_page(viewport={"width": 1200, "height": 720})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
+    page, errors = page_with_errors(browser, {"width": 1200, "height": 720})
     try:
         page.goto(url)
         page.wait_for_selector("#name")
