@@ -37,3 +37,13 @@ def page_with_errors(browser: Any, viewport: dict | None = None) -> tuple[Any, l
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
     return page, errors
+
+
+def sign_in(page: Any, url: str, name: str) -> None:
+    """Open the operator page at ``url`` and type ``name`` into its name field, as a person
+    does (click, keys, Enter)."""
+    page.goto(url)
+    page.wait_for_selector("#name")
+    page.click("#name")
+    page.keyboard.type(name)
+    page.keyboard.press("Enter")

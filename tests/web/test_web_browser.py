@@ -19,7 +19,7 @@ import os
 import re
 from pathlib import Path
 
-from chromium import page_with_errors
+from chromium import page_with_errors, sign_in
 from cli_server import CliServer
 
 from elicit_jax.data.demos import read_demos
@@ -233,11 +233,7 @@ def narrow_layout(browser, url: str) -> None:
     screen, the keys still work (a second operator, on the running server)."""
     page = browser.new_page(viewport={"width": 390, "height": 844})
     try:
-        page.goto(url)
-        page.wait_for_selector("#name")
-        page.click("#name")
-        page.keyboard.type("ben")
-        page.keyboard.press("Enter")
+        sign_in(page, url, "ben")
         screen(page, "practice", "ready")
         stage, panel = page.locator("#stage").bounding_box(), page.locator("#panel").bounding_box()
         assert stage["width"] >= 380 and stage["height"] >= 300, stage

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from chromium import page_with_errors
+from chromium import page_with_errors, sign_in
 from fixtures_data import skip_without_robosuite
 
 skip_without_robosuite()
@@ -94,11 +94,7 @@ def server(inputs, tmp_path):
 def test_robosuite_scene_and_indicator_in_chromium(browser, server):
     page, errors = page_with_errors(browser, {"width": 1000, "height": 640})
     try:
-        page.goto(server)
-        page.wait_for_selector("#name")
-        page.click("#name")
-        page.keyboard.type("rob")
-        page.keyboard.press("Enter")
+        sign_in(page, server, "rob")
         page.wait_for_selector("body[data-screen=demonstrate][data-state=ready]",
                                state="attached", timeout=120_000)  # fmt: skip
         desc = page.evaluate(
