@@ -36,10 +36,9 @@ import platform
 import time
 from pathlib import Path
 
-from bench_score import _torch_models
+from bench_score import ACT, OBS, _torch_models, bench_policy
 from machine import busy_cores, busy_text
 
-OBS, ACT, K = 23, 7, 5
 SIZES = {"paper": 1024, "cpu": 256}
 
 
@@ -87,29 +86,17 @@ def _percentiles(ms):
 
 
 def bench_size(hidden: int, steps: int, rounds: int) -> dict:
-    import jax
     import numpy as np
     import torch
 
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.elicit.live import LiveScorer
-    from elicit_jax.policy.base import init_policy
 
     rng = np.random.default_rng(0)
     obs = rng.normal(size=(steps, OBS)).astype(np.float32)
     act = rng.uniform(-1, 1, size=(steps, ACT)).astype(np.float32)
     mean, std = obs.mean(0), obs.std(0) + 0.5
-    policy = init_policy(
-        jax.random.key(0),
-        kind="mlp",
-        obs_dim=OBS,
-        action_dim=ACT,
-        n_members=K,
-        hidden=(hidden, hidden),
-        dropout=0.5,
-        obs_mean=mean,
-        obs_std=std,
-    )
+    policy = bench_policy(hidden, mean, std)
     scorer = LiveScorer(ScoreConfig(likelihood="member-average", ddof=1), policy)
     models = _torch_models(policy)
     tm, ts = torch.from_numpy(mean), torch.from_numpy(std)

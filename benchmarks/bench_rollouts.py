@@ -57,8 +57,8 @@ configure(mjx=True)
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from bench_score import bench_policy  # noqa: E402
 
-from elicit_jax.policy.base import init_policy  # noqa: E402
 from elicit_jax.sim.env import make_task  # noqa: E402
 from elicit_jax.sim.evaluate import rollout_mujoco_policy  # noqa: E402
 from elicit_jax.sim.rollout_mjx import rollout_fn  # noqa: E402
@@ -71,14 +71,8 @@ FLOP_PER_STEP = 2 * MEMBERS * (OBS * 1024 + 1024 * 1024 + 1024 * ACT)  # 10.8 MF
 
 
 def paper_policy():
-    return init_policy(
-        jax.random.PRNGKey(0),
-        kind="mlp",
-        obs_dim=OBS,
-        action_dim=ACT,
-        n_members=MEMBERS,
-        hidden=HIDDEN,
-    )
+    """The paper's policy (5 MLPs of 1024-1024, no dropout), as :mod:`bench_score` builds it."""
+    return bench_policy(HIDDEN[0], dropout=0.0)
 
 
 _members = jax.jit(lambda p, o: p.members(o))

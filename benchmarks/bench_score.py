@@ -116,6 +116,26 @@ def spread(values: list[float]) -> dict[str, float]:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
+def bench_policy(hidden: int, mean=None, std=None, dropout: float = 0.5):
+    """The benchmarked policy: the paper's ensemble of K MLPs with two ``hidden``-unit layers
+    on OBS-dim observations (normalized by ``mean``/``std`` when given), seed 0."""
+    import jax
+
+    from elicit_jax.policy.base import init_policy
+
+    return init_policy(
+        jax.random.key(0),
+        kind="mlp",
+        obs_dim=OBS,
+        action_dim=ACT,
+        n_members=K,
+        hidden=(hidden, hidden),
+        dropout=dropout,
+        obs_mean=mean,
+        obs_std=std,
+    )
+
+
 def _torch_models(policy):
     """The policy's members as PyTorch modules (same weights; sizes read from the params)."""
     import numpy as np
@@ -188,7 +208,7 @@ def main() -> None:
     from elicit_jax.compat.score import score_demos
     from elicit_jax.compat.score_file import score_file
     from elicit_jax.data.demos import from_episodes, write_demos
-    from elicit_jax.policy.base import init_policy, normalization_stats
+    from elicit_jax.policy.base import normalization_stats
 
     a = _args()
     rng = np.random.default_rng(0)
@@ -202,17 +222,7 @@ def main() -> None:
     demos = from_episodes(eps, operators="op")
     episode = from_episodes(eps[:1], operators="op")
     mean, std = normalization_stats(demos.obs)
-    policy = init_policy(
-        jax.random.key(0),
-        kind="mlp",
-        obs_dim=OBS,
-        action_dim=ACT,
-        n_members=K,
-        hidden=(HIDDEN, HIDDEN),
-        dropout=0.5,
-        obs_mean=mean,
-        obs_std=std,
-    )
+    policy = bench_policy(HIDDEN, mean, std)
     n_pairs = demos.n_steps
     n = a.matmul_n
     xa = jax.random.normal(jax.random.key(1), (n, n), jnp.float32)

@@ -16,6 +16,15 @@ configure(mjx=True)
 os.environ.setdefault(LOG_ENV, str(Path(tempfile.gettempdir()) / "elicit-jax-tests.log"))
 
 
+@pytest.fixture
+def cli(monkeypatch, capsys):
+    """``cli(*args)`` runs ``elicit-jax ARGS`` in-process: (exit code, out, err)
+    (:func:`fixtures_data.run_cli`)."""
+    from fixtures_data import run_cli
+
+    return lambda *args: run_cli(monkeypatch, capsys, *args)
+
+
 @pytest.fixture(scope="session")
 def square_nut_session_inputs(tmp_path_factory):
     """Square-nut D_base, a tiny base policy and fitted (λ, η), built once for every session

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -556,6 +557,51 @@ def own_robomimic_file(path: Path, n_base: int = 12, n_alt: int = 6, t: int = 40
     return write_robomimic(path, demos, masks=names, env_name="NutAssemblySquare")
 
 
+def skip_without_robosuite() -> None:
+    """Skip the calling test module when the robosuite extra is not installed, except under
+    ELICIT_JAX_REQUIRE_ROBOSUITE=1 (CI), where its tests run and fail instead."""
+    import os
+
+    import pytest
+
+    try:
+        import robosuite  # noqa: F401
+    except ModuleNotFoundError:
+        if os.environ.get("ELICIT_JAX_REQUIRE_ROBOSUITE") != "1":
+            pytest.skip("robosuite extra not installed", allow_module_level=True)
+
+
+def invoke(*args):
+    """``elicit-jax ARGS`` through Typer's ``CliRunner`` (arguments as strings): its Result."""
+    from typer.testing import CliRunner
+
+    from elicit_jax.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def cli_ok(*args):
+    """:func:`invoke` that must exit 0; fails with the output and exception otherwise."""
+    result = invoke(*args)
+    assert result.exit_code == 0, (result.output, result.exception)
+    return result
+
+
+def run_cli(monkeypatch, capsys, *args) -> tuple[int, str, str]:
+    """Run ``elicit-jax ARGS`` in-process through ``main``; returns (exit code, out, err)."""
+    from elicit_jax.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
+    monkeypatch.setenv("COLUMNS", "250")  # rich wraps tables at the terminal width
+    code = 0
+    try:
+        main()
+    except SystemExit as e:
+        code = e.code or 0
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
 def tiny_episodes(n: int = 6, t: int = 20, seed: int = 0) -> list[dict]:
     """``n`` random episodes of ``t`` steps: obs (t, 3), action (t, 2) in [-1, 1]."""
     rng = np.random.default_rng(seed)
@@ -600,6 +646,25 @@ class SessionInputs:
     policy: Path
     lam: float
     eta: float
+
+    def session_config(self, operator: str, **overrides):
+        """A square-nut ``SessionConfig`` on these inputs for ``operator``: 1 practice, 2
+        prompt and 2 demonstration episodes, at most 4 episodes; ``overrides`` replace fields."""
+        from elicit_jax.compat.threshold_source import Thresholds
+        from elicit_jax.elicit.config import SessionConfig
+
+        base = dict(
+            task="square-nut",
+            policy=str(self.policy),
+            base_demos=str(self.base),
+            thresholds=Thresholds(self.lam, self.eta, "given"),
+            operator=operator,
+            demos=2,
+            practice=1,
+            prompt=2,
+            max_episodes=4,
+        )
+        return SessionConfig(**{**base, **overrides})
 
 
 def square_nut_session_inputs(d: Path) -> SessionInputs:

@@ -4,9 +4,8 @@ import json
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from fixtures_data import cli_ok, invoke
 
-from elicit_jax.cli import app
 from elicit_jax.compat.score_file import read_scores
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
@@ -50,30 +49,22 @@ def run(tmp_path_factory):
     return d
 
 
-def _ok(args):
-    result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, (result.output, result.exception)
-    return result
-
-
 def test_score_fit_filter_map(run):
     d = run
-    _ok(
-        [
-            "score",
-            "--policy",
-            str(d / "runs"),
-            "--demos",
-            str(d / "new.parquet"),
-            "-o",
-            str(d / "scores.parquet"),
-            "--lambda",
-            "0.05",
-            "--eta",
-            "0.5",
-            "--chunk-size",
-            "64",
-        ]
+    cli_ok(
+        "score",
+        "--policy",
+        str(d / "runs"),
+        "--demos",
+        str(d / "new.parquet"),
+        "-o",
+        str(d / "scores.parquet"),
+        "--lambda",
+        "0.05",
+        "--eta",
+        "0.5",
+        "--chunk-size",
+        "64",
     )
     header, s = read_scores(d / "scores.parquet")
     assert header["thresholds"] == {"lambda": 0.05, "eta": 0.5}
@@ -83,18 +74,16 @@ def test_score_fit_filter_map(run):
     # the policy learned the base mapping: the opposite-style operator has far larger errors
     assert s["likelihood"][ops == "bad"].mean() > 5 * s["likelihood"][ops == "good"].mean()
 
-    r = _ok(
-        [
-            "fit-thresholds",
-            "--scores",
-            str(d / "scores.parquet"),
-            "--compatible",
-            "operator:good",
-            "--incompatible",
-            "operator:bad",
-            "-o",
-            str(d / "t.json"),
-        ]
+    r = cli_ok(
+        "fit-thresholds",
+        "--scores",
+        str(d / "scores.parquet"),
+        "--compatible",
+        "operator:good",
+        "--incompatible",
+        "operator:bad",
+        "-o",
+        str(d / "t.json"),
     )
     assert "balanced accuracy" in r.output
     t = json.loads((d / "t.json").read_text())
@@ -103,73 +92,49 @@ def test_score_fit_filter_map(run):
     assert t["report"]["per_operator"]["bad"]["rejected_episodes"] == 4
     assert t["report"]["per_operator"]["good"]["rejected_episodes"] == 0
 
-    _ok(
-        [
-            "filter",
-            "--scores",
-            str(d / "scores.parquet"),
-            "--demos",
-            str(d / "new.parquet"),
-            "--base",
-            str(d / "base.parquet"),
-            "-o",
-            str(d / "f.parquet"),
-            "--level",
-            "episode",
-            "--thresholds",
-            str(d / "t.json"),
-        ]
+    cli_ok(
+        "filter",
+        "--scores",
+        str(d / "scores.parquet"),
+        "--demos",
+        str(d / "new.parquet"),
+        "--base",
+        str(d / "base.parquet"),
+        "-o",
+        str(d / "f.parquet"),
+        "--level",
+        "episode",
+        "--thresholds",
+        str(d / "t.json"),
     )
     f = read_demos(d / "f.parquet")
     assert sorted(set(f.operator.astype(str))) == ["base", "good"]
 
     for name in ("map.png", "map.html"):
-        _ok(
-            [
-                "map",
-                "--scores",
-                str(d / "scores.parquet"),
-                "-o",
-                str(d / name),
-                "--thresholds",
-                str(d / "t.json"),
-            ]
+        cli_ok(
+            "map",
+            "--scores",
+            str(d / "scores.parquet"),
+            "-o",
+            str(d / name),
+            "--thresholds",
+            str(d / "t.json"),
         )
         assert (d / name).stat().st_size > 1000
     for artifact in ("scores.parquet", "scores.episodes.parquet", "t.json", "f.dropped.parquet"):
-        _ok(["info", str(d / artifact)])
+        cli_ok("info", str(d / artifact))
 
 
-def test_cli_errors_are_clear(run):
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--lambda", "0.1"], "--lambda and --eta go together"),
+        (["--preset", "peg"], "unknown preset"),
+    ],
+)
+def test_cli_errors_are_clear(run, flags, message):
     d = run
-    result = CliRunner().invoke(
-        app,
-        [
-            "score",
-            "--policy",
-            str(d / "runs"),
-            "--demos",
-            str(d / "new.parquet"),
-            "-o",
-            str(d / "x.parquet"),
-            "--lambda",
-            "0.1",
-        ],
-    )
+    args = ["score", "--policy", d / "runs", "--demos", d / "new.parquet", "-o", d / "x.parquet"]
+    result = invoke(*args, *flags)
     assert isinstance(result.exception, ElicitError)
-    assert "--lambda and --eta go together" in str(result.exception)
-    result = CliRunner().invoke(
-        app,
-        [
-            "score",
-            "--policy",
-            str(d / "runs"),
-            "--demos",
-            str(d / "new.parquet"),
-            "-o",
-            str(d / "x.parquet"),
-            "--preset",
-            "peg",
-        ],
-    )
-    assert "unknown preset" in str(result.exception)
+    assert message in str(result.exception)

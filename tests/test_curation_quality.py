@@ -3,7 +3,7 @@ robomimic file (``quality`` then ``filter --method quality``)."""
 
 import numpy as np
 import pytest
-from fixtures_data import write_robomimic
+from fixtures_data import cli_ok, write_robomimic
 from typer.testing import CliRunner
 
 from elicit_jax.cli import app
@@ -106,9 +106,7 @@ def test_quality_cli_on_imported_robomimic(tmp_path):
     src = write_robomimic(tmp_path / "teleop.hdf5", demos)
 
     def ok(*args):
-        r = CliRunner().invoke(app, [str(a) for a in args])
-        assert r.exit_code == 0, (r.output, r.exception)
-        return r.output
+        return cli_ok(*args).output
 
     ok("import", src, "--obs-keys", "eef_pos", "-o", tmp_path / "all.parquet")
     out = ok("quality", tmp_path / "all.parquet", "-o", tmp_path / "q.parquet")

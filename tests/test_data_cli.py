@@ -11,26 +11,7 @@ import numpy as np
 import pytest
 from fixtures_data import lerobot_episode, write_lerobot_v30
 
-from elicit_jax.cli import main
 from elicit_jax.data.demos import read_demos
-
-
-def run(monkeypatch, capsys, *args):
-    """Run ``elicit-jax ARGS`` in-process through ``main``; returns (exit code, out, err)."""
-    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
-    monkeypatch.setenv("COLUMNS", "250")  # rich wraps tables at the terminal width
-    code = 0
-    try:
-        main()
-    except SystemExit as e:
-        code = e.code or 0
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-@pytest.fixture
-def cli(monkeypatch, capsys):
-    return lambda *args: run(monkeypatch, capsys, *args)
 
 
 def test_quickstart_make_example_import_info_export(cli, tmp_path):

@@ -259,7 +259,7 @@ def test_lerobot_version_written_by_default(tmp_path, writer, version):
 def test_collected_demos_round_trip_bit_equal(tmp_path, monkeypatch, capsys):
     import shlex
 
-    from test_data_cli import run
+    from fixtures_data import run_cli
 
     from elicit_jax.sim.collect import CollectConfig, collect
 
@@ -274,7 +274,7 @@ def test_collected_demos_round_trip_bit_equal(tmp_path, monkeypatch, capsys):
     collected = read_demos(tmp_path / "c.parquet")
 
     def cli(*args):
-        code, out, err = run(monkeypatch, capsys, *args)
+        code, out, err = run_cli(monkeypatch, capsys, *args)
         assert code == 0, err
         return out
 

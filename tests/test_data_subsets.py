@@ -3,16 +3,11 @@ episodes are selected, and the per-episode scores name the source demo."""
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from fixtures_data import invoke
 
-from elicit_jax.cli import app
 from elicit_jax.compat.selection import parse_selection
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -37,17 +32,17 @@ def demos_file(tmp_path_factory):
 
 def test_select_ranges_and_split(demos_file, tmp_path):
     held, rest = tmp_path / "held.parquet", tmp_path / "rest.parquet"
-    r = _invoke("demos", "select", demos_file, "--episodes", "0-2,6", "-o", held)
+    r = invoke("demos", "select", demos_file, "--episodes", "0-2,6", "-o", held)
     assert r.exit_code == 0, r.output
     assert "demo_16" in r.output  # the table names each episode's source demo
     h = read_demos(held)
     assert h.episode_ids.tolist() == [0, 1, 2, 6]  # ids of the input, not renumbered
     names = [h.extra["source_episode"][s] for _, s, _ in h.episode_bounds()]
     assert names == ["demo_10", "demo_11", "demo_12", "demo_16"]
-    r = _invoke("demos", "select", demos_file, "--exclude", "0-2,6", "-o", rest)
+    r = invoke("demos", "select", demos_file, "--exclude", "0-2,6", "-o", rest)
     assert r.exit_code == 0, r.output
     assert read_demos(rest).episode_ids.tolist() == [3, 4, 5, 7]
-    r = _invoke(
+    r = invoke(
         "demos", "select", demos_file, "--operator", "bob", "--source-episodes",
         "demo_15,demo_17", "-o", tmp_path / "b.parquet",
     )  # fmt: skip
@@ -56,22 +51,22 @@ def test_select_ranges_and_split(demos_file, tmp_path):
 
 
 def test_select_errors(demos_file, tmp_path):
-    r = _invoke("demos", "select", demos_file, "--episodes", "3-12", "-o", tmp_path / "x.parquet")
+    r = invoke("demos", "select", demos_file, "--episodes", "3-12", "-o", tmp_path / "x.parquet")
     assert isinstance(r.exception, ElicitError) and "has no episode 8" in str(r.exception)
-    r = _invoke("demos", "select", demos_file, "--episodes", "4-2", "-o", tmp_path / "x.parquet")
+    r = invoke("demos", "select", demos_file, "--episodes", "4-2", "-o", tmp_path / "x.parquet")
     assert "bad episode range" in str(r.exception)
-    r = _invoke("demos", "select", demos_file, "--operator", "carol", "-o", tmp_path / "x.parquet")
+    r = invoke("demos", "select", demos_file, "--operator", "carol", "-o", tmp_path / "x.parquet")
     assert "has no operator 'carol'" in str(r.exception)
-    r = _invoke("demos", "select", demos_file, "--episodes", "1", "-o", demos_file)
+    r = invoke("demos", "select", demos_file, "--episodes", "1", "-o", demos_file)
     assert "is the input" in str(r.exception)
     assert not (tmp_path / "x.parquet").exists()
 
 
 def test_concat_renumbers_and_keeps_source_names(demos_file, tmp_path):
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    _invoke("demos", "select", demos_file, "--episodes", "5-7", "-o", a)
-    _invoke("demos", "select", demos_file, "--episodes", "0,1", "-o", b)
-    r = _invoke("demos", "concat", a, b, "-o", tmp_path / "ab.parquet")
+    invoke("demos", "select", demos_file, "--episodes", "5-7", "-o", a)
+    invoke("demos", "select", demos_file, "--episodes", "0,1", "-o", b)
+    r = invoke("demos", "concat", a, b, "-o", tmp_path / "ab.parquet")
     assert r.exit_code == 0, r.output
     ab = read_demos(tmp_path / "ab.parquet")
     assert ab.episode_ids.tolist() == [0, 1, 2, 3, 4]
@@ -80,9 +75,9 @@ def test_concat_renumbers_and_keeps_source_names(demos_file, tmp_path):
         "demo_15", "demo_16", "demo_17", "demo_10", "demo_11",
     ]  # fmt: skip
     assert [int(ab.extra["part"][s]) for s in starts] == [0, 0, 0, 1, 1]
-    r = _invoke("demos", "list", tmp_path / "ab.parquet")
+    r = invoke("demos", "list", tmp_path / "ab.parquet")
     assert r.exit_code == 0 and "demo_17" in r.output
-    r = _invoke("demos", "concat", a, "-o", tmp_path / "one.parquet")
+    r = invoke("demos", "concat", a, "-o", tmp_path / "one.parquet")
     assert "at least two" in str(r.exception)
 
 
@@ -94,7 +89,7 @@ def test_episode_selections_accept_ranges_everywhere():
 
 
 def test_info_shows_ids_with_source_names(demos_file):
-    r = _invoke("info", demos_file)
+    r = invoke("info", demos_file)
     assert r.exit_code == 0
     assert "0 (demo_10)" in r.output and "7 (demo_17)" in r.output
 

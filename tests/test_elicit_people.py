@@ -19,8 +19,6 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
-from elicit_jax.compat.threshold_source import Thresholds
-from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import EpisodeEndEvent, EpisodeStartEvent, PromptEvent, ReviewEvent
 from elicit_jax.elicit.people import SimulatedPerson, make_population, parse_person, person_of
 from elicit_jax.elicit.people.learn import Shown, compass_search, imagined_error
@@ -267,19 +265,8 @@ class Watcher:
 
 
 def _session(nut, out, operator=PERSON, **kw):
-    base = dict(
-        task="square-nut",
-        policy=str(nut.policy),
-        base_demos=str(nut.base),
-        thresholds=Thresholds(nut.lam, nut.eta, "given"),
-        operator=operator,
-        demos=2,
-        practice=1,
-        prompt=2,
-        max_episodes=6,
-        seed=2,
-    )
-    setup, op, _ = open_session(SessionConfig(**{**base, **kw}), out)
+    config = nut.session_config(operator, **{"max_episodes": 6, "seed": 2, **kw})
+    setup, op, _ = open_session(config, out)
     watcher = Watcher(op)
     session = run_session(setup, watcher)
     return session, watcher, person_of(op)

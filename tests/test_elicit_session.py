@@ -21,8 +21,6 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
-from elicit_jax.compat.threshold_source import Thresholds
-from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
     IndicatorEvent,
     PromptEvent,
@@ -58,23 +56,8 @@ class Recorder:
         return [e for e in self.events if isinstance(e, kind)]
 
 
-def _config(nut: SessionInputs, operator: str, **kw) -> SessionConfig:
-    base = dict(
-        task="square-nut",
-        policy=str(nut.policy),
-        base_demos=str(nut.base),
-        thresholds=Thresholds(nut.lam, nut.eta, "given"),
-        operator=operator,
-        demos=2,
-        practice=1,
-        prompt=2,
-        max_episodes=4,
-    )
-    return SessionConfig(**{**base, **kw})
-
-
 def _run(nut: SessionInputs, out: Path, operator: str, **kw):
-    setup, op, _ = open_session(_config(nut, operator, **kw), out)
+    setup, op, _ = open_session(nut.session_config(operator, **kw), out)
     rec = Recorder(op)
     return run_session(setup, rec), rec
 
@@ -268,7 +251,9 @@ def test_a_crash_mid_episode_loses_only_that_episode(nut, tmp_path):
     from elicit_jax.data.demos import read_demos
 
     kw = dict(mode="naive", demos=2, practice=1)
-    setup, op, _ = open_session(_config(nut, "scripted:conflict-flip-pause", **kw), tmp_path / "c")
+    setup, op, _ = open_session(
+        nut.session_config("scripted:conflict-flip-pause", **kw), tmp_path / "c"
+    )
     with pytest.raises(Crash):
         run_session(setup, CrashingOperator(op, episode=2, at=150))
     assert [p.name for p in SessionStore(tmp_path / "c").episode_files()] == [
@@ -338,25 +323,8 @@ def test_kill_9_mid_session_and_resume_loses_only_the_episode_in_progress(nut, t
     assert not list(out.rglob(".*.tmp"))
 
 
-def _main(monkeypatch, capsys, *args):
-    from elicit_jax.cli import main
-
-    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
-    monkeypatch.setenv("COLUMNS", "250")
-    code = 0
-    try:
-        main()
-    except SystemExit as e:
-        code = e.code or 0
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def test_cli_bad_inputs_info_and_report(nut, tmp_path, monkeypatch, capsys):
+def test_cli_bad_inputs_info_and_report(nut, tmp_path, cli):
     from elicit_jax.data.demos import from_episodes, write_demos
-
-    def cli(*args):
-        return _main(monkeypatch, capsys, *args)
 
     head = ["elicit", "--task", "square-nut", "--policy", nut.policy]
     thr = ["--lambda", nut.lam, "--eta", nut.eta, "--practice", "0", "--demos", "1"]
@@ -443,4 +411,4 @@ def test_cli_bad_inputs_info_and_report(nut, tmp_path, monkeypatch, capsys):
     assert "## Per batch" in md and "| 1 | 1 | 1 | 0 | 0 | 100% |" in md
     assert "data:image/png;base64," in page and "http" not in page.replace("http-equiv", "")
     with pytest.raises(ElicitError, match="choose one of --resume and --overwrite"):
-        open_session(_config(nut, "scripted:base"), out, resume=True, overwrite=True)
+        open_session(nut.session_config("scripted:base"), out, resume=True, overwrite=True)

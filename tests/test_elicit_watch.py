@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 
 import numpy as np
 import pytest
-from fixtures_data import write_lerobot_v21, write_robomimic
+from fixtures_data import run_cli, write_lerobot_v21, write_robomimic
 
 from elicit_jax.data.demos import from_episodes, write_demos
 
@@ -82,18 +81,6 @@ def _lerobot(root, episodes):
     write_lerobot_v21(root, eps, ["stack"])
 
 
-def _main(monkeypatch, capsys, *args):
-    from elicit_jax.cli import main
-
-    monkeypatch.setattr(sys, "argv", ["elicit-jax", *map(str, args)])
-    code = 0
-    try:
-        main()
-    except SystemExit as e:
-        code = e.code or 0
-    return (code, *capsys.readouterr())
-
-
 def _watch_args(inbox, d):
     return [
         "watch",
@@ -131,7 +118,7 @@ def test_watch_a_robomimic_inbox(setup, tmp_path, monkeypatch, capsys):
     (inbox / "op3.hdf5.part").write_bytes(b"still copying")
     (inbox / "broken.hdf5").write_bytes(b"\x89HDF\r\n\x1a\n cut short")
     args = _watch_args(inbox, setup / "rm")
-    code, out, err = _main(monkeypatch, capsys, *args)
+    code, out, err = run_cli(monkeypatch, capsys, *args)
     assert code == 0, err
     verdicts, lines = _verdicts(out)
     assert verdicts == {"op1.hdf5 / demo_0": "accepted", "op1.hdf5 / demo_1": "rejected"}
@@ -144,7 +131,7 @@ def test_watch_a_robomimic_inbox(setup, tmp_path, monkeypatch, capsys):
         assert "data:image/png;base64," in page and (pages / f"{stem}.png").stat().st_size > 1000
     log = [json.loads(x) for x in (pages / "verdicts.jsonl").read_text().splitlines()]
     assert len(log) == 3 and sum("error" in r for r in log) == 1
-    code, out, _ = _main(monkeypatch, capsys, *args)  # a restart judges nothing again
+    code, out, _ = run_cli(monkeypatch, capsys, *args)  # a restart judges nothing again
     assert code == 0 and "judged 0 demonstrations" in out
 
 
@@ -158,13 +145,13 @@ def test_watch_a_lerobot_folder_that_grows(setup, tmp_path, monkeypatch, capsys)
     inbox.mkdir()
     _lerobot(inbox / "op2", episodes(2))
     args = _watch_args(inbox, setup / "lr")
-    code, out, err = _main(monkeypatch, capsys, *args)
+    code, out, err = run_cli(monkeypatch, capsys, *args)
     assert code == 0, err
     assert _verdicts(out)[0] == {"op2 / 0": "accepted", "op2 / 1": "rejected"}
     assert (inbox / "verdicts" / "op2__1.html").exists()
     shutil.rmtree(inbox / "op2")  # the recorder adds an episode: only the new one is judged
     _lerobot(inbox / "op2", episodes(3))
-    code, out, _ = _main(monkeypatch, capsys, *args)
+    code, out, _ = run_cli(monkeypatch, capsys, *args)
     assert code == 0 and "judged 1 demonstrations" in out
     assert _verdicts(out)[0] == {"op2 / 2": "accepted"}
 

@@ -5,21 +5,15 @@ check quotes is the one the report shows."""
 
 import numpy as np
 import pytest
-from fixtures_data import tiny_run
-from typer.testing import CliRunner
+from fixtures_data import invoke, tiny_run
 
 from elicit_jax.artifact import make_header, write_parquet
-from elicit_jax.cli import app
 from elicit_jax.errors import ElicitError
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     return tiny_run(tmp_path_factory.mktemp("errors"))
-
-
-def _run(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
 
 
 def _one_line(r, path, text):
@@ -31,7 +25,7 @@ def _one_line(r, path, text):
 
 def test_a_parquet_file_given_as_thresholds(run, tmp_path):
     demos = run / "demos.parquet"
-    r = _run(
+    r = invoke(
         "filter",
         "--scores",
         demos,
@@ -46,14 +40,14 @@ def test_a_parquet_file_given_as_thresholds(run, tmp_path):
     # any binary file read as JSON
     blob = tmp_path / "blob.json"
     blob.write_bytes(bytes(range(256)))
-    r = _run("info", blob)
+    r = invoke("info", blob)
     _one_line(r, blob, "not a JSON file: it is binary, not text")
 
 
 def test_a_file_of_random_bytes_named_npz(run, tmp_path):
     bad = tmp_path / "random.npz"
     bad.write_bytes(np.random.default_rng(0).bytes(4000))
-    r = _run("import", bad, "-o", tmp_path / "d.parquet")
+    r = invoke("import", bad, "-o", tmp_path / "d.parquet")
     msg = _one_line(r, bad, "not a .npz archive: a .npz is a zip file")
     assert "pickle" not in msg
     # the same reader guards a checkpoint's parameter files
@@ -61,7 +55,7 @@ def test_a_file_of_random_bytes_named_npz(run, tmp_path):
 
     shutil.copytree(run / "run", tmp_path / "run")
     (tmp_path / "run" / "seed0" / "params" / "best.npz").write_bytes(bad.read_bytes())
-    r = _run(
+    r = invoke(
         "score",
         "--policy",
         tmp_path / "run",
@@ -112,7 +106,7 @@ def test_watch_errors_name_the_item(run, tmp_path):
 
 def test_operator_lists_are_plain_names(run, tmp_path):
     demos = run / "demos.parquet"
-    r = _run("demos", "select", demos, "--operator", "nobody", "-o", tmp_path / "x.parquet")
+    r = invoke("demos", "select", demos, "--operator", "nobody", "-o", tmp_path / "x.parquet")
     msg = _one_line(r, demos, "has no operator 'nobody' (operators: base)")
     assert "np." not in msg
     # a contrast selection that matches nothing names the scores file and its operators
@@ -128,7 +122,7 @@ def test_operator_lists_are_plain_names(run, tmp_path):
         }
     )
     write_parquet(s, table, make_header("scores", 1))
-    r = _run(
+    r = invoke(
         "fit-thresholds",
         "--scores",
         s,
@@ -212,5 +206,5 @@ def test_the_in_sample_accuracy_quoted_is_the_one_the_report_shows(tmp_path, cap
 def test_info_on_an_empty_sessions_folder_says_what_it_looked_for(tmp_path):
     folder = tmp_path / "sessions"
     folder.mkdir()
-    msg = _one_line(_run("info", folder), folder, "no elicit-jax artifact")
+    msg = _one_line(invoke("info", folder), folder, "no elicit-jax artifact")
     assert "operator session" in msg and "until an operator starts" in msg

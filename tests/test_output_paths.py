@@ -6,30 +6,18 @@ import json
 
 import numpy as np
 import pytest
-from fixtures_data import tiny_episodes, tiny_run
-from typer.testing import CliRunner
+from fixtures_data import cli_ok, invoke, tiny_episodes, tiny_run
 
 from elicit_jax.artifact import atomic_path, file_sha256, read_header
-from elicit_jax.cli import app
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def _ok(*args):
-    r = _invoke(*args)
-    assert r.exit_code == 0, (r.output, r.exception)
-    return r
 
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
     d = tiny_run(tmp_path_factory.mktemp("paths"))
-    _ok("score", "--policy", d / "run", "--demos", d / "demos.parquet", "-o", d / "s.parquet",
-        "--lambda", "0.4", "--eta", "0.05")  # fmt: skip
+    cli_ok("score", "--policy", d / "run", "--demos", d / "demos.parquet", "-o", d / "s.parquet",
+           "--lambda", "0.4", "--eta", "0.05")  # fmt: skip
     return d
 
 
@@ -60,18 +48,18 @@ def test_an_existing_directory_is_never_replaced(work, tmp_path):
     notes = _notes(tmp_path)
     for name, args in _commands(work, notes).items():
         for extra in ((), ("--overwrite",)):
-            r = _invoke(*args, *extra)
+            r = invoke(*args, *extra)
             assert isinstance(r.exception, ElicitError), (name, r.output, r.exception)
             assert "existing directory" in str(r.exception), (name, str(r.exception))
             assert (notes / "a.txt").read_text() == "mine", name
             assert sorted(p.name for p in notes.iterdir()) == ["a.txt"], name
     # train replaces only training runs, even with --overwrite
-    r = _invoke("train", "--demos", work / "demos.parquet", "--out", notes, "--profile", "cpu",
-                "--epochs", "1", "--overwrite")  # fmt: skip
+    r = invoke("train", "--demos", work / "demos.parquet", "--out", notes, "--profile", "cpu",
+               "--epochs", "1", "--overwrite")  # fmt: skip
     assert "not a training run" in str(r.exception)
     assert (notes / "a.txt").read_text() == "mine"
     # a report goes over an earlier report only, never over another directory
-    r = _invoke("report", work / "run", "-o", notes)
+    r = invoke("report", work / "run", "-o", notes)
     assert "existing directory" in str(r.exception) and (notes / "a.txt").exists()
 
 
@@ -80,15 +68,15 @@ def test_an_existing_file_needs_overwrite(work, tmp_path):
     for name in ("score", "filter", "demos select", "demos concat"):
         out.write_text("precious")
         args = _commands(work, out)[name]
-        r = _invoke(*args)
+        r = invoke(*args)
         assert isinstance(r.exception, ElicitError) and "--overwrite" in str(r.exception), name
         assert out.read_text() == "precious", name
-        _ok(*args, "--overwrite")
+        cli_ok(*args, "--overwrite")
         assert read_header(out)["kind"] == "demos" or name == "score"
         out.unlink()
     # a sibling output (score's per-episode summary) counts too
     (tmp_path / "out.episodes.parquet").write_text("precious")
-    r = _invoke(*_commands(work, out)["score"])
+    r = invoke(*_commands(work, out)["score"])
     assert "already exists" in str(r.exception) and not out.exists()
 
 
@@ -106,20 +94,20 @@ def test_an_output_inside_an_input_directory_is_refused(work):
         _commands(work, loss)["score"],
         (*_commands(work, work / "run" / "new.parquet")["score"], "--overwrite"),
     ):
-        r = _invoke(*args)
+        r = invoke(*args)
         assert "inside the input directory" in str(r.exception), r.exception
     assert file_sha256(loss) == before
-    r = _invoke("evaluate", "--policy", work / "run", "--rollouts", "1", "-o",
-                work / "run" / "evals.parquet")  # fmt: skip
+    r = invoke("evaluate", "--policy", work / "run", "--rollouts", "1", "-o",
+               work / "run" / "evals.parquet")  # fmt: skip
     assert "inside the input directory" in str(r.exception)
 
 
 def test_concat_refuses_duplicate_episodes_unless_allowed(work, tmp_path):
     demos = work / "demos.parquet"
     a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
-    _ok("demos", "select", demos, "--episodes", "0-3", "-o", a)
-    _ok("demos", "select", demos, "--episodes", "2-5", "-o", b)
-    r = _invoke("demos", "concat", a, b, "-o", tmp_path / "ab.parquet")
+    cli_ok("demos", "select", demos, "--episodes", "0-3", "-o", a)
+    cli_ok("demos", "select", demos, "--episodes", "2-5", "-o", b)
+    r = invoke("demos", "concat", a, b, "-o", tmp_path / "ab.parquet")
     assert isinstance(r.exception, ElicitError)
     msg = str(r.exception)
     assert "2 episode(s) repeat" in msg and "--allow-duplicates" in msg
@@ -128,15 +116,15 @@ def test_concat_refuses_duplicate_episodes_unless_allowed(work, tmp_path):
     # the same observations and actions under another operator label are still duplicates
     other = from_episodes(tiny_episodes()[:1], operators="someone-else")
     write_demos(tmp_path / "relabelled.parquet", other)
-    r = _invoke("demos", "concat", a, tmp_path / "relabelled.parquet", "-o", tmp_path / "x.parquet")
+    r = invoke("demos", "concat", a, tmp_path / "relabelled.parquet", "-o", tmp_path / "x.parquet")
     assert "repeat" in str(r.exception)
-    _ok("demos", "concat", a, b, "-o", tmp_path / "ab.parquet", "--allow-duplicates")
+    cli_ok("demos", "concat", a, b, "-o", tmp_path / "ab.parquet", "--allow-duplicates")
     kept = read_header(tmp_path / "ab.parquet")["config"]["duplicates_kept"]
     assert [(d["part"], d["episode"], d["of_part"], d["of_episode"]) for d in kept] == [
         (1, 2, 0, 2), (1, 3, 0, 3),
     ]  # fmt: skip
     # an export of that file leaves the second copies out, and says so
-    r = _ok("export", tmp_path / "ab.parquet", "--format", "npz", "-o", tmp_path / "ab.npz")
+    r = cli_ok("export", tmp_path / "ab.parquet", "--format", "npz", "-o", tmp_path / "ab.npz")
     assert "left out 2 episode(s) identical" in r.output
     with np.load(tmp_path / "ab.npz") as z:
         assert len(z["lengths"]) == 6
@@ -145,10 +133,10 @@ def test_concat_refuses_duplicate_episodes_unless_allowed(work, tmp_path):
 def test_filter_base_drops_episodes_of_demos_identical_to_base(work, tmp_path):
     demos = work / "demos.parquet"
     base = tmp_path / "base.parquet"
-    _ok("demos", "select", demos, "--episodes", "0,1", "-o", base)
+    cli_ok("demos", "select", demos, "--episodes", "0,1", "-o", base)
     out = tmp_path / "f.parquet"
-    r = _ok("filter", "--scores", work / "s.parquet", "--demos", demos, "--base", base,
-            "-o", out, "--lambda", "1e9", "--eta", "1e-9")  # keeps every pair by M  # fmt: skip
+    r = cli_ok("filter", "--scores", work / "s.parquet", "--demos", demos, "--base", base,
+               "-o", out, "--lambda", "1e9", "--eta", "1e-9")  # keeps every pair by M  # fmt: skip
     assert "dropped 2 episode(s) of --demos identical to --base episodes" in r.output
     assert "(6 -> 4 episodes; 2 episode(s) as duplicates of --base; the others:" in r.output
     got = read_demos(out)
@@ -165,34 +153,34 @@ def test_filter_base_drops_episodes_of_demos_identical_to_base(work, tmp_path):
 def test_std_scaled_scores_refuse_raw_unit_thresholds(work, tmp_path):
     run, demos = work / "run", work / "demos.parquet"
     score = ("score", "--policy", run, "--demos", demos, "--action-scale", "std")
-    r = _invoke(*score, "-o", tmp_path / "a.parquet", "--preset", "square-nut")
+    r = invoke(*score, "-o", tmp_path / "a.parquet", "--preset", "square-nut")
     assert isinstance(r.exception, ElicitError)
     assert "raw action units" in str(r.exception) and not (tmp_path / "a.parquet").exists()
     # a thresholds file fitted on raw-unit scores
-    _ok("fit-thresholds", "--scores", work / "s.parquet", "--lambda", "0.4", "--eta", "0.05",
-        "-o", tmp_path / "raw.json")  # fmt: skip
+    cli_ok("fit-thresholds", "--scores", work / "s.parquet", "--lambda", "0.4", "--eta", "0.05",
+           "-o", tmp_path / "raw.json")  # fmt: skip
     assert json.loads((tmp_path / "raw.json").read_text())["action_scale"] == "none"
-    r = _invoke(*score, "-o", tmp_path / "a.parquet", "--thresholds", tmp_path / "raw.json")
+    r = invoke(*score, "-o", tmp_path / "a.parquet", "--thresholds", tmp_path / "raw.json")
     assert "--action-scale none scores" in str(r.exception)
     # no thresholds: scored, and M / accept-reject are said and recorded to be placeholders
-    r = _ok(*score, "-o", tmp_path / "std.parquet")
+    r = cli_ok(*score, "-o", tmp_path / "std.parquet")
     assert "placeholders, not verdicts" in r.output
     assert read_header(tmp_path / "std.parquet")["thresholds_source"].startswith("placeholder")
     # thresholds fitted on std-scaled scores apply to std-scaled scores only
-    _ok("fit-thresholds", "--scores", tmp_path / "std.parquet", "--lambda", "2", "--eta", "1",
-        "-o", tmp_path / "std.json")  # fmt: skip
-    _ok(*score, "-o", tmp_path / "b.parquet", "--thresholds", tmp_path / "std.json")
-    r = _invoke("filter", "--scores", work / "s.parquet", "--demos", demos,
-                "--thresholds", tmp_path / "std.json", "-o", tmp_path / "f.parquet")  # fmt: skip
+    cli_ok("fit-thresholds", "--scores", tmp_path / "std.parquet", "--lambda", "2", "--eta", "1",
+           "-o", tmp_path / "std.json")  # fmt: skip
+    cli_ok(*score, "-o", tmp_path / "b.parquet", "--thresholds", tmp_path / "std.json")
+    r = invoke("filter", "--scores", work / "s.parquet", "--demos", demos,
+               "--thresholds", tmp_path / "std.json", "-o", tmp_path / "f.parquet")  # fmt: skip
     assert "--action-scale std scores" in str(r.exception)
     # live scoring (elicit, watch) is in raw units
-    r = _invoke("watch", tmp_path, "--policy", run, "--base-demos", demos,
-                "--thresholds", tmp_path / "std.json", "--once")  # fmt: skip
+    r = invoke("watch", tmp_path, "--policy", run, "--base-demos", demos,
+               "--thresholds", tmp_path / "std.json", "--once")  # fmt: skip
     assert "do not apply to --action-scale none" in str(r.exception)
-    r = _invoke("serve", "--task", "reach-pillar", "--policy", run, "--base-demos", demos,
-                "--thresholds", tmp_path / "std.json", "--sessions", tmp_path / "sessions",
-                "--port", "0")  # fmt: skip
+    r = invoke("serve", "--task", "reach-pillar", "--policy", run, "--base-demos", demos,
+               "--thresholds", tmp_path / "std.json", "--sessions", tmp_path / "sessions",
+               "--port", "0")  # fmt: skip
     assert "do not apply to --action-scale none" in str(r.exception)
     assert not (tmp_path / "sessions").exists()
-    r = _ok(*score, "-o", tmp_path / "c.parquet", "--lambda", "2", "--eta", "1")
+    r = cli_ok(*score, "-o", tmp_path / "c.parquet", "--lambda", "2", "--eta", "1")
     assert "std-scaled units" in r.output

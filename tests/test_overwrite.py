@@ -5,16 +5,10 @@ import os
 import tempfile
 
 import pytest
-from fixtures_data import tiny_run, tiny_train_config
-from typer.testing import CliRunner
+from fixtures_data import invoke, tiny_run, tiny_train_config
 
 from elicit_jax.artifact import atomic_path, file_sha256
-from elicit_jax.cli import app
 from elicit_jax.errors import ElicitError
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -25,13 +19,13 @@ def work(tmp_path_factory):
 def test_score_and_filter_refuse_to_write_over_their_input(work):
     demos = work / "demos.parquet"
     before = file_sha256(demos)
-    r = _invoke("score", "--policy", work / "run", "--demos", demos, "-o", demos)
+    r = invoke("score", "--policy", work / "run", "--demos", demos, "-o", demos)
     assert isinstance(r.exception, ElicitError) and "is the input" in str(r.exception)
     assert file_sha256(demos) == before
-    r = _invoke("score", "--policy", work / "run", "--demos", demos, "-o", work / "s.parquet")
+    r = invoke("score", "--policy", work / "run", "--demos", demos, "-o", work / "s.parquet")
     assert r.exit_code == 0, r.output
     for out in (demos, work / "s.parquet"):
-        r = _invoke(
+        r = invoke(
             "filter", "--scores", work / "s.parquet", "--demos", demos, "-o", out,
             "--lambda", "0.4", "--eta", "0.05",
         )  # fmt: skip
@@ -39,7 +33,7 @@ def test_score_and_filter_refuse_to_write_over_their_input(work):
     assert file_sha256(demos) == before
     # the per-episode sibling of a scores file is an output too: writing over the demos via
     # 'x.episodes.parquet' is caught as well
-    r = _invoke(
+    r = invoke(
         "fit-thresholds", "--scores", work / "s.parquet", "--lambda", "0.4", "--eta", "0.05",
         "-o", work / "s.parquet",
     )  # fmt: skip
@@ -62,7 +56,7 @@ def test_train_refuses_to_replace_another_run(work, tmp_path):
     assert (run / "seed1").is_dir() and not (run / "seed0").exists()
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "a.txt").write_text("mine")
-    r = _invoke(
+    r = invoke(
         "train", "--demos", work / "demos.parquet", "--out", tmp_path / "notes", "--profile",
         "cpu", "--epochs", "1",
     )  # fmt: skip

@@ -7,18 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from fixtures_data import own_robomimic_file
-from typer.testing import CliRunner
+from fixtures_data import cli_ok, invoke, own_robomimic_file
 
-from elicit_jax.cli import app
 from elicit_jax.compat.score_file import read_scores
 from elicit_jax.data.demos import read_demos
-
-
-def _ok(*args):
-    r = CliRunner().invoke(app, [str(a) for a in args])
-    assert r.exit_code == 0, (r.output, r.exception)
-    return r.output
 
 
 @pytest.fixture(scope="module")
@@ -27,45 +19,45 @@ def walk(tmp_path_factory):
     src = own_robomimic_file(d / "teleop.hdf5")
     out = {"dir": d, "src": src}
     # 1. look, then import with the file's own obs keys and operators from its mask keys
-    out["info"] = _ok("info", src)
-    r = CliRunner().invoke(app, ["import", str(src), "-o", str(d / "x.parquet")])
+    out["info"] = cli_ok("info", src).output
+    r = invoke("import", src, "-o", d / "x.parquet")
     out["default_keys_error"] = str(r.exception)
-    out["import"] = _ok(
+    out["import"] = cli_ok(
         "import", src, "--obs-keys", "eef_pos,gripper_qpos,object_pose",
         "--operators-from-masks", "op_*", "-o", d / "all.parquet",
-    )  # fmt: skip
+    ).output  # fmt: skip
     # 2. split: three base demos held out for the threshold fit, the rest trains
-    _ok("demos", "list", d / "all.parquet")
-    _ok("demos", "select", d / "all.parquet", "--episodes", "0-2", "-o", d / "heldout.parquet")
-    _ok(
+    cli_ok("demos", "list", d / "all.parquet")
+    cli_ok("demos", "select", d / "all.parquet", "--episodes", "0-2", "-o", d / "heldout.parquet")
+    cli_ok(
         "demos", "select", d / "all.parquet", "--operator", "op_base", "--exclude", "0-2",
         "-o", d / "base.parquet",
     )  # fmt: skip
     # 3. train the base policy (a small net, so the test is quick)
-    out["train"] = _ok(
+    out["train"] = cli_ok(
         "train", "--demos", d / "base.parquet", "--out", d / "runs/base", "--profile", "cpu",
         "--hidden", "64,64", "--epochs", "150", "--ensemble-size", "3", "--batch-size", "64",
         "--checkpoint-every", "50",
-    )  # fmt: skip
+    ).output  # fmt: skip
     # 4. score everything, each action dim in units of its spread (the gripper would dominate)
-    out["score"] = _ok(
+    out["score"] = cli_ok(
         "score", "--policy", d / "runs/base", "--demos", d / "all.parquet", "-o",
         d / "scores.parquet", "--action-scale", "std",
-    )  # fmt: skip
+    ).output  # fmt: skip
     # 5. fit thresholds: held-out base demos vs the other operator
-    out["fit"] = _ok(
+    out["fit"] = cli_ok(
         "fit-thresholds", "--scores", d / "scores.parquet", "--compatible", "episodes:0-2",
         "--incompatible", "operator:op_alt", "-o", d / "thresholds.json",
-    )  # fmt: skip
-    _ok(
+    ).output  # fmt: skip
+    cli_ok(
         "map", "--scores", d / "scores.parquet", "--thresholds", d / "thresholds.json",
         "-o", d / "map.html",
     )  # fmt: skip
     # 6. filter: drop rejected demos of the new operator
-    out["filter"] = _ok(
+    out["filter"] = cli_ok(
         "filter", "--scores", d / "scores.parquet", "--demos", d / "all.parquet",
         "--thresholds", d / "thresholds.json", "--level", "episode", "-o", d / "filtered.parquet",
-    )  # fmt: skip
+    ).output  # fmt: skip
     return out
 
 
@@ -130,24 +122,26 @@ def test_step_7_hands_the_result_back_directly_and_across_a_lerobot_leg(walk):
         with h5py.File(path, "r") as f:
             return sorted((x.decode() for x in f["mask"][key][:]), key=lambda n: int(n[5:]))
 
-    out = _ok(
+    out = cli_ok(
         "export", d / "filtered.parquet", "-f", "robomimic", "--mask-key", "compatible",
         "-o", d / "low_dim_compatible.hdf5",
-    )  # fmt: skip
+    ).output  # fmt: skip
     assert "config.train.hdf5_filter_key=compatible" in out
     assert mask(d / "low_dim_compatible.hdf5", "compatible") == kept
-    out = _ok("export", d / "filtered.parquet", "-f", "lerobot", "--fps", "20", "-o", d / "lr")
+    out = cli_ok(
+        "export", d / "filtered.parquet", "-f", "lerobot", "--fps", "20", "-o", d / "lr"
+    ).output
     assert "lerobot v3.0, new dataset" in out
-    _ok("import", d / "lr", "-o", d / "lr.parquet")
+    cli_ok("import", d / "lr", "-o", d / "lr.parquet")
     back = read_demos(d / "lr.parquet")
     assert sorted(set(back.operator)) == ["op_base"]
     assert sorted(set(back.extra["source_episode"]), key=lambda n: int(n[5:])) == kept
-    _ok(
+    cli_ok(
         "export", d / "lr.parquet", "-f", "robomimic", "--mask-key", "via_lerobot",
         "-o", d / "via_lerobot.hdf5",
     )  # fmt: skip
     assert mask(d / "via_lerobot.hdf5", "via_lerobot") == kept
-    out = _ok("export", d / "lr.parquet", "-f", "robomimic", "-o", d / "new.hdf5")
+    out = cli_ok("export", d / "lr.parquet", "-f", "robomimic", "-o", d / "new.hdf5").output
     assert "cannot instantiate" not in out
     with h5py.File(src, "r") as a, h5py.File(d / "new.hdf5", "r") as b:
         assert json.loads(b["data"].attrs["env_args"]) == json.loads(a["data"].attrs["env_args"])

@@ -6,10 +6,8 @@ import shutil
 import jax
 import numpy as np
 import pytest
-from fixtures_data import tiny_run
-from typer.testing import CliRunner
+from fixtures_data import invoke, tiny_run
 
-from elicit_jax.cli import app
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score_file import score_file
 from elicit_jax.errors import ElicitError
@@ -27,10 +25,6 @@ def _copy(run, tmp_path):
     return tmp_path / "run" / "seed0" / "params" / "best.npz"
 
 
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
 def test_nan_parameters_are_an_error_naming_the_checkpoint(run, tmp_path):
     best = _copy(run, tmp_path)
     flat = flatten_params(load_params(best))
@@ -38,11 +32,11 @@ def test_nan_parameters_are_an_error_naming_the_checkpoint(run, tmp_path):
     with open(best, "wb") as f:
         np.savez(f, **flat)
     out = tmp_path / "scores.parquet"
-    r = _invoke("score", "--policy", tmp_path / "run", "--demos", run / "demos.parquet", "-o", out)
+    r = invoke("score", "--policy", tmp_path / "run", "--demos", run / "demos.parquet", "-o", out)
     assert isinstance(r.exception, ElicitError)
     assert "non-finite" in str(r.exception) and str(best) in str(r.exception)
     assert not out.exists()
-    r = _invoke("info", tmp_path / "run")
+    r = invoke("info", tmp_path / "run")
     assert r.exit_code == 0
     assert "check: 1 of 1 seeds have problems" in r.output and "non-finite" in r.output
     assert "check: ok" not in r.output
@@ -66,16 +60,16 @@ def test_nan_predictions_never_score_as_compatible(run, tmp_path):
 def test_a_corrupt_parameter_file_is_one_line(run, tmp_path):
     best = _copy(run, tmp_path)
     best.write_bytes(b"PK\x03\x04 not really a zip archive")
-    r = _invoke(
+    r = invoke(
         "score", "--policy", tmp_path / "run", "--demos", run / "demos.parquet", "-o",
         tmp_path / "s.parquet",
     )  # fmt: skip
     assert isinstance(r.exception, ElicitError)
     assert "unreadable parameter file" in str(r.exception) and "\n" not in str(r.exception)
-    r = _invoke("info", tmp_path / "run")
+    r = invoke("info", tmp_path / "run")
     assert "unreadable parameter file" in r.output and "check: ok" not in r.output
 
 
 def test_a_healthy_run_says_so(run):
-    r = _invoke("info", run / "run")
+    r = invoke("info", run / "run")
     assert r.exit_code == 0 and "check: ok" in r.output

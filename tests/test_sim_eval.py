@@ -6,6 +6,7 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from fixtures_data import cli_ok
 from typer.testing import CliRunner
 
 from elicit_jax.artifact import read_header
@@ -15,20 +16,14 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.sim.evaluate import EvalConfig, eval_seeds, summarize
 
 
-def _ok(args):
-    result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, (result.output, result.exception)
-    return result
-
-
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
     from elicit_jax.policy.config import TrainConfig
     from elicit_jax.policy.train import train_policy
 
     d = tmp_path_factory.mktemp("sim")
-    _ok(["collect", "--task", "reach-pillar", "--operator", "base", "--episodes", "40",
-         "--seed", "3", "-o", str(d / "base.parquet")])  # fmt: skip
+    cli_ok("collect", "--task", "reach-pillar", "--operator", "base", "--episodes", "40",
+           "--seed", "3", "-o", str(d / "base.parquet"))  # fmt: skip
     cfg = TrainConfig(
         hidden=(64, 64),
         ensemble_size=2,
@@ -66,8 +61,8 @@ def test_collect_writes_valid_demos(work):
 
 
 def test_collect_is_deterministic(work, tmp_path):
-    _ok(["collect", "--task", "reach-pillar", "--operator", "base", "--episodes", "40",
-         "--seed", "3", "-o", str(tmp_path / "again.parquet")])  # fmt: skip
+    cli_ok("collect", "--task", "reach-pillar", "--operator", "base", "--episodes", "40",
+           "--seed", "3", "-o", str(tmp_path / "again.parquet"))  # fmt: skip
     a, b = read_demos(work / "base.parquet"), read_demos(tmp_path / "again.parquet")
     np.testing.assert_array_equal(a.obs, b.obs)
     np.testing.assert_array_equal(a.action, b.action)
@@ -91,9 +86,9 @@ def test_collect_bad_input(tmp_path):
 
 def test_evaluate_tiny_policy_learns_reach_pillar(work):
     out = work / "evals.parquet"
-    result = _ok(["evaluate", "--policy", f"tiny={work / 'runs'}", "--task", "reach-pillar",
-                  "--rollouts", "20", "--backend", "mujoco", "--checkpoint", "all",
-                  "--select", "best", "-o", str(out)])  # fmt: skip
+    result = cli_ok("evaluate", "--policy", f"tiny={work / 'runs'}", "--task", "reach-pillar",
+                    "--rollouts", "20", "--backend", "mujoco", "--checkpoint", "all",
+                    "--select", "best", "-o", str(out))  # fmt: skip
     assert "tiny" in result.output
     assert "biased upwards" in " ".join(result.output.split())  # chosen on these rollouts
     table = pd.read_parquet(out)
@@ -108,7 +103,7 @@ def test_evaluate_tiny_policy_learns_reach_pillar(work):
     assert (table[~table.success].steps_to_success == -1).all()
     (row,) = header["summary"]
     assert row["n_seeds"] == 2 and row["success_mean"] >= 80.0  # the tiny policy learned
-    _ok(["info", str(out)])
+    cli_ok("info", str(out))
 
 
 def test_summarize_by_hand():
@@ -255,8 +250,8 @@ def test_demo_score_on_real_rollouts_cross_validates_across_checkpoints(work):
 
 def test_cli_filter_demo_score_end_to_end(work, tmp_path):
     out = tmp_path / "kept.parquet"
-    res = _ok(["filter", "--method", "demo-score", "--policy", str(work / "runs"), "--demos",
-               str(work / "base.parquet"), "--rollouts", "8", "-o", str(out)])  # fmt: skip
+    res = cli_ok("filter", "--method", "demo-score", "--policy", str(work / "runs"), "--demos",
+                 str(work / "base.parquet"), "--rollouts", "8", "-o", str(out))  # fmt: skip
     assert "checkpoint 100:" in res.output and "checkpoint 200:" in res.output
     assert (tmp_path / "kept.episode-scores.parquet").exists()
     kept = read_demos(out)

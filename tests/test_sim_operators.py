@@ -130,16 +130,23 @@ def test_round_nut_base_and_conflict_are_proficient():
         assert out["success"].mean() >= 0.9, op
 
 
+def _assert_pauses_where_the_base_moves(base, pause, n: int) -> None:
+    """From the same initial observations the base moves at once (translation > 0.5), while
+    the pausing style holds still (zero translation and rotation) for its first ``n`` steps,
+    then moves."""
+    np.testing.assert_array_equal(base["obs"][:, 0], pause["obs"][:, 0])
+    assert np.abs(base["action"][:, 0, 0:3]).max(axis=1).min() > 0.5
+    assert np.abs(pause["action"][:, :n, 0:6]).max() == 0.0
+    assert np.abs(pause["action"][:, n, 0:3]).max(axis=1).min() > 0.5
+
+
 def test_square_nut_pause_holds_still_where_the_base_moves(nut_runs):
     """From the same initial observations the base moves at once, while 'conflict-flip-pause'
     holds still for its first ``pause_steps`` control steps (same states, zero action: the
     naive mean action there is ~0), and again above the handle and above the peg."""
     n = dict(STYLES["conflict-flip-pause"][0].choices)["pause_steps"]
     b0, p0 = nut_runs["base"], nut_runs["conflict-flip-pause"]
-    np.testing.assert_array_equal(b0["obs"][:, 0], p0["obs"][:, 0])
-    assert np.abs(b0["action"][:, 0, 0:3]).max(axis=1).min() > 0.5
-    assert np.abs(p0["action"][:, :n, 0:6]).max() == 0.0
-    assert np.abs(p0["action"][:, n, 0:3]).max(axis=1).min() > 0.5
+    _assert_pauses_where_the_base_moves(b0, p0, n)
     still = (np.abs(p0["action"][:, :, 0:6]).max(axis=2) == 0.0).sum(axis=1)
     assert (still >= 3 * n).all(), still.min()  # start, above the handle, above the peg
 
@@ -151,8 +158,5 @@ def test_reach_pillar_pause_holds_still_at_the_start(reach_runs):
 
     n = dict(REACH["conflict-right-pause"][0].choices)["pause_steps"]
     b0, p0 = reach_runs["base"], reach_runs["conflict-right-pause"]
-    np.testing.assert_array_equal(b0["obs"][:, 0], p0["obs"][:, 0])
-    assert np.abs(b0["action"][:, 0, 0:3]).max(axis=1).min() > 0.5
-    assert np.abs(p0["action"][:, :n, 0:6]).max() == 0.0
-    assert np.abs(p0["action"][:, n, 0:3]).max(axis=1).min() > 0.5
+    _assert_pauses_where_the_base_moves(b0, p0, n)
     assert (p0["length"] < reach_runs["base"]["length"] + n + 10).all()

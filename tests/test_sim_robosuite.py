@@ -9,25 +9,17 @@ module shares one pool (``shared_pool``: the CLI runs in this process reuse it t
 a skip elsewhere.
 """
 
-import os
-
 import h5py
 import numpy as np
 import pytest
+from fixtures_data import skip_without_robosuite
 from typer.testing import CliRunner
 
 from elicit_jax.artifact import read_header
 from elicit_jax.cli import app
 from elicit_jax.errors import ElicitError
 
-try:
-    import robosuite  # noqa: F401
-
-    HAVE_ROBOSUITE = True
-except ModuleNotFoundError:
-    HAVE_ROBOSUITE = False
-if not HAVE_ROBOSUITE and os.environ.get("ELICIT_JAX_REQUIRE_ROBOSUITE") != "1":
-    pytest.skip("robosuite extra not installed", allow_module_level=True)
+skip_without_robosuite()
 
 
 def _run(args):

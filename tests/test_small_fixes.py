@@ -6,29 +6,23 @@ import json
 
 import numpy as np
 import pandas as pd
-from fixtures_data import lerobot_episode, write_lerobot_v21, write_robomimic
+from fixtures_data import invoke, lerobot_episode, write_lerobot_v21, write_robomimic
 from rich.console import Console
-from typer.testing import CliRunner
 
-from elicit_jax.cli import app
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
-
-
-def _invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
 
 
 def test_a_folder_where_a_file_is_expected(tmp_path):
     folder = tmp_path / "folder"  # (an output inside the input folder would be refused first)
     folder.mkdir()
-    r = _invoke("import", folder, "--format", "npz", "-o", tmp_path / "d.parquet")
+    r = invoke("import", folder, "--format", "npz", "-o", tmp_path / "d.parquet")
     assert "is a folder, not a .npz file" in str(r.exception)
-    r = _invoke("import", folder, "--format", "robomimic", "-o", tmp_path / "d.parquet")
+    r = invoke("import", folder, "--format", "robomimic", "-o", tmp_path / "d.parquet")
     assert "is a folder, not an HDF5 file" in str(r.exception)
     f = tmp_path / "x.txt"
     f.write_text("x")
-    r = _invoke("import", f, "--format", "lerobot", "-o", tmp_path / "d.parquet")
+    r = invoke("import", f, "--format", "lerobot", "-o", tmp_path / "d.parquet")
     assert "is a file, not a LeRobot dataset folder" in str(r.exception)
 
 
@@ -56,10 +50,10 @@ def _robomimic_with_a_nan(tmp_path):
 def test_one_bad_episode_can_be_skipped_and_is_listed(tmp_path):
     src = _robomimic_with_a_nan(tmp_path)
     out = tmp_path / "d.parquet"
-    r = _invoke("import", src, "-o", out)
+    r = invoke("import", src, "-o", out)
     assert isinstance(r.exception, ElicitError) and "non-finite action[1]" in str(r.exception)
     assert "(demo_2)" in str(r.exception) and not out.exists()
-    r = _invoke("import", src, "-o", out, "--skip-bad-episodes")
+    r = invoke("import", src, "-o", out, "--skip-bad-episodes")
     assert r.exit_code == 0, r.output
     assert "skipped 1 of 4 episodes (demo_2: non-finite action at step 4)" in r.output
     d = read_demos(out)
@@ -79,10 +73,10 @@ def test_assumed_success_shows_as_unknown(tmp_path):
     for f in root.glob("data/*/*.parquet"):  # a dataset that never recorded success
         pq.write_table(pq.read_table(f).drop_columns(["next.success"]), f)
     out = tmp_path / "d.parquet"
-    r = _invoke("import", root, "-o", out)
+    r = invoke("import", root, "-o", out)
     assert r.exit_code == 0, r.output
     assert "unknown" in r.output and "100%" not in r.output
-    info = _invoke("info", out)
+    info = invoke("info", out)
     assert "unknown" in info.output and "100.0%" not in info.output
 
 

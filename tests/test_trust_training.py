@@ -12,11 +12,9 @@ import shutil
 import numpy as np
 import pyarrow as pa
 import pytest
-from fixtures_data import tiny_episodes, tiny_train_config
-from typer.testing import CliRunner
+from fixtures_data import invoke, tiny_episodes, tiny_train_config
 
 from elicit_jax.artifact import make_header, write_parquet
-from elicit_jax.cli import app
 from elicit_jax.compat.fit import FitJob, fit_scores_file
 from elicit_jax.compat.measures import ScoreConfig, config_dict
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
@@ -147,18 +145,14 @@ def test_training_demos_not_in_the_scores_are_scored_under_the_policy(d, tmp_pat
         _fit(s, tmp_path / "w.json", None, None, lambda_=1e-9, eta=1e9, base=(d / "new.parquet",))
 
 
-def _run(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
 def test_commands_that_load_thresholds_show_a_verdict_that_is_not_clean(d, tmp_path):
     s = _scores(d, "cli.parquet", "all.parquet", dirty=range(6), incompatible=range(15, 20))
-    r = _run(
+    r = invoke(
         *("fit-thresholds", "--scores", s, "--compatible", "episodes:10-14"),
         *("--incompatible", "episodes:15-19", "-o", tmp_path / "t.json"),
     )
     assert r.exit_code == 1 and "reject 6 of the base policy's 10" in str(r.exception)
-    r = _run(
+    r = invoke(
         *("fit-thresholds", "--scores", s, "--compatible", "episodes:10-14"),
         *("--incompatible", "episodes:15-19", "-o", tmp_path / "t.json", "--force"),
     )
@@ -179,17 +173,17 @@ def test_commands_that_load_thresholds_show_a_verdict_that_is_not_clean(d, tmp_p
             if cmd == "watch"
             else ("-o", tmp_path / f"{cmd}.{'png' if cmd == 'map' else 'parquet'}")
         )
-        r = _run(*args, "--thresholds", tmp_path / "t.json", *out)
+        r = invoke(*args, "--thresholds", tmp_path / "t.json", *out)
         assert r.exit_code == 0, (cmd, r.output)
         assert shown in r.output and "reject 6 of the base policy's 10" in r.output, cmd
     # a clean verdict is not repeated where the thresholds are used
     clean = _scores(d, "clean-cli.parquet", "all.parquet", incompatible=range(20, 25))
-    r = _run(
+    r = invoke(
         *("fit-thresholds", "--scores", clean, "--compatible", "episodes:10-14"),
         *("--incompatible", "operator:other", "-o", tmp_path / "ok.json"),
     )
     assert "trust: no problems found" in r.output
-    r = _run(*runs["map"], "--thresholds", tmp_path / "ok.json", "-o", tmp_path / "m2.png")
+    r = invoke(*runs["map"], "--thresholds", tmp_path / "ok.json", "-o", tmp_path / "m2.png")
     assert r.exit_code == 0 and "judged when fitted" not in r.output
 
 

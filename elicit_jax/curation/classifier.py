@@ -24,6 +24,7 @@ import optax
 from flax import struct
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.loop import keep_best
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,16 +146,7 @@ def _fit_fn(config: ClassifierConfig, obs_dim: int):
             keys = jax.random.split(jax.random.fold_in(k_run, r), config.eval_every)
             (params, opt_state), _ = jax.lax.scan(step, (state.params, state.opt_state), keys)
             loss = bce(module.apply({"params": params}, val_x, False), val_y)
-            better = loss < state.best_loss
-            state = state.replace(
-                params=params,
-                opt_state=opt_state,
-                best_params=jax.tree.map(
-                    lambda a, b: jnp.where(better, a, b), params, state.best_params
-                ),
-                best_loss=jnp.where(better, loss, state.best_loss),
-                best_step=jnp.where(better, (r + 1) * config.eval_every, state.best_step),
-            )
+            state = keep_best(state, params, opt_state, loss, best_step=(r + 1) * config.eval_every)
             return state, loss
 
         return jax.lax.scan(round_, state, jnp.arange(config.n_rounds))

@@ -53,6 +53,10 @@ class ModelKind:
       lr: default Adam learning rate (paper).
       cpu: the ``cpu`` profile's training settings for this kind (see
         :mod:`elicit_jax.policy.config`).
+      build: ``ModuleArgs -> nn.Module`` of one member.
+      init: ``(module, key, obs_dim) -> params`` of one member.
+      loss: ``(module, params, obs (B, L, O), action (B, L, A), rng, train, reduce) -> (B, L)``
+        per-step training loss of one member (``reduce``: mean or sum over action dims).
       recurrent: actions depend on the history (trained on windows, scored per episode, never
         one state at a time).
       mc_dropout: MC-dropout scoring (:meth:`Policy.sample_members`) applies.
@@ -60,14 +64,13 @@ class ModelKind:
         novelty (an ensemble of one is not degenerate).
       own_fields: config and checkpoint-spec fields stored only for this kind (other kinds
         leave them out, as they were written before the fields existed).
-      build: ``ModuleArgs -> nn.Module`` of one member.
-      init: ``(module, key, obs_dim) -> params`` of one member.
       predict: feed-forward only: ``(module, params, x (B, O)) -> (B, A)`` deterministic action
         of one member (None for recurrent kinds).
       spread: ``(module, params, x) -> (B, A)`` the member's own predictive std, or None.
-      loss: ``(module, params, obs (B, L, O), action (B, L, A), rng, train, reduce) -> (B, L)``
-        per-step training loss of one member (``reduce``: mean or sum over action dims).
-      describe: ``spec -> str`` the kind's own details in ``info`` (", 2 components").
+      describe: ``spec -> str`` the kind's own details in ``info`` (", 2 components"; none by
+        default).
+
+    The flags default to a plain feed-forward kind, so an entry states only what sets it apart.
     """
 
     name: str
@@ -76,16 +79,16 @@ class ModelKind:
     hidden: tuple[int, ...]
     lr: float
     cpu: Mapping[str, Any]
-    recurrent: bool
-    mc_dropout: bool
-    own_spread: bool
-    own_fields: tuple[str, ...]
     build: Callable[[ModuleArgs], Any]
     init: Callable[[Any, Any, int], Any]
-    predict: Callable[[Any, Any, Any], Any] | None
-    spread: Callable[[Any, Any, Any], Any] | None
     loss: Callable[..., Any]
-    describe: Callable[[Mapping[str, Any]], str]
+    recurrent: bool = False
+    mc_dropout: bool = False
+    own_spread: bool = False
+    own_fields: tuple[str, ...] = ()
+    predict: Callable[[Any, Any, Any], Any] | None = None
+    spread: Callable[[Any, Any, Any], Any] | None = None
+    describe: Callable[[Mapping[str, Any]], str] = lambda spec: ""
 
 
 # --- the kinds' functions (JAX/Flax imported when called) ------------------------------------
@@ -205,16 +208,11 @@ MODEL_KINDS: Mapping[str, ModelKind] = MappingProxyType(
             hidden=(1024, 1024),
             lr=1e-3,
             cpu=MappingProxyType(_CPU_MLP),
-            recurrent=False,
-            mc_dropout=True,
-            own_spread=False,
-            own_fields=(),
             build=_build_mlp,
             init=_init_feed_forward,
-            predict=_predict_mlp,
-            spread=None,
             loss=_loss_mlp,
-            describe=lambda spec: "",
+            mc_dropout=True,
+            predict=_predict_mlp,
         ),
         "mdn": ModelKind(
             name="mdn",
@@ -223,15 +221,13 @@ MODEL_KINDS: Mapping[str, ModelKind] = MappingProxyType(
             hidden=(1024, 1024),
             lr=1e-4,
             cpu=MappingProxyType(_CPU_MDN),
-            recurrent=False,
-            mc_dropout=False,
-            own_spread=True,
-            own_fields=("mdn_min_std",),
             build=_build_mdn,
             init=_init_feed_forward,
+            loss=_loss_mdn,
+            own_spread=True,
+            own_fields=("mdn_min_std",),
             predict=_predict_mdn,
             spread=_spread_mdn,
-            loss=_loss_mdn,
             describe=lambda spec: f", {spec['n_components']} components",
         ),
         "lstm": ModelKind(
@@ -241,15 +237,10 @@ MODEL_KINDS: Mapping[str, ModelKind] = MappingProxyType(
             hidden=(512, 512),
             lr=1e-3,
             cpu=MappingProxyType(_CPU_LSTM),
-            recurrent=True,
-            mc_dropout=False,
-            own_spread=False,
-            own_fields=(),
             build=_build_lstm,
             init=_init_lstm,
-            predict=None,
-            spread=None,
             loss=_loss_lstm,
+            recurrent=True,
             describe=lambda spec: f", state reset every {spec['reset_every']} steps",
         ),
     }

@@ -147,6 +147,23 @@ def init_state(spec: LoopSpec, key: jax.Array) -> TrainState:
     )
 
 
+def keep_best(state: Any, params: Any, opt_state: Any, loss: jax.Array, **marks: Any) -> Any:
+    """``state`` (a struct with ``params``, ``opt_state``, ``best_params`` and ``best_loss``)
+    moved on to ``params`` and ``opt_state``; where ``loss`` beats ``best_loss`` the best
+    params and loss become these, and each ``marks`` field (``best_epoch=e + 1``) its value.
+    Traceable (``jnp.where``), so it runs inside a jitted scan."""
+    better = loss < state.best_loss
+    return state.replace(
+        params=params,
+        opt_state=opt_state,
+        best_params=jax.tree.map(
+            lambda new, old: jnp.where(better, new, old), params, state.best_params
+        ),
+        best_loss=jnp.where(better, loss, state.best_loss),
+        **{k: jnp.where(better, v, getattr(state, k)) for k, v in marks.items()},
+    )
+
+
 def _train_epoch(
     spec: LoopSpec, state: TrainState, data: dict[str, jax.Array], key: jax.Array
 ) -> tuple[Any, Any, jax.Array]:
@@ -223,16 +240,7 @@ def run_epochs(
         else:
             val_loss = jnp.full((spec.n_members,), jnp.nan)
             score = jnp.mean(train_loss)
-        better = score < state.best_loss
-        state = state.replace(
-            params=params,
-            opt_state=opt_state,
-            best_params=jax.tree.map(
-                lambda new, old: jnp.where(better, new, old), params, state.best_params
-            ),
-            best_loss=jnp.where(better, score, state.best_loss),
-            best_epoch=jnp.where(better, e + 1, state.best_epoch),
-        )
+        state = keep_best(state, params, opt_state, score, best_epoch=e + 1)
         return state, (train_loss, val_loss)
 
     return jax.lax.scan(epoch, state, first_epoch + jnp.arange(n_epochs))

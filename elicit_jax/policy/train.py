@@ -33,22 +33,11 @@ def chunk_epochs(config: TrainConfig) -> int:
 
 
 def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: int) -> Any:
-    from elicit_jax.policy.kinds import make_module
     from elicit_jax.policy.loop import LoopSpec
 
-    module = make_module(
-        config.model,
-        config.hidden,
-        action_dim,
-        config.dropout,
-        config.n_components,
-        layer_norm_eps=config.layer_norm_eps,
-        dropout_last=config.dropout_last,
-        mdn_min_std=config.mdn_min_std,
-    )
     return LoopSpec(
         kind=config.model,
-        module=module,
+        module=_template(config, data, obs_dim, action_dim).module,
         n_members=config.ensemble_size,
         obs_dim=obs_dim,
         batch_size=config.batch_size,
@@ -61,22 +50,30 @@ def _loop_spec(config: TrainConfig, data: TrainData, obs_dim: int, action_dim: i
     )
 
 
-def _template(config: TrainConfig, demos: Demos, data: TrainData, params: Any) -> Any:
+def _template(
+    config: TrainConfig,
+    data: TrainData,
+    obs_dim: int,
+    action_dim: int,
+    obs_fields: tuple[str, ...] = (),
+) -> Any:
+    """The policy a run of ``config`` trains, without parameters: the loop trains its
+    ``module``, and the checkpoint records its spec."""
     from elicit_jax.policy.base import Policy
 
     return Policy(
-        params=params,
+        params=None,
         obs_mean=data.obs_mean,
         obs_std=data.obs_std,
         kind=config.model,
-        obs_dim=demos.obs_dim,
-        action_dim=demos.action_dim,
+        obs_dim=obs_dim,
+        action_dim=action_dim,
         n_members=config.ensemble_size,
         hidden=config.hidden,
         dropout=config.dropout,
         n_components=config.n_components,
         reset_every=config.seq_len if model_kind(config.model).recurrent else 0,
-        obs_fields=tuple(f.name for f in demos.obs_fields),
+        obs_fields=obs_fields,
         layer_norm_eps=config.layer_norm_eps,
         dropout_last=config.dropout_last,
         mdn_min_std=config.mdn_min_std,
@@ -202,7 +199,8 @@ def train_policy(
     with atomic_path(out_dir) as tmp, TrainProgress(config, data.n_train, quiet) as progress:
         results = _train_groups(tmp, config, demos, data, progress)
         notes = training_warnings(config, demos.action, results)
-        template = _template(config, demos, data, params=None)
+        fields = tuple(f.name for f in demos.obs_fields)
+        template = _template(config, data, demos.obs_dim, demos.action_dim, fields)
         write_run(tmp, config, demos, data, template, data_hash, inputs, results, notes)
         progress.summary(results)
         progress.warn(notes)

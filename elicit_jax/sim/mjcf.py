@@ -82,11 +82,12 @@ def gripper_actuators() -> str:
     return "<actuator>\n    " + "\n    ".join(lines) + "\n  </actuator>"
 
 
-def pose_sensors(obj_site: str) -> str:
-    """Sensors making up the observation, in order (23 values).
+def object_sensors(obj_site: str, more: str) -> str:
+    """The sensor block every task's observation starts with, then the task's ``more`` lines.
 
     ``eef`` position (3) and quaternion (4), finger positions (2), the object site's world
-    position (3) and quaternion (4), and its pose in the end-effector frame (3 + 4).
+    position (3) and quaternion (4), and its position in the end-effector frame (3): 19
+    values.
     """
     return f"""
   <sensor>
@@ -97,9 +98,28 @@ def pose_sensors(obj_site: str) -> str:
     <framepos name="obj_pos" objtype="site" objname="{obj_site}"/>
     <framequat name="obj_quat" objtype="site" objname="{obj_site}"/>
     <framepos name="obj_rel_pos" objtype="site" objname="{obj_site}" reftype="site" refname="eef"/>
-    <framequat name="obj_rel_quat" objtype="site" objname="{obj_site}" reftype="site"
-               refname="eef"/>
+{more}
   </sensor>"""
+
+
+def pose_sensors(obj_site: str) -> str:
+    """Sensors making up the observation, in order (23 values): :func:`object_sensors` and
+    the object's quaternion in the end-effector frame (4)."""
+    rel_quat = (
+        f'    <framequat name="obj_rel_quat" objtype="site" objname="{obj_site}" reftype="site"\n'
+        '               refname="eef"/>'
+    )
+    return object_sensors(obj_site, rel_quat)
+
+
+def vertical_capsule(
+    name: str, xy: tuple[float, float], top: float, radius: float, rgba: str
+) -> str:
+    """A fixed capsule standing on the floor at ``xy`` (segment from z = 0 to ``top``)."""
+    x, y = xy
+    return f"""
+    <geom name="{name}" type="capsule" fromto="{x} {y} 0 {x} {y} {top}"
+          size="{radius}" rgba="{rgba}"/>"""
 
 
 def pairs(pairs_: list[tuple[str, str]]) -> str:

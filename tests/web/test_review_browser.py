@@ -4,27 +4,14 @@ and the server's Host check and token."""
 
 from __future__ import annotations
 
-import queue
-import re
-import signal
-import subprocess
-import sys
-import threading
 import urllib.error
 import urllib.request
 
 import numpy as np
 import pytest
-from fixtures_data import robomimic_demo, write_robomimic
-from typer.testing import CliRunner
-
-from elicit_jax.cli import app
-
-
-def _ok(*args):
-    r = CliRunner().invoke(app, [str(a) for a in args])
-    assert r.exit_code == 0, (r.output, r.exception)
-    return r.output
+from chromium import page_with_errors
+from cli_server import CliServer
+from fixtures_data import cli_ok, robomimic_demo, write_robomimic
 
 
 @pytest.fixture(scope="module")
@@ -40,8 +27,8 @@ def imported(tmp_path_factory):
         demo["actions"] = np.where(i == 3, demo["actions"], smooth)
         demos[f"demo_{i}"] = demo
     src = write_robomimic(d / "teleop.hdf5", demos)
-    _ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
-    _ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
+    cli_ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
+    cli_ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
     _m_scores(d / "scores.parquet")
     return d
 
@@ -68,46 +55,6 @@ def _m_scores(path):
     write_parquet(path, table, make_header("scores", 1))
 
 
-class ReviewServer:
-    """`elicit-jax review` in a subprocess; its printed URL is read from its output."""
-
-    def __init__(self, *args) -> None:
-        code = "from elicit_jax.cli import main; main()"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, "review", *map(str, args)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            self.output.append(line)
-            self.lines.put(line)
-
-    def url(self) -> str:
-        while True:
-            try:
-                line = self.lines.get(timeout=120)
-            except queue.Empty:
-                raise AssertionError("no URL:\n" + "".join(self.output)) from None
-            found = re.search(r"open (http://\S+)", line)
-            if found:
-                return found.group(1)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-
-
 def _status(url: str, host: str | None = None) -> int:
     req = urllib.request.Request(url, headers={"Host": host} if host else {})
     try:
@@ -122,21 +69,19 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
     imported,
 ):
     d = imported
-    server = ReviewServer(
-        d / "demos.parquet", "--scores", d / "scores.parquet", "--quality", d / "quality.parquet",
-        "-o", d / "rv",
+    server = CliServer(
+        "review", d / "demos.parquet", "--scores", d / "scores.parquet",
+        "--quality", d / "quality.parquet", "-o", d / "rv",
     )  # fmt: skip
     try:
-        url = server.url()
+        url = server.start()
         base = url.split("?")[0]
         port = base.rstrip("/").rsplit(":", 1)[1]
         assert _status(base) == 403  # no token
         assert _status(url, host=f"evil.example:{port}") == 400  # DNS rebinding
         assert _status(url) == 200
-        page = browser.new_page()
+        page, errors = page_with_errors(browser)
         page.set_default_timeout(60_000)
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(url)
         page.wait_for_selector("body[data-ready='true']", timeout=60_000)
         assert page.locator("#episodes tbody tr").count() == 6
@@ -177,7 +122,9 @@ def test_review_flags_two_episodes_and_the_export_reimports_without_them(
         assert errors == []
     finally:
         server.stop()
-    _ok("import", d / "rv" / "reviewed.hdf5", "--filter-key", "reviewed", "-o", d / "back.parquet")
+    cli_ok(
+        "import", d / "rv" / "reviewed.hdf5", "--filter-key", "reviewed", "-o", d / "back.parquet"
+    )
     from elicit_jax.data.demos import read_demos
 
     back = read_demos(d / "back.parquet")

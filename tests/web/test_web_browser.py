@@ -16,13 +16,11 @@ cannot pass by skipping. ELICIT_JAX_SCREENSHOTS=DIR saves a screenshot of each s
 from __future__ import annotations
 
 import os
-import queue
 import re
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
+
+from chromium import page_with_errors, sign_in
+from cli_server import CliServer
 
 from elicit_jax.data.demos import read_demos
 from elicit_jax.elicit.store import SessionStore
@@ -32,11 +30,11 @@ SHOTS = os.environ.get("ELICIT_JAX_SCREENSHOTS")
 ATTEMPTS = 4  # at the base route (the session has 2 + ATTEMPTS episodes: practice, wrong side)
 
 
-class Server:
+class Server(CliServer):
     """`elicit-jax serve --demo` in a subprocess; its printed URL is read from its output."""
 
     def __init__(self, demo_root: Path, sessions: Path) -> None:
-        self.args = [
+        super().__init__(
             "serve",
             "--demo",
             "--demo-dir",
@@ -53,46 +51,11 @@ class Server:
             str(2 + ATTEMPTS),
             "--horizon",
             "200",
-        ]
-        self.proc: subprocess.Popen | None = None
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
+        )
 
     def start(self, port: int = 0) -> str:
-        code = "from elicit_jax.cli import main; main()"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, *self.args, "--port", str(port)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        threading.Thread(target=self._read, args=(self.proc,), daemon=True).start()
-        while True:
-            try:
-                line = self.lines.get(timeout=180)
-            except queue.Empty:
-                raise AssertionError(
-                    "the server printed no URL:\n" + "".join(self.output)
-                ) from None
-            url = re.search(r"open (http://\S+)", line)
-            if url:
-                return url.group(1)
-            if self.proc.poll() is not None and self.lines.empty():
-                raise AssertionError("the server died:\n" + "".join(self.output))
-
-    def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            self.output.append(line)
-            self.lines.put(line)
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        """Start the server on ``port`` (0: any free one); its URL."""
+        return super().start("--port", port)
 
 
 def shot(page, name: str) -> None:
@@ -125,9 +88,7 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
     server = Server(demo.dir.parent, sessions)
     url = server.start()
     port = int(re.search(r":(\d+)/", url).group(1))
-    page = browser.new_page(viewport={"width": 1200, "height": 720})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
+    page, errors = page_with_errors(browser, {"width": 1200, "height": 720})
     try:
         page.goto(url)
         page.wait_for_selector("#name")
@@ -272,11 +233,7 @@ def narrow_layout(browser, url: str) -> None:
     screen, the keys still work (a second operator, on the running server)."""
     page = browser.new_page(viewport={"width": 390, "height": 844})
     try:
-        page.goto(url)
-        page.wait_for_selector("#name")
-        page.click("#name")
-        page.keyboard.type("ben")
-        page.keyboard.press("Enter")
+        sign_in(page, url, "ben")
         screen(page, "practice", "ready")
         stage, panel = page.locator("#stage").bounding_box(), page.locator("#panel").bounding_box()
         assert stage["width"] >= 380 and stage["height"] >= 300, stage

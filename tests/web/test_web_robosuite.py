@@ -16,15 +16,10 @@ import time
 
 import numpy as np
 import pytest
+from chromium import page_with_errors, sign_in
+from fixtures_data import skip_without_robosuite
 
-try:
-    import robosuite  # noqa: F401
-
-    HAVE_ROBOSUITE = True
-except ModuleNotFoundError:
-    HAVE_ROBOSUITE = False
-if not HAVE_ROBOSUITE and os.environ.get("ELICIT_JAX_REQUIRE_ROBOSUITE") != "1":
-    pytest.skip("robosuite extra not installed", allow_module_level=True)
+skip_without_robosuite()
 
 TASK = "robosuite-square"
 SHOTS = os.environ.get("ELICIT_JAX_SCREENSHOTS")
@@ -66,6 +61,7 @@ def server(inputs, tmp_path):
     """``serve``'s app for robosuite-square on a free port, in this process."""
     import uvicorn
 
+    from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.elicit.config import SessionConfig
     from elicit_jax.web.access import access_policy
     from elicit_jax.web.hub import OperatorHub
@@ -73,7 +69,8 @@ def server(inputs, tmp_path):
     from elicit_jax.web.server import create_app
 
     session = SessionConfig(task=TASK, policy=str(inputs / "run"),
-                            base_demos=str(inputs / "base.parquet"), lambda_=0.4, eta=0.05,
+                            base_demos=str(inputs / "base.parquet"),
+                            thresholds=Thresholds(0.4, 0.05, "given"),
                             operator="browser:_", practice=0, prompt=0, demos=1,
                             max_episodes=2, horizon=80)  # fmt: skip
     config = ServeConfig(session=session, sessions=str(tmp_path / "sessions"), port=0)
@@ -95,15 +92,9 @@ def server(inputs, tmp_path):
 
 
 def test_robosuite_scene_and_indicator_in_chromium(browser, server):
-    page = browser.new_page(viewport={"width": 1000, "height": 640})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
+    page, errors = page_with_errors(browser, {"width": 1000, "height": 640})
     try:
-        page.goto(server)
-        page.wait_for_selector("#name")
-        page.click("#name")
-        page.keyboard.type("rob")
-        page.keyboard.press("Enter")
+        sign_in(page, server, "rob")
         page.wait_for_selector("body[data-screen=demonstrate][data-state=ready]",
                                state="attached", timeout=120_000)  # fmt: skip
         desc = page.evaluate(

@@ -168,19 +168,12 @@ def hammer_body() -> str:
 
 def sensors() -> str:
     """The 23 observation values (see the module docstring), in order."""
-    return """
-  <sensor>
-    <framepos name="eef_pos" objtype="site" objname="eef"/>
-    <framequat name="eef_quat" objtype="site" objname="eef"/>
-    <jointpos name="finger_l" joint="finger_l"/>
-    <jointpos name="finger_r" joint="finger_r"/>
-    <framepos name="obj_pos" objtype="site" objname="hammer"/>
-    <framequat name="obj_quat" objtype="site" objname="hammer"/>
-    <framepos name="obj_rel_pos" objtype="site" objname="hammer" reftype="site" refname="eef"/>
-    <framepos name="handle_rel_pos" objtype="site" objname="drawer_handle" reftype="site"
-              refname="eef"/>
-    <jointpos name="drawer" joint="drawer"/>
-  </sensor>"""
+    more = (
+        '    <framepos name="handle_rel_pos" objtype="site" objname="drawer_handle"'
+        ' reftype="site"\n              refname="eef"/>\n'
+        '    <jointpos name="drawer" joint="drawer"/>'
+    )
+    return mjcf.object_sensors("hammer", more)
 
 
 class HammerDrawer(Task):

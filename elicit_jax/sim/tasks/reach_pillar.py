@@ -47,10 +47,10 @@ class ReachPillar(Task):
     config_cls = ReachPillarConfig
 
     def xml(self) -> str:
-        x, y = PILLAR_XY
-        world = f"""
-    <geom name="pillar" type="capsule" fromto="{x} {y} 0 {x} {y} {PILLAR_HEIGHT}"
-          size="{PILLAR_RADIUS}" rgba="0.6 0.4 0.2 1"/>
+        pillar = mjcf.vertical_capsule(
+            "pillar", PILLAR_XY, PILLAR_HEIGHT, PILLAR_RADIUS, "0.6 0.4 0.2 1"
+        )
+        world = f"""{pillar}
     <body name="goal" mocap="true" pos="0.17 0 0.06">
       <site name="goal" size="0.012" rgba="0 0.8 0 0.5"/>
     </body>"""

@@ -2,7 +2,7 @@
 
 The nut is an octagonal ring of eight capsules with a capsule handle; the peg is a vertical
 capsule (MJX has no cylinder collisions). Contacts are explicit pairs: nut-floor (9),
-ring-peg (8), fingers-handle (2). Initial poses, success and observations follow
+ring-peg (8), fingers-handle (2). The handle, initial poses, success and observations follow
 ``square-nut`` (see :mod:`elicit_jax.sim.tasks.square_nut`), with the peg elsewhere.
 """
 
@@ -21,7 +21,6 @@ PEG_HEIGHT = 0.1
 RING_RADIUS = 0.007
 RING_MID = 0.032
 """Distance from the nut's centre to the midpoint of each ring side."""
-HANDLE_FROM, HANDLE_TO = 0.039, 0.097
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,22 +52,15 @@ class RoundNut(SquareNut):
     peg_xy = PEG_XY
     peg_height = PEG_HEIGHT
     nut_z = RING_RADIUS
+    ring_sides = 8
+    nut_rgba = "0.6 0.6 0.65 1"
 
-    def xml(self) -> str:
-        px, py = PEG_XY
-        world = f"""
-    <geom name="peg" type="capsule" fromto="{px} {py} 0 {px} {py} {PEG_HEIGHT - PEG_RADIUS}"
-          size="{PEG_RADIUS}" rgba="0.5 0.3 0.1 1"/>
-    <body name="nut" pos="-0.1 -0.08 {RING_RADIUS}">
-      <freejoint name="nut"/>
-      <site name="nut" size="0.004"/>
-{octagon_geoms("ring", RING_MID, RING_RADIUS, 0.0125)}
-      <geom name="handle" type="capsule" fromto="{HANDLE_FROM} 0 0 {HANDLE_TO} 0 0"
-            size="{RING_RADIUS}" mass="0.03" rgba="0.6 0.6 0.65 1"/>
-    </body>"""
-        pairs = [("floor", f"ring{i}") for i in range(8)] + [("floor", "handle")]
-        pairs += [("peg", f"ring{i}") for i in range(8)]
-        pairs += [(f, "handle") for f in mjcf.FINGER_JOINTS]
-        return mjcf.scene(
-            self.name, self.config.timestep, world, mjcf.pairs(pairs), mjcf.pose_sensors("nut")
+    def peg_xml(self) -> str:
+        """A capsule peg (its rounded top at ``PEG_HEIGHT``)."""
+        return mjcf.vertical_capsule(
+            "peg", PEG_XY, PEG_HEIGHT - PEG_RADIUS, PEG_RADIUS, "0.5 0.3 0.1 1"
         )
+
+    def ring_xml(self) -> str:
+        """The octagonal ring's eight capsules."""
+        return octagon_geoms("ring", RING_MID, RING_RADIUS, 0.0125)

@@ -76,24 +76,36 @@ class SquareNut(Task):
     peg_xy = PEG_XY
     peg_height = PEG_HEIGHT
     nut_z = NUT_Z
+    ring_sides = 4
+    nut_rgba = "0.7 0.6 0.1 1"
 
-    def xml(self) -> str:
+    def peg_xml(self) -> str:
+        """The peg's MJCF (a geom named ``peg``)."""
         px, py = PEG_XY
-        world = f"""
+        return f"""
     <body name="peg" pos="{px} {py} {PEG_HEIGHT / 2}">
       <geom name="peg" type="box" size="{PEG_HALF} {PEG_HALF} {PEG_HEIGHT / 2}"
             rgba="0.5 0.3 0.1 1"/>
-    </body>
-    <body name="nut" pos="-0.1 -0.08 {NUT_Z}">
+    </body>"""
+
+    def ring_xml(self) -> str:
+        """The nut ring's ``ring_sides`` geoms, ``ring0`` ...; the handle is added by
+        :meth:`xml`."""
+        return ring_geoms("ring", RING_HALF, RING_RADIUS, 0.025)
+
+    def xml(self) -> str:
+        world = f"""{self.peg_xml()}
+    <body name="nut" pos="-0.1 -0.08 {self.nut_z}">
       <freejoint name="nut"/>
       <site name="nut" size="0.004"/>
-{ring_geoms("ring", RING_HALF, RING_RADIUS, 0.025)}
+{self.ring_xml()}
       <geom name="handle" type="capsule" fromto="{HANDLE_FROM} 0 0 {HANDLE_TO} 0 0"
-            size="{RING_RADIUS}" mass="0.03" rgba="0.7 0.6 0.1 1"/>
+            size="{RING_RADIUS}" mass="0.03" rgba="{self.nut_rgba}"/>
     </body>"""
-        pairs = [("floor", f"ring{i}") for i in range(4)] + [("floor", "handle")]
-        pairs += [("peg", f"ring{i}") for i in range(4)]
-        pairs += [(f, g) for f in mjcf.FINGER_JOINTS for g in ("handle",)]
+        ring = [f"ring{i}" for i in range(self.ring_sides)]
+        pairs = [("floor", g) for g in ring] + [("floor", "handle")]
+        pairs += [("peg", g) for g in ring]
+        pairs += [(f, "handle") for f in mjcf.FINGER_JOINTS]
         return mjcf.scene(
             self.name, self.config.timestep, world, mjcf.pairs(pairs), mjcf.pose_sensors("nut")
         )
