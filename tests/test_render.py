@@ -116,11 +116,12 @@ def test_demo_page_renders_as_before(tmp_path):
 
 
 def _session_data() -> dict:
+    from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.elicit.events import Counts
 
     config = types.SimpleNamespace(
         task="reach-pillar", operator="ann <a>", mode="informed", dagger=False,
-        lambda_=0.4, eta=0.05, thresholds_file=None, batch=2, fixed_base=True,
+        thresholds=Thresholds(0.4, 0.05, "given"), batch=2, fixed_base=True,
         policy="runs/p", base_demos="base.parquet",
         rule=lambda: types.SimpleNamespace(describe=lambda: "reject if > 5% incompatible"),
     )  # fmt: skip
