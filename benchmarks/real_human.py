@@ -332,14 +332,16 @@ def per_operator(path: Path, lam: float, eta: float) -> dict[str, dict[str, floa
     return out
 
 
-def human_profile(path: Path, lam: float, eta: float, bins: int = 5) -> list[float]:
-    """The human demo's fraction of incompatible pairs in ``bins`` equal stretches of time."""
+def human_profile(path: Path, lam: float, eta: float, bins: int = 5) -> tuple[list[float], float]:
+    """The human demo's fraction of incompatible pairs in ``bins`` equal stretches of time,
+    and its fraction of pairs in unfamiliar states (ν ≥ η: never flagged, whatever ℓ)."""
     from elicit_jax.compat.score_file import read_scores
 
     _, s = read_scores(path, ["operator", "likelihood", "novelty"])
     sel = s["operator"].astype(str) == "human"
     inc = (s["likelihood"][sel] > lam) & (s["novelty"][sel] < eta)
-    return [float(part.mean()) for part in np.array_split(inc, bins)]
+    novel = float((s["novelty"][sel] >= eta).mean())
+    return [float(part.mean()) for part in np.array_split(inc, bins)], novel
 
 
 def success_rates(path: Path) -> dict[str, tuple[int, int]]:
@@ -394,7 +396,7 @@ def report(args: argparse.Namespace, work: Path, prep: dict[str, Any], cmd: str)
     fitted = per_operator(work / "scores_fitted.parquet", lam, eta)
     plam, peta = PAPER_THRESHOLDS[args.task]
     paper = per_operator(work / "scores_fitted.parquet", plam, peta)
-    prof = human_profile(work / "human_scores.parquet", lam, eta)
+    prof, novel = human_profile(work / "human_scores.parquet", lam, eta)
     rp = prep["replay"]
     s, e = prep["span"]
     h = fitted["human"]
@@ -442,7 +444,9 @@ def report(args: argparse.Namespace, work: Path, prep: dict[str, Any], cmd: str)
         f"**The human demonstration is {verdict}**: {100 * h['frac_inc']:.1f}% of its "
         f"{h['pairs']} pairs are incompatible (the 5% rule rejects above 5%). Fraction "
         "incompatible over five equal stretches of the demonstration: "
-        + ", ".join(f"{100 * p:.0f}%" for p in prof) + ".",
+        + ", ".join(f"{100 * p:.0f}%" for p in prof) + f". {100 * novel:.0f}% of its pairs "
+        "lie in states the base policy finds unfamiliar (ν ≥ η): the method never flags "
+        "those, whatever the action.",
         "",
         "Under the fitted thresholds:",
         "",
