@@ -344,12 +344,16 @@ def human_profile(path: Path, lam: float, eta: float, bins: int = 5) -> tuple[li
     return [float(part.mean()) for part in np.array_split(inc, bins)], novel
 
 
-def success_rates(path: Path) -> dict[str, tuple[int, int]]:
-    """Successes and rollouts per policy label of an evaluation file."""
+def success_rates(path: Path) -> dict[str, np.ndarray]:
+    """Per policy label of an evaluation file: success of each rollout, in rollout order
+    (rollout i starts from the same seeded initial state for every policy)."""
     import pandas as pd
 
-    df = pd.read_parquet(path, columns=["policy", "success"])
-    return {str(k): (int(g["success"].sum()), len(g)) for k, g in df.groupby("policy", sort=False)}
+    df = pd.read_parquet(path, columns=["policy", "rollout", "success"])
+    return {
+        str(k): g.sort_values("rollout")["success"].to_numpy(dtype=float)
+        for k, g in df.groupby("policy", sort=False)
+    }
 
 
 def replay_check(task: str, human: Path) -> dict[str, Any]:
@@ -464,9 +468,19 @@ def report(args: argparse.Namespace, work: Path, prep: dict[str, Any], cmd: str)
                   "| policy | trained on | success |", "|---|---|---|"]  # fmt: skip
         what = {"base-only": f"{args.episodes} base demos", "naive": "base + the human demo",
                 "filtered": "base + the human demo's compatible pairs (M-filtered)"}  # fmt: skip
-        for k, (n, tot) in success_rates(evals).items():
-            lines.append(f"| {k} | {what.get(k, k)} | {n}/{tot} ({100 * n / tot:.0f}%) |")
-        lines += ["", "One training seed and one demonstration: a difference here is not "
+        from elicit_jax.stats import format_diff, paired_t_interval
+
+        rates = success_rates(evals)
+        for k, v in rates.items():
+            lines.append(f"| {k} | {what.get(k, k)} | {int(v.sum())}/{len(v)} "
+                         f"({100 * v.mean():.0f}%) |")  # fmt: skip
+        pairs = [("naive", "base-only"), ("filtered", "base-only"), ("filtered", "naive")]
+        lines += ["", "Paired differences over the rollouts' shared initial states, points "
+                  "[95% interval; * excludes 0]: "
+                  + "; ".join(f"{a} − {b} {format_diff(paired_t_interval(rates[a], rates[b]))}"
+                              for a, b in pairs if a in rates and b in rates) + ".",
+                  "", "One training seed per policy and one demonstration: the intervals "
+                  "cover the initial states, not training seeds, so a difference here is not "
                   "evidence of an effect of filtering."]  # fmt: skip
     return "\n".join(lines) + "\n"
 
