@@ -91,7 +91,7 @@ def test_robosuite_study_runs_end_to_end_and_reports(tmp_path):
         assert len(frame) == 2 and (frame["length"] <= 5).all()
     # CUPID's rollouts were recorded on robosuite: its scores cover every D_new demo
     cupid = pq.read_table(out / "curation/robosuite-square/mlp/cupid-mild.parquet")
-    assert cupid.num_rows == 2
+    assert cupid.num_rows == TINY_TASK["new_episodes"]
     report = (out / "report" / "report.md").read_text()
     assert "robosuite-square" in report and (out / "report" / "report.html").stat().st_size > 0
     assert "the one checkpoint evaluated per seed" in report  # final only: nothing chosen
