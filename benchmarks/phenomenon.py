@@ -1,12 +1,13 @@
 """Is the phenomenon there? Do a new operator's demos lower naive BC below base-only?
 
 For one task and each collection seed: collect ``--episodes`` successful demos of the base
-operator and of every operator in ``--operators`` (C MuJoCo; within a collection seed every
-operator starts from the same initial states), train an MLP ensemble on base-only and on
-base + each operator (naive union) for the training seeds ``0..--seeds-1`` (vmapped in one
-call), evaluate every checkpoint on the same ``--rollouts`` seeded initial states of
-evaluation seed ``--eval-seed`` (C MuJoCo) and keep the best checkpoint per training seed (the
-paper's protocol). The report gives, per collection seed, success % mean (std) over training
+operator and of every operator in ``--operators`` (C MuJoCo, or robosuite worker processes for
+the ``robosuite-*`` tasks; within a collection seed every operator starts from the same initial
+states), train an MLP ensemble on base-only and on base + each operator (naive union) for the
+training seeds ``0..--seeds-1`` (vmapped in one call), evaluate every checkpoint on the same
+``--rollouts`` seeded initial states of evaluation seed ``--eval-seed`` (same simulator) and
+keep the best checkpoint per training seed (the paper's protocol; ``--checkpoints final``: the
+final checkpoint only). The report gives, per collection seed, success % mean (std) over training
 seeds and the paired difference (naive − base-only); over all collection seeds, the mean
 difference with a 95% bootstrap interval that resamples collection and training seeds
 (:func:`elicit_jax.stats.paired_difference`), and each operator's collection success rate
@@ -18,6 +19,14 @@ Example::
     python benchmarks/phenomenon.py --task square-nut --operators same-style,conflict-flip \\
         --collect-seeds 1-5 --seeds 3 --epochs 150 --hidden 256 --members 2 \\
         --out benchmarks/results/phenomenon-square-nut.md
+    python benchmarks/phenomenon.py --task robosuite-square --operators same-style,mild,\
+conflict-flip-pause --collect-seeds 1-5 --seeds 3 --epochs 100 --checkpoint-every 50 \
+        --hidden 256 --members 5 --checkpoints final --workers 2 \
+        --out benchmarks/results/phenomenon-robosuite-square.md
+
+On robosuite, ``--workers`` is the number of environment processes of collection and
+evaluation (0: one per CPU) and ``--checkpoints final`` evaluates only the last checkpoint
+(robosuite's rollouts are what a run spends its time on: docs/robosuite.md).
 """
 
 from __future__ import annotations
@@ -57,6 +66,16 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1")
     p.add_argument("--rollouts", type=int, default=50)
     p.add_argument("--eval-seed", type=int, default=0, help="picks the evaluation states")
+    p.add_argument(
+        "--checkpoints",
+        default="all",
+        choices=["all", "final"],
+        help="evaluate every saved checkpoint (best per seed) or the final one",
+    )
+    p.add_argument("--horizon", type=int, default=0, help="rollout steps (0: the task's)")
+    p.add_argument(
+        "--workers", type=int, default=0, help="robosuite: environment processes (0: one per CPU)"
+    )
     p.add_argument("--work", type=Path, default=Path("/tmp/elicit-phenomenon"))
     p.add_argument("--out", type=Path, default=None, help="also write the report here")
     return p.parse_args()
@@ -78,7 +97,7 @@ class Study:
 
     def __init__(self, args: argparse.Namespace) -> None:
         from elicit_jax.policy.config import TrainConfig
-        from elicit_jax.sim.evaluate import EvalConfig
+        from elicit_jax.sim.evaluate import EvalConfig, is_robosuite_task
 
         self.args = args
         self.t0 = time.time()
@@ -93,7 +112,9 @@ class Study:
         )
         self.eval_cfg = EvalConfig(
             task=args.task, rollouts=args.rollouts, seed=args.eval_seed,
-            checkpoints=("all",), select="best", backend="mujoco",
+            checkpoints=(args.checkpoints,), select="best", workers=args.workers,
+            horizon=args.horizon,
+            backend="robosuite" if is_robosuite_task(args.task) else "mujoco",
         )  # fmt: skip
         self.root = args.work / args.task
         self.run_tag = (
@@ -101,6 +122,7 @@ class Study:
             f"{'' if args.batch_size == 512 else f'-b{args.batch_size}'}"
             f"-s{args.seeds}-n{args.episodes}"
         )
+        self.backend = self.eval_cfg.backend
         self.proficiency: dict[tuple[int, str], float] = {}
 
     def log(self, msg: str) -> None:
@@ -115,7 +137,11 @@ class Study:
         if not path.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
             cfg = CollectConfig(
-                task=self.args.task, operator=op, episodes=self.args.episodes, seed=cseed
+                task=self.args.task,
+                operator=op,
+                episodes=self.args.episodes,
+                seed=cseed,
+                threads=self.args.workers,
             )
             collect(cfg, path)
             self.log(f"collected c{cseed} {op}")
@@ -134,7 +160,10 @@ class Study:
 
         a = self.args
         run = self.root / f"c{cseed}" / self.run_tag / f"run-{op}"
-        rollouts = run.with_name(f"rollouts-{op}-eval{a.eval_seed}-r{a.rollouts}.parquet")
+        tag = ("" if a.checkpoints == "all" else f"-{a.checkpoints}") + (
+            f"-h{a.horizon}" if a.horizon else ""
+        )
+        rollouts = run.with_name(f"rollouts-{op}-eval{a.eval_seed}-r{a.rollouts}{tag}.parquet")
         if not rollouts.exists():
             if not run.exists():
                 base = self.demos(cseed, a.base)
@@ -160,9 +189,11 @@ def report(args: argparse.Namespace, study: Study, results: dict, wall: float) -
         "",
         f"MLP {args.hidden}x{args.hidden}, {args.members} members, {args.epochs} epochs "
         f"(batch {args.batch_size}), "
-        f"checkpoints every {cfg.checkpoint_every}, best checkpoint per training seed, "
+        f"checkpoints every {cfg.checkpoint_every}, "
+        f"{'best' if args.checkpoints == 'all' else 'final'} checkpoint per training seed, "
         f"training seeds {', '.join(map(str, cfg.seeds))}; {args.episodes} demos per operator; "
-        f"collection seeds {', '.join(map(str, cseeds))}; {args.rollouts} rollouts (C MuJoCo) "
+        f"collection seeds {', '.join(map(str, cseeds))}; {args.rollouts} rollouts "
+        f"({'robosuite' if study.backend == 'robosuite' else 'C MuJoCo'}) "
         f"from evaluation seed {args.eval_seed}, the same initial states for every policy.",
         "",
         "### Per collection seed: success % mean (std) over training seeds; paired difference",
@@ -234,6 +265,8 @@ def command_line(args: argparse.Namespace) -> str:
         f"{args.hidden} --members {args.members} --batch-size {args.batch_size} --episodes "
         f"{args.episodes} --rollouts "
         f"{args.rollouts} --eval-seed {args.eval_seed}"
+        + ("" if args.checkpoints == "all" else f" --checkpoints {args.checkpoints}")
+        + (f" --horizon {args.horizon}" if args.horizon else "")
     )
 
 

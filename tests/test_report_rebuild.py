@@ -20,12 +20,14 @@ from elicit_jax.pipeline.evidence import (
     ROLLOUTS_FILE,
     cell_frame,
     result_rows_of,
+    selection_lines,
     selection_meta,
 )
 from elicit_jax.pipeline.plan import build_graph
 from elicit_jax.pipeline.run import rebuild_report, render_run_report, write_manifest
 from elicit_jax.pipeline.spec import load_spec
 from elicit_jax.pipeline.stages import resolve_config
+from elicit_jax.pipeline.tables import selection_label
 
 SPEC = """# a tiny study: two methods, two training seeds, held-out checkpoint selection (default)
 [pipeline]
@@ -111,6 +113,15 @@ def test_heldout_selection_chooses_on_one_seed_and_reports_another(tmp_path):
     # the paper's rule: the best on the reported rollouts themselves (biased upwards)
     (paper,) = result_rows_of(cell_frame(_config("reported"), path))
     assert paper.checkpoint == "40" and paper.success == pytest.approx(1.0)
+    # one checkpoint evaluated (e.g. checkpoints = ["final"]): nothing was chosen, and the
+    # report says so instead of calling the number a maximum
+    only = {k: v for k, v in HAND.items() if k[2] == "20"}
+    _write_eval(path, _rollouts(only))
+    for rule in ("reported", "heldout"):
+        (one,) = result_rows_of(cell_frame(_config(rule), path))
+        assert one.selection == "single" and one.success == pytest.approx(0.25)
+    assert selection_label([one]) == "the one checkpoint evaluated per seed"
+    assert selection_lines([one])[0].startswith("**Checkpoint: the only one evaluated.**")
 
 
 def test_selection_is_validated():

@@ -113,6 +113,28 @@ def test_paired_initial_states_identical_across_policies_and_workers(work, pool)
     assert a["env_steps"] == 9 and not a["success"].any()
 
 
+def test_recorded_states_and_seeded_noise_do_not_depend_on_the_worker(work, pool):
+    """What CUPID and Demo-SCORE read on robosuite: every state the policy acted in and the
+    action taken, the exploration noise drawn per rollout seed (the same whichever worker)."""
+    from elicit_jax.policy.base import jitted_act
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.sim.rollout_robosuite import rollout_policy
+
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
+    seeds = np.array([21, 22, 23])
+    a = rollout_policy(pool.spec, jitted_act(), policy, seeds, 3, 2, pool, True, 0.2)
+    b = rollout_policy(pool.spec, jitted_act(), policy, seeds[::-1], 3, 2, pool, True, 0.2)
+    clean = rollout_policy(pool.spec, jitted_act(), policy, seeds, 3, 2, pool, True)
+    assert a["states"].shape == (3, 3, 23) and a["actions"].shape == (3, 3, 7)
+    assert a["state_mask"].all()  # no success in 3 steps: every step recorded
+    assert np.allclose(a["states"][:, 0], a["init_obs"])  # the first state is the reset's
+    for key in ("states", "actions"):
+        assert np.allclose(a[key], b[key][::-1], atol=1e-5)
+    # at the first step the states agree, so the actions differ by exactly the seeded noise
+    noise = np.stack([np.random.default_rng(s).normal(size=7) for s in seeds]) * 0.2
+    assert np.allclose(a["actions"][:, 0] - clean["actions"][:, 0], noise, atol=1e-5)
+
+
 def test_evaluate_task_and_env_from_exported_file(work):
     d = work["dir"]
     _ok(["evaluate", "--policy", f"A={d / 'run'}", "--policy", f"B={d / 'run'}",

@@ -50,7 +50,7 @@ class DemoScoreConfig:
       seed: initial states of checkpoint j are evaluation seeds ``seed + j`` (far from the
         evaluation's own, which use seeds < 50).
       horizon: control steps (0: the task's).
-      threads: C MuJoCo threads (0: one per CPU).
+      threads: C MuJoCo threads or robosuite processes (0: one per CPU).
       classifier: the state classifier and its training (a mapping of its fields is accepted,
         as a ``[demo_score.classifier]`` table of a pipeline definition gives).
     """
@@ -134,7 +134,7 @@ def collect_rollouts(
     """
     from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.sim.env import OBS_DIM, make_task
-    from elicit_jax.sim.evaluate import EVAL_SEED_BASE, rollout_mujoco_policy
+    from elicit_jax.sim.evaluate import EVAL_SEED_BASE
 
     seed, epochs = rollout_epochs(policy_dir, config)
     task = make_task(config.task)
@@ -149,7 +149,7 @@ def collect_rollouts(
                 policy_dir,
             )
         init = EVAL_SEED_BASE + (config.seed + j) * SEED_STRIDE + np.arange(config.rollouts)
-        out = rollout_mujoco_policy(task, policy, init, horizon, config.threads, True)
+        out = _rollouts(task, policy, init, horizon, config.threads)
         mask = out["state_mask"]
         offset = j * config.rollouts
         success.append(np.asarray(out["success"], bool))
@@ -181,6 +181,22 @@ class DemoScoreModel:
     def prob(self, states: np.ndarray) -> np.ndarray:
         """(M,) predicted probability of success for raw states ``(M, O)``."""
         return predict(self.config, self.params, (np.asarray(states) - self.mean) / self.std)
+
+
+def _rollouts(task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int) -> dict:
+    """Rollouts with recorded states on the task's simulator: C MuJoCo, or robosuite's
+    worker processes (``threads`` of them; 0: one per CPU) for its tasks."""
+    from elicit_jax.sim.evaluate import rollout_mujoco_policy
+
+    if getattr(task, "backend", "") != "robosuite":
+        return rollout_mujoco_policy(task, policy, seeds, horizon, threads, True)
+    from elicit_jax.policy.base import jitted_act
+    from elicit_jax.runtime import available_cpus
+    from elicit_jax.sim.rollout_robosuite import rollout_policy, shared_pool
+
+    workers = min(threads or available_cpus(), len(seeds))
+    pool = shared_pool(task.spec, workers)
+    return rollout_policy(task.spec, jitted_act(), policy, seeds, horizon, workers, pool, True)
 
 
 def checkpoint_summary(rollouts: Rollouts) -> list[dict[str, int]]:

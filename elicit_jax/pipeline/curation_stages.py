@@ -4,8 +4,8 @@ functions, and where they go in the filtering study's graph.
 * ``quality/<task>/<op>`` (per task, no policy): the quality flags of one D_new as
   per-demonstration scores (kind ``episode-scores``).
 * ``cupid/<task>/<model>/<op>`` (per task × model): rolls out that operator's naive policy
-  (trained on D_base ∪ D_new) with exploration noise on C MuJoCo, then scores D_new by its
-  estimated influence on that policy's expected return.
+  (trained on D_base ∪ D_new) with exploration noise (C MuJoCo, or robosuite for its tasks),
+  then scores D_new by its estimated influence on that policy's expected return.
 
 Their scores are cut by the same ``curate`` stages as DemInf's and Demo-SCORE's: at the
 method's own rule (``cupid``, ``quality``) or at the M-filter's amount (``*-matched``).
@@ -44,10 +44,11 @@ def resolve_quality(raw: dict[str, Any]) -> dict[str, Any]:
 
 
 def resolve_cupid(raw: dict[str, Any]) -> dict[str, Any]:
-    """Stage config of a ``cupid`` stage: task, model, operator and the full CupidConfig."""
+    """Stage config of a ``cupid`` stage: task, model, operator, the full CupidConfig and,
+    when ``[cupid] horizon`` is given, the control steps of its rollouts (0: the task's)."""
     from elicit_jax.curation.cupid import CupidConfig
 
-    meta = {k: raw[k] for k in ("task", "model", "operator") if k in raw}
+    meta = {k: raw[k] for k in ("task", "model", "operator", "horizon") if k in raw}
     over = {k: v for k, v in raw.items() if k not in meta}
     return {**meta, "cupid": dataclasses.asdict(_checked(CupidConfig, over, "cupid"))}
 
@@ -69,7 +70,7 @@ def cupid_stage(ctx: Any) -> None:
     from elicit_jax.curation.episodes import write_episode_scores
     from elicit_jax.data.demos import read_demos
     from elicit_jax.policy.checkpoint import seed_dirs
-    from elicit_jax.sim.evaluate import EvalConfig, evaluate_policies
+    from elicit_jax.sim.evaluate import EvalConfig, evaluate_policies, is_robosuite_task
     from elicit_jax.sim.trajectories import TrajectoryConfig
 
     cfg = CupidConfig(**ctx.config["cupid"])
@@ -82,7 +83,8 @@ def cupid_stage(ctx: Any) -> None:
         task=ctx.config["task"],
         rollouts=cfg.rollouts,
         seed=cfg.rollout_seed,
-        backend="mujoco",
+        horizon=int(ctx.config.get("horizon", 0)),
+        backend="robosuite" if is_robosuite_task(ctx.config["task"]) else "mujoco",
         checkpoints=(cfg.checkpoint,),
     )
     with tempfile.TemporaryDirectory() as tmp:

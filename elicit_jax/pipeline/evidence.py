@@ -59,7 +59,12 @@ SELECTION_TEXT = {
     "Each training seed's checkpoint is the best on the very rollouts whose success is "
     "reported: a maximum over noisy checkpoints, **biased upwards**, and the intervals "
     "ignore it",
+    "single": "**Checkpoint: the only one evaluated.** Each training seed was evaluated at a "
+    'single checkpoint (e.g. `[evaluate] checkpoints = ["final"]`), so nothing was chosen '
+    "and no maximum over checkpoints inflates the reported success",
 }
+"""How the report states each rule; ``single`` is not a setting but what either setting
+amounts to when a cell's seeds were evaluated at one checkpoint only."""
 
 ROLLOUT_COLUMNS = [
     *CELL_KEYS,
@@ -189,6 +194,7 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
             )
         chosen = _per_checkpoint(choose)
         best = chosen.loc[chosen["success"].idxmax()]  # ties: the earliest saved
+        single = len(chosen) == 1 and report["checkpoint"].nunique() == 1
         shown = _per_checkpoint(report).set_index("checkpoint").loc[best["checkpoint"]]
         reported = report[report["checkpoint"] == best["checkpoint"]]
         rows.append(
@@ -205,7 +211,7 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
                 init_states=init_states_id(reported["init_seed"].to_numpy()),
                 study=str(first["study"]),
                 point=None if int(first["point"]) < 0 else int(first["point"]),
-                selection=str(first["selection"]),
+                selection="single" if single else str(first["selection"]),
                 eval_seeds=tuple(sorted({int(s) for s in g["eval_seed"]})),
                 select_success=float(best["success"]),
                 collection=int(first["collection"]),

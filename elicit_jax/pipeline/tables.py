@@ -96,6 +96,8 @@ def selection_label(results: Sequence[ResultRow]) -> str:
         return "checkpoint per seed chosen on held-out rollouts"
     if rules == {"reported"}:
         return "best checkpoint per seed on the reported rollouts: biased upwards"
+    if rules == {"single"}:
+        return "the one checkpoint evaluated per seed"
     return "checkpoint per seed: mixed selection rules, see above"
 
 

@@ -180,7 +180,7 @@ def evaluate_refs(
     """Roll out every policy reference; returns the per-rollout ``pandas.DataFrame``.
 
     With ``trajectories`` (a :class:`~elicit_jax.sim.trajectories.TrajectoryConfig`) the
-    rollouts run on C MuJoCo with its exploration noise and every step is recorded there.
+    rollouts run with its exploration noise and every step is recorded (C MuJoCo or robosuite).
     """
     import pandas as pd
 
@@ -193,15 +193,10 @@ def evaluate_refs(
     if trajectories is not None:
         from elicit_jax.sim.trajectories import steps_frame, write_trajectories
 
-        if backend != "mujoco":
-            raise ElicitError("--trajectories records on C MuJoCo: use --backend mujoco")
+        if backend == "mjx":
+            raise ElicitError("--trajectories records on C MuJoCo or robosuite, not MJX")
     if backend == "robosuite":
-        from elicit_jax.sim.evaluate_robosuite import evaluate_refs_robosuite
-
-        results, horizon, _ = evaluate_refs_robosuite(refs, config, seeds, progress)
-        return pd.concat(
-            [rollout_frame(ref, seeds, out, horizon) for ref, out in results], ignore_index=True
-        )
+        return _evaluate_robosuite(refs, config, seeds, progress, trajectories)
     task = make_task(config.task)
     horizon = config.horizon or task.config.horizon
     frames, steps = [], []
@@ -229,6 +224,32 @@ def evaluate_refs(
         header = {"config": dataclasses.asdict(config), "task": config.task, "seed": config.seed}
         write_trajectories(steps, trajectories, header)
     return pd.concat(frames, ignore_index=True)
+
+
+def _evaluate_robosuite(
+    refs: Sequence[PolicyRef],
+    config: EvalConfig,
+    seeds: np.ndarray,
+    progress: Callable[[PolicyRef, float], None] | None,
+    trajectories: Any,
+) -> Any:
+    """:func:`evaluate_refs` on robosuite workers (recording steps with ``trajectories``)."""
+    import pandas as pd
+
+    from elicit_jax.sim.evaluate_robosuite import evaluate_refs_robosuite
+
+    noise = 0.0 if trajectories is None else trajectories.action_noise
+    record = trajectories is not None
+    results, horizon, _ = evaluate_refs_robosuite(refs, config, seeds, progress, record, noise)
+    if record:
+        from elicit_jax.sim.trajectories import steps_frame, write_trajectories
+
+        steps = [steps_frame(ref, seeds, out) for ref, out in results]
+        header = {"config": dataclasses.asdict(config), "task": config.task, "seed": config.seed}
+        write_trajectories(steps, trajectories, header)
+    return pd.concat(
+        [rollout_frame(ref, seeds, out, horizon) for ref, out in results], ignore_index=True
+    )
 
 
 def rollout_frame(ref: PolicyRef, seeds: np.ndarray, out: dict, horizon: int) -> Any:

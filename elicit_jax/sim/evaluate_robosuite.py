@@ -84,8 +84,11 @@ def evaluate_refs_robosuite(
     config: Any,
     seeds: np.ndarray,
     progress: Callable[[Any, float], None] | None = None,
+    record_states: bool = False,
+    action_noise: float = 0.0,
 ) -> tuple[list[tuple[Any, dict]], int, dict[str, Any]]:
-    """Roll out every policy reference on robosuite workers.
+    """Roll out every policy reference on robosuite workers (``record_states`` and
+    ``action_noise``: see :func:`elicit_jax.sim.rollout_robosuite.rollout_policy`).
 
     Returns:
       ``[(ref, outcome)]``, the horizon and timing (``policy_seconds``, ``env_steps``,
@@ -109,7 +112,8 @@ def evaluate_refs_robosuite(
     pool = shared_pool(spec, workers)
     for ref, policy in zip(refs, policies, strict=True):
         _check_policy(config, ref, policy, spec, pool, file_dims)
-        out = rollout_policy(spec, jitted_act(), policy, seeds, horizon, workers, pool)
+        out = rollout_policy(spec, jitted_act(), policy, seeds, horizon, workers, pool,
+                             record_states, action_noise)  # fmt: skip
         timing["policy_seconds"] += float(out.pop("policy_seconds"))
         timing["env_steps"] += int(out.pop("env_steps"))
         results.append((ref, out))

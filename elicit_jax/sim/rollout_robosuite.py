@@ -206,6 +206,8 @@ def rollout_policy(
     horizon: int,
     workers: int,
     pool: EnvPool | None = None,
+    record_states: bool = False,
+    action_noise: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Roll ``policy`` out from the initial states of ``seeds`` on robosuite workers.
 
@@ -213,12 +215,17 @@ def rollout_policy(
       act: jitted ``act(policy, carry, obs (B, D)) -> (carry, action (B, 7))``.
       workers: worker processes (one environment each), unless ``pool`` is given.
       pool: an open :class:`EnvPool` to use (left open).
+      record_states: also return the states the policy acted in and the actions taken.
+      action_noise: std of Gaussian exploration noise added to every action (0: none), drawn
+        from a generator seeded by the rollout's initial-state seed (as on C MuJoCo), so a
+        rollout's noise does not depend on which worker runs it.
 
     Returns:
       dict of ``success (N,)``, ``steps_to_success (N,)`` (horizon when never), ``ret (N,)``,
       ``unstable (N,)`` (the simulation failed; not a success), ``init_obs (N, D)`` (each
       rollout's first observation), ``policy_seconds`` (time in policy calls) and
-      ``env_steps``.
+      ``env_steps``; with ``record_states`` also ``states (N, horizon, D)`` float32,
+      ``state_mask (N, horizon)`` and ``actions (N, horizon, 7)`` (noise included).
     """
     import time
 
@@ -228,7 +235,8 @@ def rollout_policy(
     own = pool is None
     pool = pool or EnvPool(spec, min(workers, len(seeds)), horizon)
     w = pool.size
-    slots = _Slots(len(seeds), w, pool.obs_dim, horizon)
+    slots = _Slots(len(seeds), w, pool.obs_dim, horizon, record_states)
+    rngs = [np.random.default_rng(int(s)) for s in seeds] if action_noise > 0 else []
     stateless = not jax.tree.leaves(policy.init_carry(1))
     policy_s, env_steps = 0.0, 0
     try:
@@ -243,6 +251,9 @@ def rollout_policy(
             action = np.asarray(action, np.float64)
             policy_s += time.perf_counter() - t0
             run = [i for i in range(w) if slots.busy[i]]
+            for i in run if rngs else ():
+                action[i] = action[i] + action_noise * rngs[slots.slot[i]].normal(size=7)
+            slots.keep(run, action)
             slots.record(run, pool.request([(i, "step", action[i]) for i in run]))
             env_steps += len(run)
     finally:
@@ -257,7 +268,9 @@ class _Slots:
     """Which rollout each worker runs and for how many steps, and the rollouts' outcomes:
     a worker whose rollout ended (success, instability, horizon) takes the next one."""
 
-    def __init__(self, n: int, workers: int, obs_dim: int, horizon: int) -> None:
+    def __init__(
+        self, n: int, workers: int, obs_dim: int, horizon: int, record: bool = False
+    ) -> None:
         self.out = {
             "success": np.zeros(n, bool),
             "steps_to_success": np.full(n, horizon, np.int32),
@@ -265,6 +278,12 @@ class _Slots:
             "unstable": np.zeros(n, bool),
             "init_obs": np.zeros((n, obs_dim)),
         }
+        if record:
+            self.out |= {
+                "states": np.zeros((n, horizon, obs_dim), np.float32),
+                "state_mask": np.zeros((n, horizon), bool),
+                "actions": np.zeros((n, horizon, 7), np.float32),
+            }
         self.slot = np.full(workers, -1)  # rollout index each worker runs (-1: idle)
         self.t_slot = np.zeros(workers, np.int64)
         self.obs = np.zeros((workers, obs_dim), np.float32)
@@ -292,6 +311,16 @@ class _Slots:
             if ok:  # solved at the start: a success in zero steps
                 out["success"][slot[i]], out["steps_to_success"][slot[i]] = True, 0
                 slot[i] = -1
+
+    def keep(self, run: list[int], action: np.ndarray) -> None:
+        """With recording: the state each running worker's policy acted in and its action."""
+        if "states" not in self.out:
+            return
+        for i in run:
+            k, t = self.slot[i], self.t_slot[i]
+            self.out["states"][k, t] = self.obs[i]
+            self.out["state_mask"][k, t] = True
+            self.out["actions"][k, t] = action[i]
 
     def record(self, run: list[int], answers: list[Any]) -> None:
         """Take the workers' answers to one step; free those whose rollout ended."""
