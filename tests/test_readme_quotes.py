@@ -26,6 +26,7 @@ def test_every_quoted_number_is_in_its_report():
 def test_an_edited_quote_fails(tmp_path):
     (tmp_path / "docs").mkdir()
     shutil.copytree(ROOT / "docs" / "results", tmp_path / "docs" / "results")
+    shutil.copytree(ROOT / "benchmarks" / "results", tmp_path / "benchmarks" / "results")
     readme = (ROOT / "README.md").read_text()
     (tmp_path / "README.md").write_text(readme)
     assert check_file(tmp_path / "README.md", tmp_path) == []

@@ -6,6 +6,7 @@ points, the new-data valley rule).
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, make_header, write_json
@@ -100,7 +101,7 @@ def filter_stage(ctx: StageContext) -> None:
     """
     import numpy as np
 
-    from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
+    from elicit_jax.compat.filtering import FilterConfig, drop_mask
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.thresholds import read_thresholds
 
@@ -117,24 +118,54 @@ def filter_stage(ctx: StageContext) -> None:
     }
     with atomic_path(ctx.output) as tmp:
         tmp.mkdir()
-        files = []
-        if not drop.all():
-            result = filter_demos(scores_path, ctx.inputs["demos"], tmp / DEMOS_FILE, cfg)
-            counts["episodes_out"] = result.episodes_out
-            files = [DEMOS_FILE, result.log_path.name]
-        else:
-            reason += "; every pair dropped, so the retraining uses D_base alone"
-        header = make_header(
-            "pipeline-filter",
-            1,
-            config=dict(ctx.config),
-            inputs=dict(ctx.inputs),
-            thresholds={"lambda": lam, "eta": eta},
-            reason=reason,
-            files=files,
-            **counts,
-        )
-        write_json(tmp / "artifact.json", header)
+        write_filter_output(ctx, tmp, scores_path, ctx.inputs["demos"], cfg, drop, reason, counts)
+
+
+def write_filter_output(
+    ctx: StageContext,
+    tmp: Path,
+    scores_path: Path,
+    source: Path,
+    cfg: Any,
+    drop: Any,
+    reason: str,
+    counts: dict[str, int],
+    keep: tuple[str, ...] = (),
+) -> None:
+    """Write a filter-like stage's output into ``tmp``: the kept demonstrations (none when
+    every pair is dropped: the retraining then uses D_base alone) and its header.
+
+    Args:
+      ctx: the stage.
+      tmp: the output directory being written.
+      scores_path: the scores the filter reads.
+      source: the demonstrations filtered.
+      cfg: the filter config (with the fitted λ, η).
+      drop: ``(n_pairs,)`` the pairs dropped; None when there was nothing to filter.
+      reason: what the filter did, in words.
+      counts: pairs/episodes in and dropped; ``episodes_out`` is set here.
+      keep: other files of ``tmp`` the header lists (after the demonstrations).
+    """
+    from elicit_jax.compat.filtering import filter_demos
+
+    files: list[str] = []
+    if drop is not None and not drop.all():
+        result = filter_demos(scores_path, source, tmp / DEMOS_FILE, cfg)
+        counts["episodes_out"] = result.episodes_out
+        files = [DEMOS_FILE, *keep, result.log_path.name]
+    elif drop is not None:
+        reason += "; every pair dropped, so the retraining uses D_base alone"
+    header = make_header(
+        "pipeline-filter",
+        1,
+        config=dict(ctx.config),
+        inputs=dict(ctx.inputs),
+        thresholds={"lambda": cfg.lambda_, "eta": cfg.eta},
+        reason=reason,
+        files=files,
+        **counts,
+    )
+    write_json(tmp / "artifact.json", header)
 
 
 def map_stage(ctx: StageContext) -> None:

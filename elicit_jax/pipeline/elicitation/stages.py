@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.artifact import atomic_path, write_json
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.elicitation.gather import PERSON_FILE
 from elicit_jax.pipeline.runner import StageContext, StageFn
@@ -116,12 +116,13 @@ def filter_session_stage(ctx: StageContext) -> None:
     dropped: no demonstrations file, and the retraining uses D_base alone."""
     import numpy as np
 
-    from elicit_jax.compat.filtering import FilterConfig, drop_mask, filter_demos
+    from elicit_jax.compat.filtering import FilterConfig, drop_mask
     from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score_file import read_scores, score_file
     from elicit_jax.compat.show import scoring_bar
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.pipeline.stages import DEMOS_FILE, SCORES_FILE
+    from elicit_jax.pipeline.stages_compat import write_filter_output
     from elicit_jax.policy.checkpoint import load_policy
 
     lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
@@ -131,8 +132,7 @@ def filter_session_stage(ctx: StageContext) -> None:
     counts = {"pairs_in": 0, "pairs_dropped": 0, "episodes_in": 0, "episodes_out": 0}
     with atomic_path(ctx.output) as tmp:
         tmp.mkdir()
-        files: list[str] = []
-        reason = "the naive session accepted no demonstrations"
+        drop, reason = None, "the naive session accepted no demonstrations"
         if source.exists():
             policy = load_policy(
                 ctx.inputs["policy"], score_cfg["checkpoint"], seed=score_cfg["policy_seed"]
@@ -149,23 +149,9 @@ def filter_session_stage(ctx: StageContext) -> None:
             drop, reason = drop_mask(scores, cfg)
             counts["pairs_in"], counts["pairs_dropped"] = int(drop.size), int(drop.sum())
             counts["episodes_in"] = int(np.unique(scores["episode"]).size)
-            if not drop.all():
-                result = filter_demos(tmp / SCORES_FILE, source, tmp / DEMOS_FILE, cfg)
-                counts["episodes_out"] = result.episodes_out
-                files = [DEMOS_FILE, SCORES_FILE, result.log_path.name]
-            else:
-                reason += "; every pair dropped, so the retraining uses D_base alone"
-        header = make_header(
-            "pipeline-filter",
-            1,
-            config=dict(ctx.config),
-            inputs=dict(ctx.inputs),
-            thresholds={"lambda": lam, "eta": eta},
-            reason=reason,
-            files=files,
-            **counts,
+        write_filter_output(
+            ctx, tmp, tmp / SCORES_FILE, source, cfg, drop, reason, counts, (SCORES_FILE,)
         )
-        write_json(tmp / "artifact.json", header)
 
 
 def study_report_stage(ctx: StageContext) -> None:
