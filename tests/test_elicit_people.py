@@ -19,7 +19,13 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
-from elicit_jax.elicit.events import EpisodeEndEvent, EpisodeStartEvent, PromptEvent, ReviewEvent
+from elicit_jax.elicit.events import (
+    EpisodeEndEvent,
+    EpisodeStartEvent,
+    PromptEvent,
+    ReviewEvent,
+    SessionEndEvent,
+)
 from elicit_jax.elicit.people import SimulatedPerson, make_population, parse_person, person_of
 from elicit_jax.elicit.people.learn import Shown, compass_search, imagined_error
 from elicit_jax.elicit.people.traits import PersonTraits
@@ -202,6 +208,11 @@ def test_practice_trials_are_judged_by_success(pillar):
     for i in range(4):
         episode(calm, i, False)
     assert not calm.log and np.allclose(calm.theta, calm.start_theta)
+    # a failed last episode starts no trial: the θ a session ends with was acted with
+    person = SimulatedPerson(task, parse_person("conflict-right,explore=1,seed=2"), None)
+    episode(person, 0, False)
+    person.on_event(SessionEndEvent("complete", None))
+    assert not person.log and np.allclose(person.theta, person.start_theta)
 
 
 def test_memory_keeps_the_last_segments_and_delay_acts_on_old_states(pillar):
