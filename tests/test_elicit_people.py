@@ -19,7 +19,13 @@ import numpy as np
 import pytest
 from fixtures_data import SessionInputs
 
-from elicit_jax.elicit.events import EpisodeEndEvent, EpisodeStartEvent, PromptEvent, ReviewEvent
+from elicit_jax.elicit.events import (
+    EpisodeEndEvent,
+    EpisodeStartEvent,
+    PromptEvent,
+    ReviewEvent,
+    SessionEndEvent,
+)
 from elicit_jax.elicit.people import SimulatedPerson, make_population, parse_person, person_of
 from elicit_jax.elicit.people.learn import Shown, compass_search, imagined_error
 from elicit_jax.elicit.people.traits import PersonTraits
@@ -202,6 +208,11 @@ def test_practice_trials_are_judged_by_success(pillar):
     for i in range(4):
         episode(calm, i, False)
     assert not calm.log and np.allclose(calm.theta, calm.start_theta)
+    # a failed last episode starts no trial: the θ a session ends with was acted with
+    person = SimulatedPerson(task, parse_person("conflict-right,explore=1,seed=2"), None)
+    episode(person, 0, False)
+    person.on_event(SessionEndEvent("complete", None))
+    assert not person.log and np.allclose(person.theta, person.start_theta)
 
 
 def test_memory_keeps_the_last_segments_and_delay_acts_on_old_states(pillar):
@@ -348,3 +359,34 @@ def test_person_with_every_channel_open_learns_from_the_prompt_first(nut, tmp_pa
     assert set(sources) <= {"prompt", "feedback", "practice-try", "practice-keep", "practice-undo"}
     # having turned the wrist round before demonstrating, both its demonstrations pass the rule
     assert (session.progress.counts.accepted, session.progress.counts.rejected) == (2, 0)
+
+
+# --- the shipped study's hammer-drawer people can do the task -----------------------------------
+def test_shipped_hammer_drawer_same_style_person_completes_the_task():
+    """p3 of the shipped hammer-drawer population (same-style) completes the task with its own
+    controller, delay and noise (with [people.ranges] alone it drew delay 1 × gain 2.04 and
+    oscillated at the grasp in every episode); the task's narrower ranges touch no other task."""
+    from elicit_jax.pipeline.elicitation.spec import load_study
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.rollout_mujoco import BatchSim
+
+    study = load_study("pipelines/elicitation.toml", "cpu")
+    people = {t.name: t.people for t in study.tasks}
+    assert people["reach-pillar"][3].endswith("gain=2.037,delay=1,memory=3,reach=0.835,"
+                                              "slip=0.032,seed=3")  # fmt: skip
+    task = make_task("hammer-drawer")
+    person = SimulatedPerson(task, parse_person(people["hammer-drawer"][3][len("person:") :]), None)
+    assert person.traits.style == "same-style" and person.traits.delay <= 1
+    op = importlib.import_module("elicit_jax.sim.operators").make_operator(
+        task, person.name, style=person.episode_style()
+    )
+    with BatchSim(task, 4, threads=1) as sim:
+        obs = sim.reset_seeds(np.arange(4) + 500)
+        op.reset(obs, np.random.default_rng(1))
+        history, done = [obs], np.zeros(4, bool)
+        for _ in range(task.config.horizon):
+            obs = sim.step(op.act(history[max(len(history) - 1 - person.traits.delay, 0)]),
+                           active=~done)  # fmt: skip
+            history.append(obs)
+            done |= sim.success
+    assert done.sum() >= 3

@@ -125,6 +125,14 @@ def test_shipped_definition_and_its_graph():
         (("demos = 2", "demos = 2\nmode = 'naive'"), "set by the study"),
         (('"conflict-right-pause"', '"conflict-right"'), "is also a person's starting style"),
         (("size = 1", "size = 1\ncolour = 2"), "unknown key"),
+        (
+            ("dagger = true", "dagger = true\npeople_ranges = {delay = [2, 1]}"),
+            "reach-pillar: trait range delay: low 2.0 above high 1.0",
+        ),
+        (
+            ("dagger = true", "dagger = true\npeople_ranges = {grip = [0, 1]}"),
+            "reach-pillar: unknown trait range 'grip'",
+        ),
     ],
 )
 def test_definition_errors_name_the_problem(edit, words):

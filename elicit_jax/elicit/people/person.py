@@ -185,7 +185,7 @@ class SimulatedPerson:
         elif isinstance(event, ReviewEvent) and self._seen is not None:
             self._seen.feedback = tuple(event.feedback)
         elif isinstance(event, SessionEndEvent):
-            self.digest()
+            self.digest(last=True)
 
     # --- learning from what was shown ----------------------------------------------------------
     def _set(self, episode: int, source: str, theta: np.ndarray, **extra: Any) -> None:
@@ -223,8 +223,10 @@ class SimulatedPerson:
         if rng.random() < self.traits.imitation:
             self.fit(self._seen.index + 1 if self._seen is not None else 0, "prompt")
 
-    def digest(self) -> None:
-        """Think over the episode just finished (called when the next one starts)."""
+    def digest(self, last: bool = False) -> None:
+        """Think over the episode just finished (called when the next one starts, and with
+        ``last`` when the session ends: no new practice trial then, as no episode would try
+        it, so the final θ a session records is one the person acted with or fitted)."""
         seen, self._seen = self._seen, None
         if seen is None:
             return
@@ -235,7 +237,9 @@ class SimulatedPerson:
             self._settle_trial(seen)
         if seen.kind == DEMONSTRATION and seen.feedback:
             changed = self._learn_from_feedback(seen, rng) or changed
-        if not changed and self.trial is None and seen.bad and rng.random() < self.traits.explore:
+        if last or changed or self.trial is not None or not seen.bad:
+            return
+        if rng.random() < self.traits.explore:
             step = rng.normal(0.0, TRIAL_STEP * self.space.width)
             self.trial = {"old": self.theta.copy(), "red_before": seen.red_fraction}
             self._set(seen.index, "practice-try", self.theta + step, success=seen.success,

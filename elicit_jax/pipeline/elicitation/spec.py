@@ -8,7 +8,8 @@ Layout (see ``pipelines/elicitation.toml``)::
     [people]        # size, seed, styles, [people.ranges] trait = [low, high]
     [session]       # session settings (SessionConfig fields: demos, practice, prompt, ...)
     [[task]]        # name, base_operator, base_episodes, holdout_episodes,
-                    # incompatible_operator, incompatible_episodes, styles, dagger
+                    # incompatible_operator, incompatible_episodes, styles, dagger,
+                    # [task.people_ranges] trait = [low, high] (this task's trait ranges)
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # library config overrides
     [profiles.cpu.*]  [task.profiles.cpu]                         # profile overrides
 
@@ -16,7 +17,8 @@ A task's ``incompatible_operator`` may not be a person's starting style (the thr
 be fitted on that person's own way of doing the task). Each task's population is drawn by
 :func:`~elicit_jax.elicit.people.traits.make_population` from ``[people]`` (the task's
 ``styles`` replace ``[people] styles``): person ``i`` starts from the ``i``-th style
-(cycling), with traits drawn from the ranges, all seeded.
+(cycling), with traits drawn from the ranges (a task's ``people_ranges`` replace
+``[people.ranges]`` for the traits it names), all seeded.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ _TASK = {
     "styles",
     "dagger",
     "profiles",
+    "people_ranges",
 }
 _SESSION_FIXED = {"task", "policy", "base_demos", "lambda", "lambda_", "eta", "operator", "mode"}
 _SESSION_FIXED |= {"show", "dagger", "thresholds_file", "policy_seed", "seed"}
@@ -253,9 +256,11 @@ def _task(raw: Mapping[str, Any], people: Mapping[str, Any], source: str) -> Stu
             source,
         )
     size = int(people.get("size", 6))
-    population = make_population(
-        styles, size, int(people.get("seed", 0)), dict(people.get("ranges", {}))
-    )
+    ranges = {**dict(people.get("ranges", {})), **dict(raw.get("people_ranges", {}))}
+    try:
+        population = make_population(styles, size, int(people.get("seed", 0)), ranges)
+    except ElicitError as e:
+        raise ElicitError(f"[[task]] {name}: {e}", source) from None
     return StudyTask(
         name=name,
         base_operator=base_operator,
