@@ -38,17 +38,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import statistics
-import sys
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-OBS, ACT, K, HIDDEN, T = 23, 7, 5, 1024, 90
-FLOP_PER_PAIR = K * 2 * (OBS * HIDDEN + HIDDEN * HIDDEN + HIDDEN * ACT)
+from bench_score_report import ACT, FLOP_PER_PAIR, HIDDEN, OBS, K, T, to_markdown
 
 
 def _args() -> argparse.Namespace:
@@ -72,15 +69,6 @@ def _cfg(chunk: int):
     from elicit_jax.compat.measures import ScoreConfig
 
     return ScoreConfig(likelihood="member-average", ddof=1, chunk_size=chunk)
-
-
-TARGETS = {
-    "one_pass": 1.2,  # best chunk / torch per-demo one-pass loop
-    "batched": 1.5,  # best chunk / torch batched loop
-    "matmul": 0.70,  # best chunk GFLOP/s / JAX matmul GFLOP/s
-    "chunk1024": 0.80,  # chunk 1024 / best chunk
-    "episode": 2.0,  # one 90-step episode's time / its FLOP time at the matmul's speed
-}
 
 
 def _best_of(fn: Callable[[], object], calls: int) -> float:
@@ -195,22 +183,14 @@ def _torch_score_one_pass(models, mean, std, obs, act, lam=0.4, eta=0.05, lim=1.
     return ell, nu, m
 
 
-def main() -> None:
-    from elicit_jax.runtime import configure
-
-    configure()
-    import jax
-    import jax.numpy as jnp
+def _data(a: argparse.Namespace):
+    """``a.demos`` random demos (seed 0) at the paper's sizes, the first of them alone, and the
+    benchmarked policy normalized on them, with its normalization statistics."""
     import numpy as np
-    import torch
 
-    from elicit_jax.compat.measures import ScoreConfig
-    from elicit_jax.compat.score import score_demos
-    from elicit_jax.compat.score_file import score_file
-    from elicit_jax.data.demos import from_episodes, write_demos
+    from elicit_jax.data.demos import from_episodes
     from elicit_jax.policy.base import normalization_stats
 
-    a = _args()
     rng = np.random.default_rng(0)
     eps = [
         {
@@ -222,16 +202,27 @@ def main() -> None:
     demos = from_episodes(eps, operators="op")
     episode = from_episodes(eps[:1], operators="op")
     mean, std = normalization_stats(demos.obs)
-    policy = bench_policy(HIDDEN, mean, std)
-    n_pairs = demos.n_steps
-    n = a.matmul_n
+    return demos, episode, bench_policy(HIDDEN, mean, std), mean, std
+
+
+def _matmuls(n: int):
+    """The reference matmul: a compiled JAX ``x @ x`` on an ``n`` x ``n`` input, torch's input."""
+    import jax
+    import jax.numpy as jnp
+    import torch
+
     xa = jax.random.normal(jax.random.key(1), (n, n), jnp.float32)
     mm = jax.jit(lambda x: x @ x)
     mm(xa).block_until_ready()
-    xt = torch.randn(n, n)
+    return mm, xa, torch.randn(n, n)
 
-    # --- compile ours at each chunk size (timed separately); copy the weights into torch ---
-    chunks = [int(x) for x in a.chunks.split(",")]
+
+def _compile(policy, demos, episode, chunks: list[int]):
+    """Compile ours at each chunk size (seconds of compile + first call, and the last scores),
+    and on one episode at the streaming chunk size (returned)."""
+    from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.score import score_demos
+
     compile_s, ref = {}, None
     for c in chunks:
         t = time.perf_counter()
@@ -239,6 +230,15 @@ def main() -> None:
         compile_s[c] = time.perf_counter() - t
     stream_chunk = ScoreConfig().chunk_size
     score_demos(policy, episode, _cfg(stream_chunk))
+    return compile_s, ref, stream_chunk
+
+
+def _torch_reference(policy, mean, std, demos, ref):
+    """The policy's weights in torch with the demos as tensors ``(models, mean, std, obs, act)``,
+    and the max |difference| of ℓ and ν between the original code's scoring and ``ref``."""
+    import numpy as np
+    import torch
+
     models = _torch_models(policy)
     tmean, tstd = torch.from_numpy(np.asarray(mean)), torch.from_numpy(np.asarray(std))
     obs_t, act_t = torch.from_numpy(demos.obs), torch.from_numpy(demos.action)
@@ -247,47 +247,38 @@ def main() -> None:
         float(np.abs(ell_t.numpy() - ref["likelihood"]).max()),
         float(np.abs(nu_t.numpy() - ref["novelty"]).max()),
     )
+    return (models, tmean, tstd, obs_t, act_t), err
 
-    def torch_loop(fn, size: int, n_rows: int, threads: int) -> Callable[[], None]:
-        def run() -> None:
-            torch.set_num_threads(threads)
-            for s in range(0, n_rows, size):
-                fn(models, tmean, tstd, obs_t[s : s + size], act_t[s : s + size])
 
-        return run
+def _torch_loop(fn, tin, size: int, n_rows: int, threads: int) -> Callable[[], None]:
+    """A job scoring the first ``n_rows`` pairs of ``tin`` with ``fn``, ``size`` pairs a call."""
+    import torch
 
-    tmp = Path(tempfile.mkdtemp(prefix="bench_score_"))
-    write_demos(tmp / "demos.parquet", demos)
+    models, tmean, tstd, obs_t, act_t = tin
 
-    def streamed() -> None:
-        cfg = _cfg(stream_chunk)
-        score_file(policy, tmp / "demos.parquet", tmp / "scores.parquet", cfg)
+    def run() -> None:
+        torch.set_num_threads(threads)
+        for s in range(0, n_rows, size):
+            fn(models, tmean, tstd, obs_t[s : s + size], act_t[s : s + size])
 
-    streamed()
-    default_threads = torch.get_num_threads()
-    settings = sorted({default_threads, 1}, reverse=True)
-    refs = {
-        "per_demo": (_torch_score, T, a.per_demo * T),
-        "one_pass": (_torch_score_one_pass, T, a.per_demo * T),
-        "batched": (_torch_score, a.torch_batch, n_pairs),
-    }
-    jobs: dict[str, tuple[Callable[[], object], int]] = {
-        f"ours{c}": ((lambda c=c: score_demos(policy, demos, _cfg(c))), 1) for c in chunks
-    }
-    jobs["episode"] = (lambda: score_demos(policy, episode, _cfg(stream_chunk)), 5)
-    jobs["streamed"] = (streamed, 1)
+    return run
+
+
+def _torch_jobs(tin, refs: dict, settings: list[int], default_threads: int) -> dict:
+    """Every torch loop at every thread setting, each warmed up once; threads reset after."""
+    import torch
+
+    jobs: dict[str, tuple[Callable[[], object], int]] = {}
     for name, (fn, size, rows) in refs.items():
         for th in settings:
-            jobs[f"{name}_{th}t"] = (torch_loop(fn, size, rows, th), 1)
+            jobs[f"{name}_{th}t"] = (_torch_loop(fn, tin, size, rows, th), 1)
             jobs[f"{name}_{th}t"][0]()  # warm up
     torch.set_num_threads(default_threads)
-    jobs["jax_mm"] = (lambda: mm(xa).block_until_ready(), 5)
-    jobs["torch_mm"] = (lambda: torch.mm(xt, xt), 5)
-    jobs["torch_mm"][0]()
-    secs = interleaved(jobs, a.rounds)
-    shutil.rmtree(tmp, ignore_errors=True)
+    return jobs
 
-    # --- per-round figures and ratios ---
+
+def _figures(secs: dict, chunks: list[int], refs: dict, settings: list[int], n_pairs: int, n: int):
+    """Pairs/s, GFLOP/s and the targets' ratios per round from the rounds' seconds."""
     pps = {f"ours{c}": [n_pairs / t for t in secs[f"ours{c}"]] for c in chunks}
     pps["streamed"] = [n_pairs / t for t in secs["streamed"]]
     for name, (_, _, rows) in refs.items():
@@ -311,7 +302,7 @@ def main() -> None:
         per_round["chunk1024"] = [o / b for o, b in zip(pps["ours1024"], best, strict=True)]
     flop_s = [T * FLOP_PER_PAIR / (g * 1e9) for g in gflops["jax_mm"]]
     per_round["episode"] = [e / f for e, f in zip(secs["episode"], flop_s, strict=True)]
-    result = {
+    return {
         "pairs_per_s": {k: spread(v) for k, v in pps.items()},
         "matmul_gflops": {k: spread(v) for k, v in gflops.items()},
         "episode_ms": spread([1e3 * t for t in secs["episode"]]),
@@ -320,6 +311,55 @@ def main() -> None:
         "ratio_rounds": per_round,
         "reference_threads": ref_setting,
         "best_chunk": best_c,
+    }
+
+
+def main() -> None:
+    from elicit_jax.runtime import configure
+
+    configure()
+    import jax
+    import torch
+
+    from elicit_jax.compat.score import score_demos
+    from elicit_jax.compat.score_file import score_file
+    from elicit_jax.data.demos import write_demos
+
+    a = _args()
+    demos, episode, policy, mean, std = _data(a)
+    n_pairs = demos.n_steps
+    mm, xa, xt = _matmuls(a.matmul_n)
+    chunks = [int(x) for x in a.chunks.split(",")]
+    compile_s, ref, stream_chunk = _compile(policy, demos, episode, chunks)
+    tin, err = _torch_reference(policy, mean, std, demos, ref)
+    tmp = Path(tempfile.mkdtemp(prefix="bench_score_"))
+    write_demos(tmp / "demos.parquet", demos)
+
+    def streamed() -> None:
+        cfg = _cfg(stream_chunk)
+        score_file(policy, tmp / "demos.parquet", tmp / "scores.parquet", cfg)
+
+    streamed()
+    default_threads = torch.get_num_threads()
+    settings = sorted({default_threads, 1}, reverse=True)
+    refs = {
+        "per_demo": (_torch_score, T, a.per_demo * T),
+        "one_pass": (_torch_score_one_pass, T, a.per_demo * T),
+        "batched": (_torch_score, a.torch_batch, n_pairs),
+    }
+    jobs: dict[str, tuple[Callable[[], object], int]] = {
+        f"ours{c}": ((lambda c=c: score_demos(policy, demos, _cfg(c))), 1) for c in chunks
+    }
+    jobs["episode"] = (lambda: score_demos(policy, episode, _cfg(stream_chunk)), 5)
+    jobs["streamed"] = (streamed, 1)
+    jobs.update(_torch_jobs(tin, refs, settings, default_threads))
+    jobs["jax_mm"] = (lambda: mm(xa).block_until_ready(), 5)
+    jobs["torch_mm"] = (lambda: torch.mm(xt, xt), 5)
+    jobs["torch_mm"][0]()
+    secs = interleaved(jobs, a.rounds)
+    shutil.rmtree(tmp, ignore_errors=True)
+    result = {
+        **_figures(secs, chunks, refs, settings, n_pairs, a.matmul_n),
         "compile_s": compile_s,
         "max_abs_diff_vs_torch": err,
         "machine": {
@@ -340,103 +380,6 @@ def main() -> None:
         a.out.write_text(text)
         a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
 
-
-def _fmt(d: dict[str, float], f: str = "{:,.0f}", scale: float = 1.0) -> str:
-    """``median [min–max]`` of a :func:`spread`."""
-    m, lo, hi = (f.format(scale * d[k]) for k in ("median", "min", "max"))
-    return f"{m} [{lo}–{hi}]"
-
-
-def _verdict(d: dict[str, float], rounds: list[float], target: float, below: bool) -> str:
-    ok = [v <= target if below else v >= target for v in rounds]
-    med = d["median"] <= target if below else d["median"] >= target
-    if med and all(ok):
-        return "met (every round)"
-    if med:
-        return f"met on the median ({sum(ok)}/{len(ok)} rounds)"
-    return f"**not met** ({sum(ok)}/{len(ok)} rounds)"
-
-
-def to_markdown(res: dict, a: argparse.Namespace, n_pairs: int, stream_chunk: int) -> str:
-    m, p, r = res["machine"], res["pairs_per_s"], res["ratios"]
-    th = res["reference_threads"]
-    rows = [
-        (f"ours, chunk {c}", p[f"ours{c}"], f"compile+first call {res['compile_s'][c]:.1f} s")
-        for c in sorted(res["compile_s"])
-    ]
-    rows.append(
-        (
-            f"ours, streamed Parquet -> Parquet (score_file, chunk {stream_chunk})",
-            p["streamed"],
-            "includes reading, writing, episode summary",
-        )
-    )
-    names = {
-        "per_demo": f"torch per-demo loop ({T}-step demos), the original code",
-        "one_pass": f"torch per-demo, one pass ({T}-step demos)",
-        "batched": f"torch batched loop ({a.torch_batch} pairs/call)",
-    }
-    for key, label in names.items():
-        for t in sorted({int(k.split("_")[-1][:-1]) for k in p if k.startswith(key + "_")}):
-            mark = " **(reference)**" if t == th[key] else ""
-            rows.append((f"{label}, {t} thread{'s' if t > 1 else ''}{mark}", p[f"{key}_{t}t"], ""))
-    gf = FLOP_PER_PAIR / 1e9
-    lines = [
-        "# Scoring throughput (pairs/s)",
-        "",
-        f"Machine: {platform.processor() or platform.machine()}, {m['cpus']} CPUs, "
-        f"jax {m['jax']}, torch {m['torch']} (default {m['torch_default_threads']} threads), "
-        f"PJRT_NPROC={m['PJRT_NPROC']}, XLA_FLAGS={m['XLA_FLAGS']!r}. Load average (1 min) at "
-        f"the end: {m['load_avg_1m_end']:.1f}. Ensemble of {K} MLPs 2x{HIDDEN}, obs {OBS}, act "
-        f"{ACT}, {FLOP_PER_PAIR / 1e6:.2f} MFLOP/pair; {n_pairs} pairs ({a.demos} demos x {T} "
-        f"steps; the per-demo loops score the first {a.per_demo}). {a.rounds} interleaved "
-        "rounds; figures are median [min–max] over rounds, ratios are taken within a round.",
-        f"Same weights: max |difference| of ℓ and ν, ours vs torch = "
-        f"{res['max_abs_diff_vs_torch']:.2e}.",
-        "",
-        "| scorer | pairs/s | GFLOP/s (median) | note |",
-        "|---|---:|---:|---|",
-    ]
-    lines += [f"| {n} | {_fmt(v)} | {v['median'] * gf:.1f} | {note} |" for n, v, note in rows]
-    mg = res["matmul_gflops"]
-    lines += [
-        f"| plain fp32 matmul {a.matmul_n}³, JAX | | {_fmt(mg['jax_mm'], '{:.1f}')} | |",
-        f"| plain fp32 matmul {a.matmul_n}³, torch | | {_fmt(mg['torch_mm'], '{:.1f}')} | |",
-        "",
-        f"One {T}-step episode per `score_demos` call: {_fmt(res['episode_ms'], '{:.1f}')} ms; "
-        f"its FLOP time at the JAX matmul's speed: {_fmt(res['episode_flop_ms'], '{:.1f}')} ms.",
-        "",
-        "| target | measured: median [min–max] over rounds | target | verdict |",
-        "|---|---:|---:|---|",
-    ]
-    bc = res["best_chunk"]
-    rr = res["ratio_rounds"]
-    checks = [
-        ("one_pass", f"ours (chunk {bc}) / torch per-demo one-pass loop", "{:.2f}x", 1, False),
-        ("batched", f"ours (chunk {bc}) / torch batched loop", "{:.2f}x", 1, False),
-        ("matmul", f"ours (chunk {bc}) GFLOP/s / JAX matmul GFLOP/s", "{:.0f}%", 100, False),
-        ("chunk1024", f"chunk 1024 / chunk {bc}", "{:.0f}%", 100, False),
-        ("episode", f"one {T}-step episode / its FLOP time", "{:.2f}x", 1, True),
-    ]
-    for key, label, f, scale, below in checks:
-        if key not in r:
-            continue
-        target = TARGETS[key]
-        tgt = ("<= " if below else ">= ") + (
-            f"{100 * target:.0f}%" if scale == 100 else f"{target:g}x"
-        )
-        verdict = _verdict(r[key], rr[key], target, below)
-        lines.append(f"| {label} | {_fmt(r[key], f, scale)} | {tgt} | {verdict} |")
-    lines += [
-        f"| ours (chunk {bc}) / torch per-demo loop (the original code) | "
-        f"{_fmt(r['per_demo'], '{:.2f}x')} | | |",
-        "",
-        "Reference thread settings (faster median): "
-        + ", ".join(f"{k} {v}" for k, v in th.items())
-        + ".",
-        f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`",
-    ]
-    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""benchmarks/real_human.py: the public source is checked before anything is rebuilt from it.
+"""benchmarks/real_human_source.py: the public source is checked before anything is rebuilt from it.
 
 The source itself (robosuite 1.0.1's wheel) is not in the repository and is never downloaded,
 so these tests cover what the script does with a path it is given: a missing path says where
@@ -17,12 +17,12 @@ import h5py
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "real_human.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "real_human_source.py"
 
 
 @pytest.fixture(scope="module")
 def rh():
-    spec = importlib.util.spec_from_file_location("real_human", SCRIPT)
+    spec = importlib.util.spec_from_file_location("real_human_source", SCRIPT)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
