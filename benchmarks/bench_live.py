@@ -36,7 +36,7 @@ import platform
 import time
 from pathlib import Path
 
-from bench_score import ACT, OBS, _torch_models, bench_policy
+from bench_score import ACT, OBS, bench_policy, torch_models
 from machine import busy_cores, busy_text
 
 SIZES = {"paper": 1024, "cpu": 256}
@@ -98,7 +98,7 @@ def bench_size(hidden: int, steps: int, rounds: int) -> dict:
     mean, std = obs.mean(0), obs.std(0) + 0.5
     policy = bench_policy(hidden, mean, std)
     scorer = LiveScorer(ScoreConfig(likelihood="member-average", ddof=1), policy)
-    models = _torch_models(policy)
+    models = torch_models(policy)
     tm, ts = torch.from_numpy(mean), torch.from_numpy(std)
     obs_t, act_t = torch.from_numpy(obs), torch.from_numpy(act)
     t = time.perf_counter()

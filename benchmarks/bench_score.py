@@ -124,7 +124,7 @@ def bench_policy(hidden: int, mean=None, std=None, dropout: float = 0.5):
     )
 
 
-def _torch_models(policy):
+def torch_models(policy):
     """The policy's members as PyTorch modules (same weights; sizes read from the params)."""
     import numpy as np
     import torch
@@ -239,7 +239,7 @@ def _torch_reference(policy, mean, std, demos, ref):
     import numpy as np
     import torch
 
-    models = _torch_models(policy)
+    models = torch_models(policy)
     tmean, tstd = torch.from_numpy(np.asarray(mean)), torch.from_numpy(np.asarray(std))
     obs_t, act_t = torch.from_numpy(demos.obs), torch.from_numpy(demos.action)
     ell_t, nu_t, _ = _torch_score(models, tmean, tstd, obs_t, act_t)
