@@ -183,9 +183,10 @@ def test_a_one_member_policy_earns_the_novelty_warning():
     from types import SimpleNamespace
 
     from elicit_jax.compat.score_file import one_member_note
+    from elicit_jax.policy.kinds import model_kind
 
     def note(n: int, kind: str = "mlp", samples: int = 0) -> str | None:
-        policy = SimpleNamespace(n_members=n, kind=kind)
+        policy = SimpleNamespace(n_members=n, kind=kind, entry=model_kind(kind))
         return one_member_note(policy, ScoreConfig(dropout_samples=samples))
 
     assert "novelty is 0 for every state" in note(1)

@@ -123,7 +123,6 @@ def _kind_name_comparisons(path: Path) -> list[int]:
 # Files outside the registry's owner that still compare names; switch each to an entry field.
 NAME_CHECKS_LEFT = {
     "elicit_jax/curation/cupid.py": "needs an MLP ensemble (its influence scores)",
-    "elicit_jax/compat/score_file.py": "one member without an own spread (use kind.own_spread)",
 }
 
 

@@ -296,7 +296,7 @@ def read_scores(
 def one_member_note(policy: Any, config: ScoreConfig) -> str | None:
     """The warning a one-member policy earns (``None`` otherwise): with a single member and no
     dropout samples, novelty is 0 everywhere (an MDN's likelihood still varies)."""
-    if policy.n_members * max(config.dropout_samples, 1) == 1 and policy.kind != "mdn":
+    if policy.n_members * max(config.dropout_samples, 1) == 1 and not policy.entry.own_spread:
         return (
             "the policy has one member: novelty is 0 for every state, so every state counts as "
             "familiar and M rests on the likelihood error alone"
