@@ -131,8 +131,18 @@ def provenance_line(prov: Mapping[str, Any]) -> str:
         )
     return (
         f"Provenance: code `{str(prov.get('commit', 'unknown'))[:12]}`{state}, elicit-jax "
-        f"{prov.get('elicit_jax', '?')} ({libs}); command `{prov.get('command', '?')}`; "
+        f"{prov.get('elicit_jax', '?')} ({libs}); command `{shown_command(prov)}`; "
         f"made {prov.get('time', '?')}.{results}"
+    )
+
+
+def shown_command(prov: Mapping[str, Any]) -> str:
+    """The recorded command as a report shows it: an absolute path (a folder of the machine
+    that ran it, which a reader does not have) is shortened to ``…/`` and its last part; the
+    record itself keeps the whole path."""
+    words = shlex.split(str(prov.get("command", "?")))
+    return " ".join(
+        f"…/{shlex.quote(Path(w).name)}" if w.startswith("/") else shlex.quote(w) for w in words
     )
 
 

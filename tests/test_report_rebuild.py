@@ -340,3 +340,19 @@ def test_provenance_line_names_every_commit_that_made_results():
         "stages carried the run across versions."
     )
     assert "not recorded" in provenance_line({})
+
+
+def test_a_report_shortens_the_machines_absolute_paths_in_the_recorded_command():
+    from elicit_jax.artifact import provenance_line
+
+    prov = {
+        "commit": "c" * 40,
+        "dirty": False,
+        "command": "elicit-jax pipeline run filtering --out /home/ann/runs/f-cpu --tasks 'a b'",
+    }
+    line = provenance_line(prov)
+    assert "command `elicit-jax pipeline run filtering --out …/f-cpu --tasks 'a b'`" in line
+    assert "/home/ann" not in line
+    assert "command `elicit-jax quickstart`" in provenance_line(
+        {**prov, "command": "elicit-jax quickstart"}
+    )
