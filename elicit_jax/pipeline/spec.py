@@ -35,6 +35,7 @@ from elicit_jax.pipeline.spec_parts import (
     SensitivitySpec,
     TaskSpec,
     check_keys,
+    check_rollout_methods,
     parse_collections,
     parse_sensitivity,
     parse_task,
@@ -277,10 +278,5 @@ def _methods(head: Mapping[str, Any], source: str) -> tuple[str, ...]:
             raise ElicitError(f"unknown method '{m}' (choose from {', '.join(METHODS)})", source)
     if "base" not in methods:
         raise ElicitError("methods must include 'base' (every comparison is against it)", source)
-    for rolled in ("demo-score", "cupid"):
-        if any(m.startswith(rolled) for m in methods) and "naive" not in methods:
-            raise ElicitError(
-                f"{rolled} rolls out the policy trained on D_base ∪ D_new: add 'naive' to methods",
-                source,
-            )
+    check_rollout_methods(methods, "", source)
     return methods

@@ -257,10 +257,22 @@ def parse_collections(
         )
     if "base" not in chosen:
         raise ElicitError("[collections] methods must include 'base'", source)
+    check_rollout_methods(chosen, "[collections] ", source)
+    return CollectionsSpec(seeds=seeds, methods=chosen)
+
+
+def check_rollout_methods(methods: tuple[str, ...], where: str, source: str) -> None:
+    """Demo-SCORE and CUPID roll out the naive policy: a method list with either needs 'naive'.
+
+    Args:
+      methods: the method names.
+      where: the table named in the error (``""`` for ``[pipeline]``).
+      source: the definition file, for the error.
+    """
     for rolled in ("demo-score", "cupid"):
-        if any(m.startswith(rolled) for m in chosen) and "naive" not in chosen:
+        if any(m.startswith(rolled) for m in methods) and "naive" not in methods:
             raise ElicitError(
-                f"[collections] {rolled} rolls out the naive policy: add 'naive' to its methods",
+                f"{where}{rolled} rolls out the policy trained on D_base ∪ D_new: add 'naive' "
+                f"to {where}methods",
                 source,
             )
-    return CollectionsSpec(seeds=seeds, methods=chosen)
