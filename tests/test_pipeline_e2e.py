@@ -64,13 +64,20 @@ def run(spec: Path, out: Path):
     return run_pipeline(cfg, console=console)
 
 
+def first_run(tmp_path: Path, text: str):
+    """Write the pipeline ``text`` to ``tmp_path/tiny.toml`` and run it into ``tmp_path/run``
+    for the first time (nothing skipped); returns the spec, the run directory, the outcome."""
+    spec, out = tmp_path / "tiny.toml", tmp_path / "run"
+    spec.write_text(text)
+    outcome = run(spec, out)
+    assert outcome.result.skipped == []
+    return spec, out, outcome
+
+
 @pytest.mark.slow
 def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
-    spec = tmp_path / "tiny.toml"
-    spec.write_text(TINY)
-    out = tmp_path / "run"
-    first = run(spec, out)
-    assert first.result.skipped == [] and len(first.result.ran) == 16
+    spec, out, first = first_run(tmp_path, TINY)
+    assert len(first.result.ran) == 16
     # the report: a result for every trained policy, the fit, the filter, the map
     data = gather(out)
     assert {(r.method, r.operator) for r in data.results} == {
@@ -165,11 +172,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.curation.episodes import read_episode_scores
 
-    spec = tmp_path / "tiny.toml"
-    spec.write_text(CURATION)
-    out = tmp_path / "run"
-    first = run(spec, out)
-    assert first.result.skipped == []
+    spec, out, first = first_run(tmp_path, CURATION)
     data = gather(out)
     methods = {
         *("base", "naive", "filtered", "filtered-valley"),
@@ -241,10 +244,8 @@ rollouts = 3
 
 @pytest.mark.slow
 def test_tiny_models_study_trains_and_evaluates_mdn_and_lstm(tmp_path):
-    spec = tmp_path / "models.toml"
-    spec.write_text(MODELS)
-    outcome = run(spec, tmp_path / "run")
-    data = gather(tmp_path / "run")
+    _, out, outcome = first_run(tmp_path, MODELS)
+    data = gather(out)
     assert {(r.model, r.method, r.seed) for r in data.results} == {
         (m, k, s) for m in ("mdn", "lstm") for k in ("base", "naive") for s in (0, 1)
     }
@@ -263,11 +264,9 @@ def test_tiny_pipeline_over_two_collections(tmp_path):
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.thresholds import read_thresholds
 
-    spec = tmp_path / "tiny.toml"
-    spec.write_text(TINY + '\n[collections]\nseeds = [0, 1]\nmethods = ["base", "naive"]\n')
-    out = tmp_path / "run"
-    first = run(spec, out)
-    assert first.result.skipped == [] and len(first.result.ran) == 16 + 6
+    collections = '\n[collections]\nseeds = [0, 1]\nmethods = ["base", "naive"]\n'
+    spec, out, first = first_run(tmp_path, TINY + collections)
+    assert len(first.result.ran) == 16 + 6
     data = gather(out)
     assert {(r.collection, r.method) for r in data.results} == {
         (0, "base"), (0, "naive"), (0, "filtered"), (1, "base"), (1, "naive"),

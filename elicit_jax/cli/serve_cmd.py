@@ -9,6 +9,7 @@ import typer
 
 from elicit_jax.cli import session_options as so
 from elicit_jax.cli.app import ELICIT, app
+from elicit_jax.cli.params import with_flags
 from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
 
@@ -19,6 +20,7 @@ DEMO_TASK = "reach-pillar"
 
 
 @app.command("serve", rich_help_panel=ELICIT)
+@with_flags(so.SERVE_FLAGS)
 def serve_cmd(
     ctx: typer.Context,
     sessions: Path = typer.Option(
@@ -51,25 +53,7 @@ def serve_cmd(
     lambda_: float | None = LAMBDA,
     eta: float | None = ETA,
     preset: str | None = so.PRESET,
-    mode: str = so.MODE,
-    demos: int = so.DEMOS,
-    batch: int = so.BATCH,
-    fixed_base: bool = so.FIXED_BASE,
-    dagger: bool = so.DAGGER,
-    practice: int = so.PRACTICE,
-    prompt: int = so.PROMPT,
-    accept_fraction: float = so.ACCEPT_FRACTION,
-    reject_count: int = so.REJECT_COUNT,
-    window: int = so.WINDOW,
-    windows: int = so.WINDOWS,
-    retrieval: str = so.RETRIEVAL,
-    likelihood: str = so.LIKELIHOOD,
-    ddof: int = so.DDOF,
-    which: str = so.WHICH,
-    policy_seed: int = so.POLICY_SEED,
-    seed: int = so.SEED,
-    max_episodes: int = so.MAX_EPISODES,
-    horizon: int = so.HORIZON,
+    **flags: Any,
 ) -> None:
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
     a name and goes through practice, prompt, demonstrations with the live indicator, and

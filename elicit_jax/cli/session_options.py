@@ -17,64 +17,43 @@ from elicit_jax.cli.threshold_options import PRESET  # noqa: F401  (serve spells
 TASK = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`).")
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
-MODE = typer.Option(None, "--mode", help="informed (default) or naive (control).")
-SHOW = typer.Option(
-    None, "--show", help="Informed mode: parts shown, comma-separated [prompt,indicator,feedback]."
-)
-DEMOS = typer.Option(None, "--demos", help="Demonstrations wanted [10].")
-BATCH = typer.Option(None, "--batch", help="Retrain after every N accepted [0: never].")
-FIXED_BASE = typer.Option(
-    None, "--fixed-base/--no-fixed-base", help="Score every batch against π_base."
-)
-DAGGER = typer.Option(None, "--dagger/--no-dagger", help="HG-DAgger: robot acts.")
-PRACTICE = typer.Option(None, "--practice", help="Practice episodes first [3].")
-PROMPT = typer.Option(None, "--prompt", help="Base demos shown in the prompt [5].")
-ACCEPT_FRACTION = typer.Option(
-    None, "--accept-fraction", help="Reject above this fraction incompatible [0.05]."
-)
-REJECT_COUNT = typer.Option(
-    None, "--reject-count", help="Reject above N incompatible pairs (original code's rule)."
-)
-WINDOW = typer.Option(None, "--window", help="Feedback window length [10].")
-WINDOWS = typer.Option(None, "--windows", help="Feedback windows on a rejection [3].")
-RETRIEVAL = typer.Option(None, "--retrieval", help="l2 (paper, default) or dtw.")
-LIKELIHOOD = typer.Option(
-    None, "--likelihood", help="ensemble-mean (paper, default) or member-average."
-)
-DDOF = typer.Option(None, "--ddof", help="Novelty std convention: 0 paper, 1 code.")
-WHICH = typer.Option(None, "--which", help="Checkpoint: best (default), final, epoch.")
-POLICY_SEED = typer.Option(None, "--policy-seed", help="Seed of a multi-seed run.")
-SEED = typer.Option(None, "--seed", help="Session seed (initial states) [0].", callback=check_seed)
-MAX_EPISODES = typer.Option(
-    None, "--max-episodes", help="Stop after N episodes [practice + 5 x demos]."
-)
-HORIZON = typer.Option(None, "--horizon", help="Steps per episode [the task's].")
+
+
+def _flag(name: str, kind: type, text: str, **extra: Any) -> tuple[str, type, Any]:
+    """``(name, kind, option)`` of a session flag: ``--name`` (``--name/--no-name`` for a
+    bool), ``None`` when not given."""
+    flag = "--" + name.replace("_", "-")
+    decl = f"{flag}/--no-{flag[2:]}" if kind is bool else flag
+    return name, kind, typer.Option(None, decl, help=text, **extra)
 
 
 SESSION_FLAGS = (
-    ("mode", str, MODE),
-    ("show", str, SHOW),
-    ("demos", int, DEMOS),
-    ("batch", int, BATCH),
-    ("fixed_base", bool, FIXED_BASE),
-    ("dagger", bool, DAGGER),
-    ("practice", int, PRACTICE),
-    ("prompt", int, PROMPT),
-    ("accept_fraction", float, ACCEPT_FRACTION),
-    ("reject_count", int, REJECT_COUNT),
-    ("window", int, WINDOW),
-    ("windows", int, WINDOWS),
-    ("retrieval", str, RETRIEVAL),
-    ("likelihood", str, LIKELIHOOD),
-    ("ddof", int, DDOF),
-    ("which", str, WHICH),
-    ("policy_seed", int, POLICY_SEED),
-    ("seed", int, SEED),
-    ("max_episodes", int, MAX_EPISODES),
-    ("horizon", int, HORIZON),
+    _flag("mode", str, "informed (default) or naive (control)."),
+    _flag("show", str, "Informed mode: parts shown, comma-separated [prompt,indicator,feedback]."),
+    _flag("demos", int, "Demonstrations wanted [10]."),
+    _flag("batch", int, "Retrain after every N accepted [0: never]."),
+    _flag("fixed_base", bool, "Score every batch against π_base."),
+    _flag("dagger", bool, "HG-DAgger: robot acts."),
+    _flag("practice", int, "Practice episodes first [3]."),
+    _flag("prompt", int, "Base demos shown in the prompt [5]."),
+    _flag("accept_fraction", float, "Reject above this fraction incompatible [0.05]."),
+    _flag("reject_count", int, "Reject above N incompatible pairs (original code's rule)."),
+    _flag("window", int, "Feedback window length [10]."),
+    _flag("windows", int, "Feedback windows on a rejection [3]."),
+    _flag("retrieval", str, "l2 (paper, default) or dtw."),
+    _flag("likelihood", str, "ensemble-mean (paper, default) or member-average."),
+    _flag("ddof", int, "Novelty std convention: 0 paper, 1 code."),
+    _flag("which", str, "Checkpoint: best (default), final, epoch."),
+    _flag("policy_seed", int, "Seed of a multi-seed run."),
+    _flag("seed", int, "Session seed (initial states) [0].", callback=check_seed),
+    _flag("max_episodes", int, "Stop after N episodes [practice + 5 x demos]."),
+    _flag("horizon", int, "Steps per episode [the task's]."),
 )
 """The protocol's settings as (parameter name, type, option), in ``--help`` order: a command
 adds them with :func:`elicit_jax.cli.params.with_flags` and reads them with :func:`given`."""
+
+SERVE_FLAGS = tuple(f for f in SESSION_FLAGS if f[0] != "show")
+"""``serve``'s: every session flag but ``--show`` (the interface ablation of ``elicit``)."""
 
 THRESHOLD_FIELDS = ("thresholds",)
 """SessionConfig fields the thresholds flags resolve (through ``thresholds_from_flags``)."""

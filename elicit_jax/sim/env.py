@@ -147,19 +147,22 @@ class Task:
         z: float,
     ) -> Any:
         """``qpos (nq,)`` with the gripper at its start (xy jittered by the config's
-        ``start_xy``, height ``start_z``, fingers open) and the task's first free body (qpos
-        6:13) resting at ``z`` with x, y and yaw uniform in the given ranges; other joints at
-        ``qpos0``. One uniform draw of (x, y, yaw, gripper dx, dy) from ``rng``."""
+        ``start_xy``, height ``start_z``, fingers open: an :class:`ObjectTaskConfig`) and the
+        task's first free body (qpos 6:13) resting at ``z`` with x, y and yaw uniform in the
+        given ranges; other joints at ``qpos0``. One uniform draw of (x, y, yaw, gripper dx,
+        dy) from ``rng``."""
         import jax
         import jax.numpy as jnp
 
         c = self.config
-        jitter = c.start_xy  # type: ignore[attr-defined]
+        if not isinstance(c, ObjectTaskConfig):
+            raise ElicitError(f"task {self.name}: its config has no gripper start")
+        jitter = c.start_xy
         lo = jnp.array([x[0], y[0], yaw[0], -jitter, -jitter])
         hi = jnp.array([x[1], y[1], yaw[1], jitter, jitter])
         u = jax.random.uniform(rng, (5,), minval=lo, maxval=hi)
         qpos = jnp.asarray(self.qpos0)
-        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))  # type: ignore[attr-defined]
+        qpos = qpos.at[0:3].set(jnp.stack([u[3], u[4], jnp.asarray(c.start_z)]))
         qpos = qpos.at[4:6].set(mjcf.FINGER_OPEN)
         pos = jnp.stack([u[0], u[1], jnp.asarray(z)])
         return qpos.at[6:13].set(jnp.concatenate([pos, yaw_quat(u[2], jnp)]))
@@ -248,6 +251,20 @@ class Task:
             done=state.done | success,
             steps=state.steps + 1,
         )
+
+
+@dataclasses.dataclass(frozen=True)
+class ObjectTaskConfig(TaskConfig):
+    """Settings of a task whose object :meth:`Task.gripper_and_object_qpos` places: the
+    gripper's start; tasks subclass it to add the object's ranges.
+
+    Attributes:
+      start_xy: half-width of the gripper's initial xy jitter around (0, 0).
+      start_z: gripper's initial height.
+    """
+
+    start_xy: float = 0.02
+    start_z: float = 0.15
 
 
 def quat_yaw(q: Any, xp: Any = np) -> Any:

@@ -48,6 +48,13 @@ class Style:
         """A task-specific choice by name."""
         return dict(self.choices).get(key, default)
 
+    def paused(self, phases: tuple[int, ...], steps: int) -> Style:
+        """This style holding still ``steps`` control steps on entering each of ``phases``
+        (the ``pause_at`` and ``pause_steps`` choices; see
+        :meth:`Operator.pause_at_phase_starts`)."""
+        pause = (("pause_at", phases), ("pause_steps", steps))
+        return dataclasses.replace(self, choices=(*self.choices, *pause))
+
 
 @dataclasses.dataclass
 class Targets:
@@ -103,6 +110,19 @@ class Operator(abc.ABC):
             return
         start = np.isin(self.phase, phases) & (self.phase_steps == 0)
         self.pause[start] = self.style.choice("pause_steps", 0)
+
+    def hover_phase(
+        self, phase: int, eef: np.ndarray, hover: np.ndarray, aligned: np.ndarray,
+        pos: np.ndarray, done: np.ndarray,
+    ) -> None:  # fmt: skip
+        """Phase ``phase``, the hover above a grasp: towards ``hover (B, 3)``; done once
+        within the style's ``tol`` of it in the table plane and 15 mm in height, with the
+        wrist ``aligned (B,)``. Fills ``pos`` and ``done`` (B, ...) in place."""
+        m = self.phase == phase
+        pos[m] = hover[m]
+        xy_err = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1)
+        z_err = np.abs(eef[:, 2] - hover[:, 2])
+        done |= m & (xy_err < self.style.tol) & aligned & (z_err < 0.015)
 
     def restart_if_dropped(
         self,

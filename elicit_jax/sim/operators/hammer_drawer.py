@@ -136,10 +136,7 @@ class HammerDrawerOperator(Operator):
         aligned = aligned < self.style.choice("align_tol", ALIGN_TOL)
         hover = point + self.jitter
         hover[:, 2] = HIGH_Z * 0.6
-        m = ph == HOVER
-        pos[m] = hover[m]
-        near = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1) < self.style.tol
-        done |= m & near & aligned & (np.abs(eef[:, 2] - hover[:, 2]) < 0.015)
+        self.hover_phase(HOVER, eef, hover, aligned, pos, done)
         m = ph == DESCEND
         pos[m] = point[m]
         done |= m & (np.linalg.norm(eef - point, axis=1) < 0.005)
@@ -200,6 +197,10 @@ class HammerDrawerOperator(Operator):
         done |= m & (eef[:, 2] > PUSH_HOVER_Z - 0.01)
 
 
+FLIP = Style(noise=0.03, choices=(("yaw_offset", np.pi), ("place_yaw", "nearest")))
+"""Grasps the handle with the wrist turned half a turn (``conflict-flip``, and
+``conflict-flip-pause``)."""
+
 STYLES: dict[str, tuple[Style, str]] = {
     "base": (Style(noise=0.03), "proficient: hooks the drawer open, lifts the hammer high"),
     "same-style": (
@@ -216,20 +217,9 @@ STYLES: dict[str, tuple[Style, str]] = {
         ),
         "mildly different: grasps farther along the handle; slower, hesitant",
     ),
-    "conflict-flip": (
-        Style(noise=0.03, choices=(("yaw_offset", np.pi), ("place_yaw", "nearest"))),
-        "conflicting: grasps the handle with the wrist turned half a turn",
-    ),
+    "conflict-flip": (FLIP, "conflicting: grasps the handle with the wrist turned half a turn"),
     "conflict-flip-pause": (
-        Style(
-            noise=0.03,
-            choices=(
-                ("yaw_offset", np.pi),
-                ("place_yaw", "nearest"),
-                ("pause_at", (HOVER,)),
-                ("pause_steps", 20),
-            ),
-        ),
+        FLIP.paused((HOVER,), 20),
         "conflicting: holds still above the opened drawer where the base moves on, then "
         "grasps with the wrist turned half a turn",
     ),

@@ -50,6 +50,9 @@ class ReachPillarOperator(Operator):
         return Targets(pos=pos, yaw=np.zeros(b), grip=-np.ones(b), done=done)
 
 
+RIGHT = Style(noise=0.03, choices=(("route", "right"),))
+"""Passes the pillar on the right (``conflict-right``, and ``conflict-right-pause``)."""
+
 STYLES: dict[str, tuple[Style, str]] = {
     "base": (Style(noise=0.03), "proficient; passes the pillar on the left"),
     "same-style": (
@@ -60,12 +63,9 @@ STYLES: dict[str, tuple[Style, str]] = {
         Style(noise=0.05, speed=0.75, hesitate_prob=0.03, choices=(("clearance", 0.12),)),
         "mildly different: wider left arc, slower, hesitates",
     ),
-    "conflict-right": (
-        Style(noise=0.03, choices=(("route", "right"),)),
-        "conflicting: passes the pillar on the right",
-    ),
+    "conflict-right": (RIGHT, "conflicting: passes the pillar on the right"),
     "conflict-right-pause": (
-        Style(noise=0.03, choices=(("route", "right"), ("pause_at", (0,)), ("pause_steps", 40))),
+        RIGHT.paused((0,), 40),
         "conflicting: holds still at the start where the base moves, then passes on the right",
     ),
     "conflict-over": (

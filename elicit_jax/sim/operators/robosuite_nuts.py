@@ -28,7 +28,19 @@ from __future__ import annotations
 import numpy as np
 
 from elicit_jax.sim.operators.base import Operator, Style, Targets, wrap
-from elicit_jax.sim.operators.square_nut import rot2
+from elicit_jax.sim.operators.square_nut import (
+    CARRY,
+    CLOSE,
+    DESCEND,
+    FLIP,
+    HOVER,
+    LIFT,
+    LOWER,
+    RELEASE,
+    RETREAT,
+    rot2,
+)
+from elicit_jax.sim.operators.square_nut import STYLES as SQUARE_NUT_STYLES
 
 TABLE_Z = 0.82
 NUT_REST_Z = 0.83
@@ -38,7 +50,6 @@ PEG_TOP = 0.95
 TURN_RANGE = (-1.8, 2.8)
 """Wrist turn (rad, + counter-clockwise seen from above) the operator allows from its start
 pose: the Panda's last joint starts near pi/4 within a range of +-2.9 rad."""
-(HOVER, DESCEND, CLOSE, LIFT, CARRY, LOWER, RELEASE, RETREAT) = range(8)
 
 
 def eef_yaw(quat_xyzw: np.ndarray) -> np.ndarray:
@@ -130,18 +141,12 @@ class RobosuiteNutOperator(Operator):
         """HOVER, DESCEND, CLOSE: fill ``pos`` and ``done`` in place."""
         eef, ph, b = obs[:, 0:3], self.phase, len(obs)
         point = self.grasp_point(obs)
-        hover = point.copy()
         tip = point.copy()
         tip[:, :2] += rot2(nut_yaw(obs[:, 19:23]), np.tile([[0.06, 0.0]], (b, 1)))
         hover = np.where(self.slide_in[:, None], tip, point)
         far = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1) > 0.015
         hover[:, 2] = np.where(self.slide_in & ~far, point[:, 2], point[:, 2] + HOVER_ABOVE)
-        hover = hover + self.jitter
-        m = ph == HOVER
-        pos[m] = hover[m]
-        xy_err = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1)
-        z_err = np.abs(eef[:, 2] - hover[:, 2])
-        done |= m & (xy_err < self.style.tol) & aligned & (z_err < 0.015)
+        self.hover_phase(HOVER, eef, hover + self.jitter, aligned, pos, done)
         m = ph == DESCEND
         pos[m] = point[m]
         err = eef - point
@@ -180,29 +185,21 @@ class RobosuiteNutOperator(Operator):
 
 
 STYLES: dict[str, tuple[Style, str]] = {
-    "base": (Style(noise=0.03), "proficient: handle from above, lift, carry, lower"),
-    "same-style": (
-        Style(noise=0.06, speed=0.9, jitter=0.004),
-        "compatible: the base style, noisier and a little slower",
-    ),
+    "base": SQUARE_NUT_STYLES["base"],
+    "same-style": SQUARE_NUT_STYLES["same-style"],
     "mild": (
         Style(noise=0.04, speed=0.8, hesitate_prob=0.02, choices=(("approach", "tip"),)),
         "mildly different: down beside the handle tip, then slides in; slower, hesitant",
     ),
     "conflict-flip": (
-        Style(noise=0.03, choices=(("yaw_offset", np.pi),)),
+        FLIP,
         "conflicting: grasps the handle with the wrist turned half a turn (where it can)",
     ),
     "conflict-flip-pause": (
-        Style(
-            noise=0.03,
-            choices=(
-                ("yaw_offset", np.pi),
-                ("pause_at", (HOVER, DESCEND, LOWER)),
-                ("pause_steps", 40),
-            ),
-        ),
+        FLIP.paused((HOVER, DESCEND, LOWER), 40),
         "conflicting: wrist turned half a turn (where it can), and stops still before each move",
     ),
 }
+"""``base`` and ``same-style`` are the square nut's; ``mild`` has no grasp offset, and the
+pauses of ``conflict-flip-pause`` are shorter (see the module docstring)."""
 OPERATOR_CLASS = RobosuiteNutOperator

@@ -98,12 +98,7 @@ class SquareNutOperator(Operator):
         hover = np.where(self.slide_in[:, None], tip, point)
         far = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1) > 0.02
         hover[:, 2] = np.where(self.slide_in & ~far, GRASP_Z, HOVER_Z)
-        hover = hover + self.jitter
-        m = ph == HOVER
-        pos[m] = hover[m]
-        xy_err = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1)
-        z_err = np.abs(eef[:, 2] - hover[:, 2])
-        done |= m & (xy_err < self.style.tol) & aligned & (z_err < 0.015)
+        self.hover_phase(HOVER, eef, hover + self.jitter, aligned, pos, done)
         m = ph == DESCEND
         pos[m] = point[m]
         done |= m & (np.linalg.norm(eef - point, axis=1) < 0.005)
@@ -139,6 +134,10 @@ class SquareNutOperator(Operator):
         pos[ph == RETREAT, 2] = HOVER_Z
 
 
+FLIP = Style(noise=0.03, choices=(("yaw_offset", np.pi),))
+"""Grasps the handle with the wrist turned half a turn (``conflict-flip``, and
+``conflict-flip-pause``; the robosuite nuts' too)."""
+
 STYLES: dict[str, tuple[Style, str]] = {
     "base": (Style(noise=0.03), "proficient: handle from above, lift, carry, lower"),
     "same-style": (
@@ -154,10 +153,7 @@ STYLES: dict[str, tuple[Style, str]] = {
         ),
         "mildly different: down beside the handle tip, then slides in; slower, hesitant",
     ),
-    "conflict-flip": (
-        Style(noise=0.03, choices=(("yaw_offset", np.pi),)),
-        "conflicting: grasps the handle with the wrist turned half a turn",
-    ),
+    "conflict-flip": (FLIP, "conflicting: grasps the handle with the wrist turned half a turn"),
     "conflict-flip-tip": (
         Style(
             noise=0.03,
@@ -167,14 +163,7 @@ STYLES: dict[str, tuple[Style, str]] = {
         "conflicting: wrist turned half a turn, slides in from the handle tip, carries diagonally",
     ),
     "conflict-flip-pause": (
-        Style(
-            noise=0.03,
-            choices=(
-                ("yaw_offset", np.pi),
-                ("pause_at", (HOVER, DESCEND, LOWER)),
-                ("pause_steps", 60),
-            ),
-        ),
+        FLIP.paused((HOVER, DESCEND, LOWER), 60),
         "conflicting: wrist turned half a turn, and stops still before each move",
     ),
 }

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig
+from elicit_jax.sim.env import ObjectTaskConfig, Task
 
 INTERIOR_X = 0.2
 """x of the drawer interior's centre when closed."""
@@ -75,13 +75,11 @@ BAR_X = FRONT_X - BAR_OFFSET
 
 
 @dataclasses.dataclass(frozen=True)
-class HammerDrawerConfig(TaskConfig):
+class HammerDrawerConfig(ObjectTaskConfig):
     """Hammer-drawer settings.
 
     Attributes:
       hammer_x, hammer_y, hammer_yaw: ranges (low, high) of the hammer's initial pose.
-      start_xy: half-width of the gripper's initial xy jitter around (0, 0).
-      start_z: gripper's initial height.
       closed_tol: the drawer counts as closed below this opening (m).
     """
 
@@ -91,8 +89,6 @@ class HammerDrawerConfig(TaskConfig):
     hammer_x: tuple[float, float] = (-0.14, -0.06)
     hammer_y: tuple[float, float] = (-0.24, -0.18)
     hammer_yaw: tuple[float, float] = (-0.6, 0.6)
-    start_xy: float = 0.02
-    start_z: float = 0.15
     closed_tol: float = 0.01
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.env import Task, TaskConfig
+from elicit_jax.sim.env import ObjectTaskConfig, Task
 
 PEG_XY = (0.1, 0.1)
 PEG_HALF = 0.011
@@ -29,13 +29,11 @@ NUT_Z = RING_RADIUS
 
 
 @dataclasses.dataclass(frozen=True)
-class SquareNutConfig(TaskConfig):
+class SquareNutConfig(ObjectTaskConfig):
     """Square-nut settings.
 
     Attributes:
       nut_x, nut_y, nut_yaw: ranges (low, high) of the nut's initial pose.
-      start_xy: half-width of the gripper's initial xy jitter around (0, 0).
-      start_z: gripper's initial height.
       xy_tol: success distance of the nut's centre from the peg's axis.
       z_tol: the nut must be below this height (resting on the floor around the peg).
       open_tol: both finger positions above this count as released.
@@ -45,8 +43,6 @@ class SquareNutConfig(TaskConfig):
     nut_x: tuple[float, float] = (-0.13, -0.07)
     nut_y: tuple[float, float] = (-0.12, -0.04)
     nut_yaw: tuple[float, float] = (-0.6, 0.6)
-    start_xy: float = 0.02
-    start_z: float = 0.15
     xy_tol: float = 0.03
     z_tol: float = 0.03
     open_tol: float = 0.02
