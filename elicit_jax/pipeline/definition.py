@@ -282,3 +282,19 @@ def contrast_fields(
         "incompatible_operator": str(raw["incompatible_operator"]),
         **numbers,
     }
+
+
+def section_fields(cls: type, overrides: Mapping[str, Any], section: str) -> dict[str, Any]:
+    """A section's keys as fields of the library config ``cls`` they set.
+
+    Raises:
+      ElicitError: a key that is no field of ``cls`` (the fields are listed).
+    """
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ElicitError(
+            f"[{section}] unknown option(s) {', '.join(unknown)} "
+            f"(allowed: {', '.join(sorted(names))})"
+        )
+    return dict(overrides)

@@ -155,14 +155,39 @@ def write_filter_output(
         files = [DEMOS_FILE, *keep, result.log_path.name]
     elif drop is not None:
         reason += "; every pair dropped, so the retraining uses D_base alone"
+    write_filter_header(ctx, tmp, (cfg.lambda_, cfg.eta), reason, files, counts)
+
+
+def write_filter_header(
+    ctx: StageContext,
+    tmp: Path,
+    thresholds: tuple[float, float],
+    reason: str,
+    files: list[str],
+    counts: dict[str, int],
+    **extra: Any,
+) -> None:
+    """The header of every filter-like stage's output (M-filter, baselines, curation cuts,
+    a session's M-filter): what it kept of its input and why.
+
+    Args:
+      ctx: the stage.
+      tmp: the output directory being written.
+      thresholds: the (λ, η) it ran under.
+      reason: what the filter did, in words.
+      files: the files of ``tmp`` it wrote (none: the retraining uses D_base alone).
+      counts: ``pairs_in``, ``pairs_dropped``, ``episodes_in``, ``episodes_out``.
+      **extra: other header fields (a curation cut: whether its scores are trusted).
+    """
     header = make_header(
         "pipeline-filter",
         1,
         config=dict(ctx.config),
         inputs=dict(ctx.inputs),
-        thresholds={"lambda": cfg.lambda_, "eta": cfg.eta},
+        thresholds={"lambda": thresholds[0], "eta": thresholds[1]},
         reason=reason,
         files=files,
+        **extra,
         **counts,
     )
     write_json(tmp / "artifact.json", header)
