@@ -253,7 +253,7 @@ def data_to_json(data: ReportData) -> dict[str, Any]:
     body = {
         f.name: getattr(data, f.name)
         for f in dataclasses.fields(data)
-        if f.name not in ("results", "heldout", "figures", "findings", "maps")
+        if f.name not in ("results", "heldout", "figures", "findings", "maps", "rollouts")
     }
     body["maps"] = [[caption, f"maps/{Path(png).name}"] for caption, png in data.maps]
     seeds = sorted({r.seed for r in (*data.results, *data.heldout)})
@@ -312,9 +312,8 @@ def round_trip(data: ReportData) -> ReportData:
     import json
 
     back = data_from_json(json.loads(dumps(data_to_json(data))), Path("."))
-    return dataclasses.replace(
-        back, maps=data.maps, results=data.results, heldout=data.heldout, findings=data.findings
-    )
+    kept = ("maps", "results", "heldout", "findings", "rollouts")
+    return dataclasses.replace(back, **{k: getattr(data, k) for k in kept})
 
 
 def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
@@ -348,4 +347,5 @@ def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> Repor
         data_from_json(header, folder),
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
+        rollouts=frame,
     )

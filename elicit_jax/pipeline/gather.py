@@ -1,4 +1,5 @@
-"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report.ReportData`.
+"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report_rows.ReportData`
+(:func:`walk_run`: what every report kind reads of a run directory).
 
 Reads the run manifest (``run.json``: the definition and every stage) and, for each finished
 stage, its artifact: evaluations (success per seed), threshold fits, filter counts, maps and
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -229,36 +230,39 @@ def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -
         rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
 
 
-def gather(run_dir: str | Path) -> ReportData:
-    """Everything the report shows, read from ``run_dir``'s finished artifacts."""
-    return gather_with_rollouts(run_dir)[0]
+def walk_run(
+    run_dir: str | Path, report_kind: str, take: Callable[[Mapping[str, Any], Path], bool]
+) -> dict[str, Any]:
+    """Read a run directory the way every report kind does: its manifest, every stage's
+    config, every finished evaluation's rollouts; ``take(stage, path)`` reads what any other
+    finished stage (not the ``report_kind`` stage) contributes, and returns False when its
+    output is not complete yet.
 
-
-def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
-    """:func:`gather`, and the study's per-rollout table the results were computed from
-    (:func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
+    Returns:
+      The fields every report has (:class:`~elicit_jax.pipeline.report_rows.RunReport`:
+      definition, run directory, ``results`` of every finished evaluation, ``rollouts``,
+      notes, provenance) and the stage ``configs`` and library ``versions``.
+    """
     import pandas as pd
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
-    cfg = manifest["config"]
+    head = manifest["config"]
     frames = []
-    rows: dict[str, list] = {k: [] for k in ("thresholds", "lengths", "filters", "curation")}
-    rows |= {"points": [], "maps": []}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
     for stage in manifest["stages"]:
         path = run_dir / stage["output"]
         configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
-        if stage["kind"] == "report":
+        if stage["kind"] == report_kind:
             continue
         if not path.exists():
             missing.append(stage["id"])
         elif stage["kind"] == "evaluate":
             frames.append(cell_frame(stage["config"], path))
-        else:
-            _gather_stage(stage, path, rows)
-    notes = [training_note(configs.get("train", {}))] if configs.get("train") else []
+        elif not take(stage, path):
+            missing.append(stage["id"])
+    notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
             f"{len(missing)} stage(s) have not finished, so their results are absent: "
@@ -266,13 +270,36 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
             + (" …" if len(missing) > 8 else "")
         )
     rollouts = pd.concat(frames, ignore_index=True) if frames else empty_rollouts()
-    results = result_rows_of(rollouts) if frames else []
-    data = ReportData(
-        pipeline=cfg["pipeline"],
-        profile=cfg["profile"],
-        description=cfg.get("description", ""),
-        run_dir=str(run_dir),
-        spec_text=cfg.get("spec_text", ""),
+    return {
+        "pipeline": head["pipeline"],
+        "profile": head["profile"],
+        "description": head.get("description", ""),
+        "run_dir": str(run_dir),
+        "spec_text": head.get("spec_text", ""),
+        "results": tuple(result_rows_of(rollouts)) if frames else (),
+        "rollouts": rollouts,
+        "configs": configs,
+        "versions": manifest.get("versions", {}),
+        "notes": tuple(notes),
+        "provenance": run_provenance(manifest, run_dir),
+    }
+
+
+def gather(run_dir: str | Path) -> ReportData:
+    """Everything the report shows, read from ``run_dir``'s finished artifacts, with the
+    study's per-rollout table the results were computed from (``rollouts``:
+    :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
+    rows: dict[str, list] = {k: [] for k in ("thresholds", "lengths", "filters", "curation")}
+    rows |= {"points": [], "maps": []}
+
+    def take(stage: Mapping[str, Any], path: Path) -> bool:
+        _gather_stage(stage, path, rows)
+        return True
+
+    run = walk_run(run_dir, "report", take)
+    results = run.pop("results")
+    return ReportData(
+        **run,
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
         lambda_points=tuple(rows["points"]),
@@ -281,9 +308,4 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
         lengths=tuple(rows["lengths"]),
         filters=tuple(rows["filters"]),
         maps=tuple(rows["maps"]),
-        configs=configs,
-        versions=manifest.get("versions", {}),
-        notes=tuple(notes),
-        provenance=run_provenance(manifest, run_dir),
     )
-    return data, rollouts

@@ -116,11 +116,10 @@ def curate_stage(ctx: StageContext) -> None:
 def report_stage(ctx: StageContext) -> None:
     """Gather the run's artifacts and write the Markdown + HTML report."""
     from elicit_jax.pipeline.evidence import round_trip
-    from elicit_jax.pipeline.gather import gather_with_rollouts
+    from elicit_jax.pipeline.gather import gather
     from elicit_jax.pipeline.report import write_report
 
-    data, rollouts = gather_with_rollouts(ctx.run_dir)
-    write_report(round_trip(data), ctx.output, rollouts)
+    write_report(round_trip(gather(ctx.run_dir)), ctx.output)
 
 
 def real_registry() -> dict[str, StageFn]:
