@@ -21,7 +21,7 @@ from elicit_jax.policy.config import PIPELINE_PROFILES as PROFILES
 DEFAULT_KIND = "filtering"
 """The kind of a definition without ``[pipeline] kind``."""
 HEAD_KEYS = frozenset({"name", "description", "profile", "seeds", "models", "collect_seed"})
-"""The ``[pipeline]`` keys of every kind (:meth:`Frame.identity`)."""
+"""The ``[pipeline]`` keys of every kind (:meth:`Frame.definition`)."""
 
 
 def check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
@@ -160,9 +160,10 @@ class Frame:
             raise ElicitError("a task is listed twice", source)
         return tasks
 
-    def identity(self, source: str) -> dict[str, Any]:
-        """The fields every parsed definition has: name (default: the file's stem),
-        description, profile, seeds, models and collection seed."""
+    def definition(self, source: str, text: str, tasks: tuple[Any, ...]) -> dict[str, Any]:
+        """The :class:`Definition` fields of a definition read from ``source`` (its ``text``)
+        with its parsed ``tasks``: the name (default: the file's stem), description and
+        collection seed of ``[pipeline]``, the profile, seeds, models and sections."""
         return {
             "name": str(self.head.get("name", Path(source).stem)),
             "description": str(self.head.get("description", "")).strip(),
@@ -170,6 +171,10 @@ class Frame:
             "seeds": self.seeds,
             "models": self.models,
             "collect_seed": int(self.head.get("collect_seed", 0)),
+            "tasks": tasks,
+            "sections": self.sections,
+            "source": source,
+            "text": text,
         }
 
     def table(self, data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
@@ -229,6 +234,39 @@ def read_frame(data: Mapping[str, Any], layout: Layout, source: str, profile: st
         seeds=seeds,
         models=models,
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class Definition:
+    """What every parsed definition has, under one profile (a kind's spec adds its own).
+
+    Attributes:
+      name: the study's name.
+      description: one paragraph shown in reports.
+      profile: ``paper`` (the paper's sizes) or ``cpu`` (shrunk to fit a 2-core machine).
+      seeds: training seeds; results are reported as mean (std) over them.
+      models: policy kinds (``mlp``, ``mdn``, ``lstm``).
+      collect_seed: base seed of demonstration collection.
+      tasks: the tasks (each a :class:`ContrastTask` and what the kind adds).
+      sections: stage name -> config overrides (profile overrides already merged in).
+      source: where the definition was read from.
+      text: the definition's exact text, reproduced in reports.
+    """
+
+    name: str
+    description: str
+    profile: str
+    seeds: tuple[int, ...]
+    models: tuple[str, ...]
+    collect_seed: int
+    tasks: tuple[Any, ...]
+    sections: Mapping[str, Mapping[str, Any]]
+    source: str
+    text: str
+
+    def section(self, name: str) -> dict[str, Any]:
+        """A copy of the overrides for stage ``name`` (empty if none)."""
+        return dict(self.sections.get(name, {}))
 
 
 @dataclasses.dataclass(frozen=True)

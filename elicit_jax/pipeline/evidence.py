@@ -31,15 +31,7 @@ import numpy as np
 
 from elicit_jax.artifact import dumps, read_header, read_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.tables import (
-    CurationRow,
-    FilterRow,
-    LambdaPoint,
-    LengthRow,
-    ReportData,
-    ResultRow,
-    ThresholdRow,
-)
+from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
 
 ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
@@ -266,11 +258,7 @@ def data_from_json(header: Mapping[str, Any], folder: Path) -> ReportData:
     return ReportData(
         **{
             **body,
-            "thresholds": _rows(ThresholdRow, body["thresholds"]),
-            "lengths": _rows(LengthRow, body["lengths"]),
-            "filters": _rows(FilterRow, body["filters"]),
-            "curation": _rows(CurationRow, body["curation"], ("scores",)),
-            "lambda_points": _rows(LambdaPoint, body["lambda_points"]),
+            **{name: _rows(row, body[name], ("scores",)) for name, row in ROW_FIELDS.items()},
             "maps": tuple((c, str(folder / rel)) for c, rel in body["maps"]),
             "notes": tuple(body["notes"]),
             "results": (),

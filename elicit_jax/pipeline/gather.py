@@ -19,21 +19,14 @@ import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import (
     cell_frame,
     empty_rollouts,
     result_rows_of,
     run_provenance,
 )
-from elicit_jax.pipeline.tables import (
-    CurationRow,
-    FilterRow,
-    LambdaPoint,
-    LengthRow,
-    ReportData,
-    ResultRow,
-    ThresholdRow,
-)
+from elicit_jax.pipeline.report_rows import ReportData, ResultRow
 
 MANIFEST = "run.json"
 MANIFEST_KIND = "pipeline-run"
@@ -50,7 +43,7 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
+def _length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.LengthRow]:
     import pyarrow.parquet as pq
 
     table = pq.read_table(path, columns=["episode", "operator"])
@@ -61,7 +54,7 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
     for op in dict.fromkeys(operator[first].tolist()):
         lens = counts[operator[first] == op]
         rows.append(
-            LengthRow(
+            report_rows.LengthRow(
                 task=stage["config"]["collect"]["task"],
                 name=Path(stage["output"]).stem,
                 operator=op,
@@ -73,13 +66,13 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
     return rows
 
 
-def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
     data = read_json(path)
     report = dict(data.get("report", {}))
     cfg = stage["config"]
     method = data.get("method", "fit")
     report.setdefault("margin", report.get("margin_quantile"))
-    return ThresholdRow(
+    return report_rows.ThresholdRow(
         task=cfg["task"],
         model=cfg["model"],
         lambda_=float(data["lambda"]),
@@ -93,7 +86,7 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
     )
 
 
-def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
     data = read_json(path)
     rep = dict(data.get("report", {}))
     lo, hi = rep.get("lambda_range", (math.nan, math.nan))
@@ -102,7 +95,7 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
         f"× that at the fitted λ; {100 * rep.get('familiar_share_between', 0):.1f}% of them "
         "lie between the two"
     )
-    return ThresholdRow(
+    return report_rows.ThresholdRow(
         task=stage["config"]["task"],
         model=stage["config"]["model"],
         lambda_=float(data["lambda"]),
@@ -114,13 +107,13 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
     )
 
 
-def _filter_row(stage: Mapping[str, Any], path: Path) -> FilterRow:
+def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
     h = read_header(path)
     cfg = stage["config"]
     method = cfg["method"]
     if "/heldout/" in stage["id"]:  # the λ-sensitivity study's filters
         method = f"M-Filtered at λ = {h['thresholds']['lambda']:.4g} (sensitivity)"
-    return FilterRow(
+    return report_rows.FilterRow(
         task=cfg["task"],
         model=cfg["model"],
         method=method,
@@ -133,7 +126,7 @@ def _filter_row(stage: Mapping[str, Any], path: Path) -> FilterRow:
     )
 
 
-def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
+def _curation_row(stage: Mapping[str, Any], path: Path) -> report_rows.CurationRow:
     from elicit_jax.curation.episodes import read_episode_scores
 
     scores = read_episode_scores(path)
@@ -141,7 +134,7 @@ def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
     report = dict(scores.report)
     if "deminf" in cfg:
         report["drop_fraction"] = cfg["deminf"].get("drop_fraction")
-    return CurationRow(
+    return report_rows.CurationRow(
         task=cfg["task"],
         model=cfg.get("model"),
         method=scores.method,
@@ -153,12 +146,12 @@ def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
     )
 
 
-def _lambda_point(stage: Mapping[str, Any], path: Path) -> LambdaPoint:
+def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoint:
     data = read_json(path)
     rep = data.get("report", {})
     lo, hi = rep["lambda_range"]
     cfg = stage["config"]
-    return LambdaPoint(
+    return report_rows.LambdaPoint(
         task=cfg["task"],
         model=cfg["model"],
         point=int(rep["point"]),
@@ -224,7 +217,7 @@ def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -
     elif kind in ("deminf", "demo-score", "cupid", "quality"):
         rows["curation"].append(mark(_curation_row(stage, path)))
     elif kind == "lambda-point":
-        rows["points"].append(_lambda_point(stage, path))
+        rows["lambda_points"].append(_lambda_point(stage, path))
     elif kind == "map":
         where = f"{cfg['task']}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
         rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
@@ -289,8 +282,7 @@ def gather(run_dir: str | Path) -> ReportData:
     """Everything the report shows, read from ``run_dir``'s finished artifacts, with the
     study's per-rollout table the results were computed from (``rollouts``:
     :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
-    rows: dict[str, list] = {k: [] for k in ("thresholds", "lengths", "filters", "curation")}
-    rows |= {"points": [], "maps": []}
+    rows: dict[str, list] = {name: [] for name in (*report_rows.ROW_FIELDS, "maps")}
 
     def take(stage: Mapping[str, Any], path: Path) -> bool:
         _gather_stage(stage, path, rows)
@@ -302,10 +294,5 @@ def gather(run_dir: str | Path) -> ReportData:
         **run,
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
-        lambda_points=tuple(rows["points"]),
-        curation=tuple(rows["curation"]),
-        thresholds=tuple(rows["thresholds"]),
-        lengths=tuple(rows["lengths"]),
-        filters=tuple(rows["filters"]),
-        maps=tuple(rows["maps"]),
+        **{name: tuple(found) for name, found in rows.items()},
     )

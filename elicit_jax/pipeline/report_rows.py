@@ -175,6 +175,15 @@ class ReportData(RunReport):
     versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
 
+ROW_FIELDS = {
+    "thresholds": ThresholdRow,
+    "lengths": LengthRow,
+    "filters": FilterRow,
+    "curation": CurationRow,
+    "lambda_points": LambdaPoint,
+}
+"""The :class:`ReportData` fields that hold rows read from the run's stages, and their row type."""
+
 Table = tuple[list[str], list[list[str]]]
 
 

@@ -31,6 +31,7 @@ from elicit_jax.pipeline.definition import (
     DEFAULT_KIND,
     HEAD_KEYS,
     PROFILES,
+    Definition,
     Layout,
     check_keys,
     read_frame,
@@ -107,43 +108,22 @@ LAYOUT = Layout(
 
 
 @dataclasses.dataclass(frozen=True)
-class PipelineSpec:
-    """A parsed pipeline definition under one profile.
+class PipelineSpec(Definition):
+    """A parsed pipeline definition under one profile: what every definition has
+    (:class:`~elicit_jax.pipeline.definition.Definition`; its tasks are :class:`TaskSpec`),
+    and the training sets compared.
 
     Attributes:
-      name: pipeline name.
-      description: one paragraph shown in reports.
-      profile: ``paper`` (the paper's sizes) or ``cpu`` (shrunk to fit a 2-core machine).
-      seeds: training seeds; results are reported as mean (std) over them.
-      models: policy kinds (``mlp``, ``mdn``, ``lstm``).
       methods: training sets compared (``base``, ``naive``, ``filtered``, baselines).
-      collect_seed: base seed of demonstration collection.
-      tasks: the tasks with their operators.
-      sections: stage name -> config overrides (profile overrides already merged in).
-      source: where the definition was read from.
-      text: the definition's exact text, reproduced in reports.
       sensitivity: the λ-sensitivity study, if the definition asks for one.
       collections: the study over several collections, if the definition asks for it.
+      kind: the study kind (:mod:`elicit_jax.pipeline.study_kinds`).
     """
 
-    name: str
-    description: str
-    profile: str
-    seeds: tuple[int, ...]
-    models: tuple[str, ...]
     methods: tuple[str, ...]
-    collect_seed: int
-    tasks: tuple[TaskSpec, ...]
-    sections: Mapping[str, Mapping[str, Any]]
-    source: str
-    text: str
     sensitivity: SensitivitySpec | None = None
     collections: CollectionsSpec | None = None
     kind: str = DEFAULT_KIND
-
-    def section(self, name: str) -> dict[str, Any]:
-        """A copy of the overrides for stage ``name`` (empty if none)."""
-        return dict(self.sections.get(name, {}))
 
     @property
     def n_cells(self) -> int:
@@ -226,12 +206,8 @@ def parse_spec(
     if "collections" in data or "collections" in frame.overrides:
         collections = parse_collections(frame.table(data, "collections", source), methods, source)
     return PipelineSpec(
-        **frame.identity(source),
+        **frame.definition(source, text, tasks),
         methods=methods,
-        tasks=tasks,
-        sections=sections,
-        source=source,
-        text=text,
         sensitivity=sensitivity,
         collections=collections,
     )

@@ -67,34 +67,23 @@ class StudyKind:
     data_kind: str
 
 
+# fmt: off
 STUDY_KINDS = {
     DEFAULT_KIND: StudyKind(
-        name=DEFAULT_KIND,
-        parse=parse_spec,
-        build_graph=build_graph,
-        resolve=resolve_config,
-        registry=real_registry,
-        gather=gather,
-        round_trip=round_trip,
-        from_raw=report_data_of,
-        write_report=write_report,
-        summary=summary_tables,
-        data_kind=DATA_KIND,
+        name=DEFAULT_KIND, parse=parse_spec, build_graph=build_graph, resolve=resolve_config,
+        registry=real_registry, gather=gather, round_trip=round_trip, from_raw=report_data_of,
+        write_report=write_report, summary=summary_tables, data_kind=DATA_KIND,
     ),
     study_spec.KIND: StudyKind(
-        name=study_spec.KIND,
-        parse=study_spec.parse_study,
-        build_graph=study_plan.build_study_graph,
-        resolve=study_stages.resolve_study_config,
-        registry=study_stages.study_registry,
-        gather=study_gather.gather_study,
-        round_trip=study_evidence.round_trip_study,
-        from_raw=study_evidence.study_from_json,
-        write_report=study_report.write_study_report,
-        summary=study_report.summary_tables,
+        name=study_spec.KIND, parse=study_spec.parse_study,
+        build_graph=study_plan.build_study_graph, resolve=study_stages.resolve_study_config,
+        registry=study_stages.study_registry, gather=study_gather.gather_study,
+        round_trip=study_evidence.round_trip_study, from_raw=study_evidence.study_from_json,
+        write_report=study_report.write_study_report, summary=study_report.summary_tables,
         data_kind=STUDY_DATA_KIND,
     ),
 }
+# fmt: on
 """Study kind name -> its entry."""
 
 

@@ -32,6 +32,7 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.definition import (
     HEAD_KEYS,
     ContrastTask,
+    Definition,
     Layout,
     check_keys,
     contrast_fields,
@@ -90,28 +91,15 @@ class StudyTask(ContrastTask):
 
 
 @dataclasses.dataclass(frozen=True)
-class StudySpec:
-    """A parsed elicitation study under one profile (fields as :class:`PipelineSpec`'s, plus
-    the conditions, the ablation arms and the DAgger conditions)."""
+class StudySpec(Definition):
+    """A parsed elicitation study under one profile: what every definition has
+    (:class:`~elicit_jax.pipeline.definition.Definition`; its tasks are :class:`StudyTask`),
+    and the conditions, the ablation arms and the DAgger conditions."""
 
-    name: str
-    description: str
-    profile: str
-    seeds: tuple[int, ...]
-    models: tuple[str, ...]
-    collect_seed: int
     conditions: tuple[str, ...]
     ablation: tuple[str, ...]
     dagger_conditions: tuple[str, ...]
-    tasks: tuple[StudyTask, ...]
-    sections: Mapping[str, Mapping[str, Any]]
-    source: str
-    text: str
     kind: str = KIND
-
-    def section(self, name: str) -> dict[str, Any]:
-        """A copy of the overrides for stage ``name`` (empty if none)."""
-        return dict(self.sections.get(name, {}))
 
 
 def load_study(
@@ -151,15 +139,12 @@ def parse_study(
         )
     people = frame.table(data, "people", source)
     check_keys(people, _PEOPLE, "[people]", source)
+    tasks = frame.tasks(lambda raw: _task(raw, people, source), source)
     return StudySpec(
-        **frame.identity(source),
+        **frame.definition(source, text, tasks),
         conditions=_names(frame.head, "conditions", CONDITIONS, source),
         ablation=_names(frame.head, "ablation", ABLATION, source),
         dagger_conditions=_names(frame.head, "dagger_conditions", DAGGER, source),
-        tasks=frame.tasks(lambda raw: _task(raw, people, source), source),
-        sections=frame.sections,
-        source=source,
-        text=text,
     )
 
 
