@@ -107,6 +107,18 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRo
     )
 
 
+def kept_counts(header: Mapping[str, Any]) -> dict[str, int]:
+    """What a filter-like stage kept of its input, from its output's header
+    (:func:`~elicit_jax.pipeline.stages_compat.write_filter_header`): pairs and episodes
+    kept, of how many."""
+    return {
+        "pairs_kept": int(header["pairs_in"]) - int(header["pairs_dropped"]),
+        "pairs_total": int(header["pairs_in"]),
+        "episodes_kept": int(header["episodes_out"]),
+        "episodes_total": int(header["episodes_in"]),
+    }
+
+
 def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
     h = read_header(path)
     cfg = stage["config"]
@@ -118,10 +130,7 @@ def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
         model=cfg["model"],
         method=method,
         operator=cfg["operator"],
-        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-        pairs_total=int(h["pairs_in"]),
-        episodes_kept=int(h["episodes_out"]),
-        episodes_total=int(h["episodes_in"]),
+        **kept_counts(h),
         note="" if h.get("trusted", True) else "no signal: kept every demo",
     )
 

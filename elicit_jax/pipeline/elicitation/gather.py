@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
-from elicit_jax.pipeline.gather import walk_run
+from elicit_jax.pipeline.gather import kept_counts, walk_run
 from elicit_jax.pipeline.report_rows import RunReport
 
 PERSON_FILE = "person.json"
@@ -131,16 +131,8 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
 
 
 def _filter_count(cfg: Mapping[str, Any], path: Path) -> FilterCount:
-    h = read_header(path)
-    return FilterCount(
-        task=cfg["task"],
-        model=cfg["model"],
-        person=cfg["person"],
-        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-        pairs_total=int(h["pairs_in"]),
-        episodes_kept=int(h["episodes_out"]),
-        episodes_total=int(h["episodes_in"]),
-    )
+    where = {"task": cfg["task"], "model": cfg["model"], "person": cfg["person"]}
+    return FilterCount(**where, **kept_counts(read_header(path)))
 
 
 def gather_study(run_dir: str | Path) -> StudyData:
