@@ -20,18 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.definition import section_fields
 from elicit_jax.pipeline.graph import Stage
-
-
-def _checked(cls: type, overrides: Mapping[str, Any], section: str) -> Any:
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ElicitError(
-            f"[{section}] unknown option(s) {', '.join(unknown)} "
-            f"(allowed: {', '.join(sorted(names))})"
-        )
-    return cls(**overrides)
 
 
 def resolve_quality(raw: dict[str, Any]) -> dict[str, Any]:
@@ -40,7 +30,12 @@ def resolve_quality(raw: dict[str, Any]) -> dict[str, Any]:
 
     meta = {k: raw[k] for k in ("task", "operator") if k in raw}
     over = {k: v for k, v in raw.items() if k not in meta}
-    return {**meta, "quality": dataclasses.asdict(_checked(QualityConfig, over, "quality"))}
+    return {
+        **meta,
+        "quality": dataclasses.asdict(
+            QualityConfig(**section_fields(QualityConfig, over, "quality"))
+        ),
+    }
 
 
 def resolve_cupid(raw: dict[str, Any]) -> dict[str, Any]:
@@ -50,7 +45,10 @@ def resolve_cupid(raw: dict[str, Any]) -> dict[str, Any]:
 
     meta = {k: raw[k] for k in ("task", "model", "operator", "horizon") if k in raw}
     over = {k: v for k, v in raw.items() if k not in meta}
-    return {**meta, "cupid": dataclasses.asdict(_checked(CupidConfig, over, "cupid"))}
+    return {
+        **meta,
+        "cupid": dataclasses.asdict(CupidConfig(**section_fields(CupidConfig, over, "cupid"))),
+    }
 
 
 def quality_stage(ctx: Any) -> None:
@@ -102,19 +100,24 @@ def cupid_stage(ctx: Any) -> None:
     write_episode_scores(ctx.output, scores, config=dict(ctx.config), inputs=inputs)
 
 
-def quality_plan(spec: Any, task: Any, resolve: Callable) -> list[Stage]:
-    """``quality`` stages of one task (one per operator), when a quality method is chosen."""
-    if not any(m.startswith("quality") for m in spec.methods):
+def operator_stages(
+    spec: Any, task: Any, kind: str, label: str, resolve: Callable, over_base: bool = False
+) -> list[Stage]:
+    """Per-demonstration scores of each D_new of a task that need no policy (``deminf``:
+    estimated over D_base ∪ D_new, ``over_base``; ``quality``): one ``kind`` stage per operator,
+    configured by the section of that name, when a method of that kind is chosen."""
+    if not any(m.startswith(kind) for m in spec.methods):
         return []
     t = task.name
+    base = {"demos0": f"collect/{t}/base"} if over_base else {}
     return [
         Stage(
-            id=f"quality/{t}/{op}",
-            kind="quality",
-            output=f"curation/{t}/quality-{op}.parquet",
-            config=resolve("quality", {**spec.section("quality"), "task": t, "operator": op}),
-            inputs={"demos1": f"collect/{t}/new/{op}"},
-            label=f"quality flags {t} D_new of {op}",
+            id=f"{kind}/{t}/{op}",
+            kind=kind,
+            output=f"curation/{t}/{kind}-{op}.parquet",
+            config=resolve(kind, {**spec.section(kind), "task": t, "operator": op}),
+            inputs={**base, "demos1": f"collect/{t}/new/{op}"},
+            label=f"{label} {t} D_new of {op}",
         )
         for op in task.operators
     ]

@@ -31,15 +31,7 @@ import numpy as np
 
 from elicit_jax.artifact import dumps, read_header, read_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.tables import (
-    CurationRow,
-    FilterRow,
-    LambdaPoint,
-    LengthRow,
-    ReportData,
-    ResultRow,
-    ThresholdRow,
-)
+from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
 
 ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
@@ -253,7 +245,7 @@ def data_to_json(data: ReportData) -> dict[str, Any]:
     body = {
         f.name: getattr(data, f.name)
         for f in dataclasses.fields(data)
-        if f.name not in ("results", "heldout", "figures", "findings", "maps")
+        if f.name not in ("results", "heldout", "figures", "findings", "maps", "rollouts")
     }
     body["maps"] = [[caption, f"maps/{Path(png).name}"] for caption, png in data.maps]
     seeds = sorted({r.seed for r in (*data.results, *data.heldout)})
@@ -266,11 +258,7 @@ def data_from_json(header: Mapping[str, Any], folder: Path) -> ReportData:
     return ReportData(
         **{
             **body,
-            "thresholds": _rows(ThresholdRow, body["thresholds"]),
-            "lengths": _rows(LengthRow, body["lengths"]),
-            "filters": _rows(FilterRow, body["filters"]),
-            "curation": _rows(CurationRow, body["curation"], ("scores",)),
-            "lambda_points": _rows(LambdaPoint, body["lambda_points"]),
+            **{name: _rows(row, body[name], ("scores",)) for name, row in ROW_FIELDS.items()},
             "maps": tuple((c, str(folder / rel)) for c, rel in body["maps"]),
             "notes": tuple(body["notes"]),
             "results": (),
@@ -312,9 +300,8 @@ def round_trip(data: ReportData) -> ReportData:
     import json
 
     back = data_from_json(json.loads(dumps(data_to_json(data))), Path("."))
-    return dataclasses.replace(
-        back, maps=data.maps, results=data.results, heldout=data.heldout, findings=data.findings
-    )
+    kept = ("maps", "results", "heldout", "findings", "rollouts")
+    return dataclasses.replace(back, **{k: getattr(data, k) for k in kept})
 
 
 def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
@@ -348,4 +335,5 @@ def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> Repor
         data_from_json(header, folder),
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
+        rollouts=frame,
     )

@@ -1,4 +1,5 @@
-"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report.ReportData`.
+"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report_rows.ReportData`
+(:func:`walk_run`: what every report kind reads of a run directory).
 
 Reads the run manifest (``run.json``: the definition and every stage) and, for each finished
 stage, its artifact: evaluations (success per seed), threshold fits, filter counts, maps and
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -18,21 +19,14 @@ import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import (
     cell_frame,
     empty_rollouts,
     result_rows_of,
     run_provenance,
 )
-from elicit_jax.pipeline.tables import (
-    CurationRow,
-    FilterRow,
-    LambdaPoint,
-    LengthRow,
-    ReportData,
-    ResultRow,
-    ThresholdRow,
-)
+from elicit_jax.pipeline.report_rows import ReportData, ResultRow
 
 MANIFEST = "run.json"
 MANIFEST_KIND = "pipeline-run"
@@ -49,7 +43,7 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
+def _length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.LengthRow]:
     import pyarrow.parquet as pq
 
     table = pq.read_table(path, columns=["episode", "operator"])
@@ -60,7 +54,7 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
     for op in dict.fromkeys(operator[first].tolist()):
         lens = counts[operator[first] == op]
         rows.append(
-            LengthRow(
+            report_rows.LengthRow(
                 task=stage["config"]["collect"]["task"],
                 name=Path(stage["output"]).stem,
                 operator=op,
@@ -72,13 +66,13 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[LengthRow]:
     return rows
 
 
-def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
     data = read_json(path)
     report = dict(data.get("report", {}))
     cfg = stage["config"]
     method = data.get("method", "fit")
     report.setdefault("margin", report.get("margin_quantile"))
-    return ThresholdRow(
+    return report_rows.ThresholdRow(
         task=cfg["task"],
         model=cfg["model"],
         lambda_=float(data["lambda"]),
@@ -92,7 +86,7 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
     )
 
 
-def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
+def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
     data = read_json(path)
     rep = dict(data.get("report", {}))
     lo, hi = rep.get("lambda_range", (math.nan, math.nan))
@@ -101,7 +95,7 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
         f"× that at the fitted λ; {100 * rep.get('familiar_share_between', 0):.1f}% of them "
         "lie between the two"
     )
-    return ThresholdRow(
+    return report_rows.ThresholdRow(
         task=stage["config"]["task"],
         model=stage["config"]["model"],
         lambda_=float(data["lambda"]),
@@ -113,26 +107,35 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> ThresholdRow:
     )
 
 
-def _filter_row(stage: Mapping[str, Any], path: Path) -> FilterRow:
+def kept_counts(header: Mapping[str, Any]) -> dict[str, int]:
+    """What a filter-like stage kept of its input, from its output's header
+    (:func:`~elicit_jax.pipeline.stages_compat.write_filter_header`): pairs and episodes
+    kept, of how many."""
+    return {
+        "pairs_kept": int(header["pairs_in"]) - int(header["pairs_dropped"]),
+        "pairs_total": int(header["pairs_in"]),
+        "episodes_kept": int(header["episodes_out"]),
+        "episodes_total": int(header["episodes_in"]),
+    }
+
+
+def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
     h = read_header(path)
     cfg = stage["config"]
     method = cfg["method"]
     if "/heldout/" in stage["id"]:  # the λ-sensitivity study's filters
         method = f"M-Filtered at λ = {h['thresholds']['lambda']:.4g} (sensitivity)"
-    return FilterRow(
+    return report_rows.FilterRow(
         task=cfg["task"],
         model=cfg["model"],
         method=method,
         operator=cfg["operator"],
-        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-        pairs_total=int(h["pairs_in"]),
-        episodes_kept=int(h["episodes_out"]),
-        episodes_total=int(h["episodes_in"]),
+        **kept_counts(h),
         note="" if h.get("trusted", True) else "no signal: kept every demo",
     )
 
 
-def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
+def _curation_row(stage: Mapping[str, Any], path: Path) -> report_rows.CurationRow:
     from elicit_jax.curation.episodes import read_episode_scores
 
     scores = read_episode_scores(path)
@@ -140,7 +143,7 @@ def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
     report = dict(scores.report)
     if "deminf" in cfg:
         report["drop_fraction"] = cfg["deminf"].get("drop_fraction")
-    return CurationRow(
+    return report_rows.CurationRow(
         task=cfg["task"],
         model=cfg.get("model"),
         method=scores.method,
@@ -152,12 +155,12 @@ def _curation_row(stage: Mapping[str, Any], path: Path) -> CurationRow:
     )
 
 
-def _lambda_point(stage: Mapping[str, Any], path: Path) -> LambdaPoint:
+def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoint:
     data = read_json(path)
     rep = data.get("report", {})
     lo, hi = rep["lambda_range"]
     cfg = stage["config"]
-    return LambdaPoint(
+    return report_rows.LambdaPoint(
         task=cfg["task"],
         model=cfg["model"],
         point=int(rep["point"]),
@@ -223,42 +226,45 @@ def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -
     elif kind in ("deminf", "demo-score", "cupid", "quality"):
         rows["curation"].append(mark(_curation_row(stage, path)))
     elif kind == "lambda-point":
-        rows["points"].append(_lambda_point(stage, path))
+        rows["lambda_points"].append(_lambda_point(stage, path))
     elif kind == "map":
         where = f"{cfg['task']}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
         rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
 
 
-def gather(run_dir: str | Path) -> ReportData:
-    """Everything the report shows, read from ``run_dir``'s finished artifacts."""
-    return gather_with_rollouts(run_dir)[0]
+def walk_run(
+    run_dir: str | Path, report_kind: str, take: Callable[[Mapping[str, Any], Path], bool]
+) -> dict[str, Any]:
+    """Read a run directory the way every report kind does: its manifest, every stage's
+    config, every finished evaluation's rollouts; ``take(stage, path)`` reads what any other
+    finished stage (not the ``report_kind`` stage) contributes, and returns False when its
+    output is not complete yet.
 
-
-def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
-    """:func:`gather`, and the study's per-rollout table the results were computed from
-    (:func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
+    Returns:
+      The fields every report has (:class:`~elicit_jax.pipeline.report_rows.RunReport`:
+      definition, run directory, ``results`` of every finished evaluation, ``rollouts``,
+      notes, provenance) and the stage ``configs`` and library ``versions``.
+    """
     import pandas as pd
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
-    cfg = manifest["config"]
+    head = manifest["config"]
     frames = []
-    rows: dict[str, list] = {k: [] for k in ("thresholds", "lengths", "filters", "curation")}
-    rows |= {"points": [], "maps": []}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
     for stage in manifest["stages"]:
         path = run_dir / stage["output"]
         configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
-        if stage["kind"] == "report":
+        if stage["kind"] == report_kind:
             continue
         if not path.exists():
             missing.append(stage["id"])
         elif stage["kind"] == "evaluate":
             frames.append(cell_frame(stage["config"], path))
-        else:
-            _gather_stage(stage, path, rows)
-    notes = [training_note(configs.get("train", {}))] if configs.get("train") else []
+        elif not take(stage, path):
+            missing.append(stage["id"])
+    notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
             f"{len(missing)} stage(s) have not finished, so their results are absent: "
@@ -266,24 +272,36 @@ def gather_with_rollouts(run_dir: str | Path) -> tuple[ReportData, Any]:
             + (" …" if len(missing) > 8 else "")
         )
     rollouts = pd.concat(frames, ignore_index=True) if frames else empty_rollouts()
-    results = result_rows_of(rollouts) if frames else []
-    data = ReportData(
-        pipeline=cfg["pipeline"],
-        profile=cfg["profile"],
-        description=cfg.get("description", ""),
-        run_dir=str(run_dir),
-        spec_text=cfg.get("spec_text", ""),
+    return {
+        "pipeline": head["pipeline"],
+        "profile": head["profile"],
+        "description": head.get("description", ""),
+        "run_dir": str(run_dir),
+        "spec_text": head.get("spec_text", ""),
+        "results": tuple(result_rows_of(rollouts)) if frames else (),
+        "rollouts": rollouts,
+        "configs": configs,
+        "versions": manifest.get("versions", {}),
+        "notes": tuple(notes),
+        "provenance": run_provenance(manifest, run_dir),
+    }
+
+
+def gather(run_dir: str | Path) -> ReportData:
+    """Everything the report shows, read from ``run_dir``'s finished artifacts, with the
+    study's per-rollout table the results were computed from (``rollouts``:
+    :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
+    rows: dict[str, list] = {name: [] for name in (*report_rows.ROW_FIELDS, "maps")}
+
+    def take(stage: Mapping[str, Any], path: Path) -> bool:
+        _gather_stage(stage, path, rows)
+        return True
+
+    run = walk_run(run_dir, "report", take)
+    results = run.pop("results")
+    return ReportData(
+        **run,
         results=tuple(r for r in results if r.study == "main"),
         heldout=tuple(r for r in results if r.study != "main"),
-        lambda_points=tuple(rows["points"]),
-        curation=tuple(rows["curation"]),
-        thresholds=tuple(rows["thresholds"]),
-        lengths=tuple(rows["lengths"]),
-        filters=tuple(rows["filters"]),
-        maps=tuple(rows["maps"]),
-        configs=configs,
-        versions=manifest.get("versions", {}),
-        notes=tuple(notes),
-        provenance=run_provenance(manifest, run_dir),
+        **{name: tuple(found) for name, found in rows.items()},
     )
-    return data, rollouts

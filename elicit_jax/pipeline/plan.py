@@ -27,7 +27,7 @@ import dataclasses
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.curation_stages import cupid_plan, per_demo_source, quality_plan
+from elicit_jax.pipeline.curation_stages import cupid_plan, operator_stages, per_demo_source
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.plan_cell import (
     Cell,
@@ -127,26 +127,27 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     stages: list[Stage] = []
     for number, sub in collection_specs(spec):
         stages += collection_stages(sub, number, resolve)
-    report_inputs = {s.id: s.id for s in stages if s.kind in REPORT_KINDS}
-    stages.append(
-        Stage(
-            id="report",
-            kind="report",
-            output="report",
-            config=resolve(
-                "report",
-                {
-                    **spec.section("report"),
-                    "pipeline": spec.name,
-                    "profile": spec.profile,
-                    "spec_text": spec.text,
-                },
-            ),
-            inputs=report_inputs,
-            label="report",
-        )
-    )
+    stages.append(report_stage(spec, "report", stages, REPORT_KINDS, resolve))
     return Graph(stages)
+
+
+def report_stage(
+    spec: Any, kind: str, stages: list[Stage], reads: tuple[str, ...], resolve: ConfigResolver
+) -> Stage:
+    """The one report stage of a study (a filtering pipeline's or an elicitation study's):
+    stage ``kind``, reading every stage of ``stages`` whose kind is in ``reads``.
+
+    ``spec`` has ``name``, ``profile``, ``text`` and ``section``.
+    """
+    raw = {**spec.section("report"), "pipeline": spec.name, "profile": spec.profile}
+    return Stage(
+        id="report",
+        kind=kind,
+        output="report",
+        config=resolve(kind, {**raw, "spec_text": spec.text}),
+        inputs={s.id: s.id for s in stages if s.kind in reads},
+        label="report",
+    )
 
 
 def collection_specs(spec: PipelineSpec) -> list[tuple[int, PipelineSpec]]:
@@ -202,8 +203,8 @@ def collection_stages(spec: PipelineSpec, number: int, resolve: ConfigResolver) 
     needs_scores = any(m in FILTER_METHODS for m in spec.methods)
     for task in spec.tasks:
         stages += _collect_stages(spec, task, resolve, needs_scores)
-        stages += _deminf_stages(spec, task, resolve)
-        stages += quality_plan(spec, task, resolve)
+        stages += operator_stages(spec, task, "deminf", "deminf", resolve, over_base=True)
+        stages += operator_stages(spec, task, "quality", "quality flags", resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, needs_scores, resolve)
     return stages if number == 0 else [in_collection(s, number) for s in stages]
@@ -227,37 +228,30 @@ def in_collection(stage: Stage, number: int) -> Stage:
     )
 
 
-def _collect_stages(
-    spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver, contrast: bool = True
+def contrast_sets(task: Any, names: tuple[str, str]) -> list[tuple[str, str, int, str]]:
+    """The two contrast sets of a task (held-out base demos, the incompatible operator's) as
+    ``(role, operator, episodes, file name)``, their files named ``names``."""
+    return [
+        ("holdout", task.base_operator, task.holdout_episodes, names[0]),
+        ("incompatible", task.incompatible_operator, task.incompatible_episodes, names[1]),
+    ]
+
+
+def collect_stages(
+    spec: Any, task: Any, sets: list[tuple[str, str, int, str]], resolve: ConfigResolver
 ) -> list[Stage]:
-    """D_base, each D_new and (when thresholds are fitted) the two contrast sets."""
-    sets = [("base", task.base_operator, task.base_episodes, "base")]
-    if contrast:
-        sets += [
-            ("holdout", task.base_operator, task.holdout_episodes, "contrast-compatible"),
-            (
-                "incompatible",
-                task.incompatible_operator,
-                task.incompatible_episodes,
-                "contrast-incompatible",
-            ),
-        ]
-    sets += [(op, op, task.new_episodes, f"new-{op}") for op in task.operators]
+    """One ``collect`` stage per demo set ``(role, operator, episodes, file name)`` of a task
+    (a role of :data:`COLLECT_SEED_OFFSETS`, or a new operator's name), each with its own
+    collection seed (:func:`collect_seed`)."""
     out = []
     for role, operator, episodes, name in sets:
         seed = collect_seed(spec, task, role)
-        raw = {
-            **spec.section("collect"),
-            "task": task.name,
-            "operator": operator,
-            "episodes": episodes,
-            "seed": seed,
-            "role": role if role in COLLECT_SEED_OFFSETS else "new",
-        }
-        sid = f"collect/{task.name}/{role if role in COLLECT_SEED_OFFSETS else 'new/' + role}"
+        kept = role if role in COLLECT_SEED_OFFSETS else "new"
+        raw = {**spec.section("collect"), "task": task.name, "operator": operator}
+        raw |= {"episodes": episodes, "seed": seed, "role": kept}
         out.append(
             Stage(
-                id=sid,
+                id=f"collect/{task.name}/{role if kept == role else 'new/' + role}",
                 kind="collect",
                 output=f"data/{task.name}/{name}.parquet",
                 config=resolve("collect", raw),
@@ -268,22 +262,15 @@ def _collect_stages(
     return out
 
 
-def _deminf_stages(spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver) -> list[Stage]:
-    """DemInf scores of each D_new over D_base ∪ D_new (no policy: one stage per task)."""
-    if not any(m.startswith("deminf") for m in spec.methods):
-        return []
-    t = task.name
-    return [
-        Stage(
-            id=f"deminf/{t}/{op}",
-            kind="deminf",
-            output=f"curation/{t}/deminf-{op}.parquet",
-            config=resolve("deminf", {**spec.section("deminf"), "task": t, "operator": op}),
-            inputs={"demos0": f"collect/{t}/base", "demos1": f"collect/{t}/new/{op}"},
-            label=f"deminf {t} D_new of {op}",
-        )
-        for op in task.operators
-    ]
+def _collect_stages(
+    spec: PipelineSpec, task: TaskSpec, resolve: ConfigResolver, contrast: bool = True
+) -> list[Stage]:
+    """D_base, each D_new and (when thresholds are fitted) the two contrast sets."""
+    sets = [("base", task.base_operator, task.base_episodes, "base")]
+    if contrast:
+        sets += contrast_sets(task, ("contrast-compatible", "contrast-incompatible"))
+    sets += [(op, op, task.new_episodes, f"new-{op}") for op in task.operators]
+    return collect_stages(spec, task, sets, resolve)
 
 
 def _cell_stages(

@@ -34,6 +34,7 @@ from elicit_jax.pipeline.runner import (
     clean_temporaries,
     run_lock,
     run_stage,
+    stage_progress,
     stage_up_to_date,
 )
 
@@ -191,7 +192,7 @@ def run_graph_ray(
     with (
         run_lock(run_dir) if lock else contextlib.nullcontext(),
         ray_session(address) as ray,
-        _progress(console, show_progress) as progress,
+        stage_progress("pipeline (ray)", console, show_progress) as progress,
     ):
         clean_temporaries(run_dir)
         bar = progress.add_task("", total=len(graph))
@@ -260,21 +261,6 @@ def _drive(
             progress.console.print(messages, markup=False, highlight=False)
         state.results[stage.id] = StageResult(stage, "ran", float(seconds))
         progress.advance(bar)
-
-
-def _progress(console: Any, show: bool) -> Any:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    return Progress(
-        TextColumn("[bold]pipeline (ray)[/]"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.description}"),
-        console=console,
-        disable=not show,
-        transient=False,
-    )
 
 
 def _one_line(error: BaseException) -> str:

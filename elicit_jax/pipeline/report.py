@@ -1,8 +1,9 @@
 """Render a pipeline run as Markdown and as one self-contained HTML page.
 
 The content comes from :mod:`elicit_jax.pipeline.tables`; :func:`render_markdown` and
-:func:`render_html` turn it into text. The HTML page inlines its PNG maps as base64 and uses no
-external asset.
+:func:`render_html` turn it into text; what every report kind shares (first lines, closing
+blocks, the folder) is :mod:`elicit_jax.pipeline.report_folder`'s. The HTML page inlines its
+PNG maps as base64 and uses no external asset.
 """
 
 from __future__ import annotations
@@ -13,17 +14,15 @@ import html
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import atomic_path, dumps, provenance_line
 from elicit_jax.pipeline.across import across_note, across_tables
-from elicit_jax.pipeline.evidence import (
-    DATA_FILE,
-    ROLLOUTS_FILE,
-    selection_lines,
-    write_data,
-    write_rollouts_table,
-)
-from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.evidence import selection_lines, write_data
 from elicit_jax.pipeline.render import html_document, markdown_document
+from elicit_jax.pipeline.report_folder import (
+    CPU_NOTE,
+    intro_lines,
+    provenance_blocks,
+    write_report_folder,
+)
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
     STD_NOTE,
@@ -38,11 +37,6 @@ from elicit_jax.pipeline.tables import (
     rollout_length_table,
     sensitivity_tables,
     threshold_table,
-)
-
-CPU_NOTE = (
-    "**CPU profile**: network sizes and epochs are shrunk to fit a 2-core machine "
-    "(sizes below); the numbers are not the paper's setting."
 )
 
 
@@ -81,45 +75,8 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
     return blocks + provenance_blocks(data, "Pipeline definition")
 
 
-def provenance_blocks(data: Any, definition_title: str) -> list[tuple[str, Any]]:
-    """The closing blocks every report ends with: the definition's text, each stage's config
-    and the library versions (``data`` has ``spec_text``, ``configs`` and ``versions``)."""
-    return [
-        (definition_title, ("code", data.spec_text or "(not recorded)")),
-        ("Stage configs", ("code", dumps(dict(data.configs)))),
-        ("Library versions", ("code", dumps(dict(data.versions)))),
-    ]
-
-
-def provenance_intro(data: Any) -> list[str]:
-    """The first lines of every study report: where its numbers came from (the run's code
-    commit, versions and command line; the seeds), and how to rebuild it from its folder."""
-    seeds = sorted({r.seed for r in (*data.results, *getattr(data, "heldout", ()))})
-    evals = sorted(
-        {s for r in (*data.results, *getattr(data, "heldout", ())) for s in r.eval_seeds}
-    )
-    raw = (
-        f"Raw results: `{ROLLOUTS_FILE}` (one row per rollout) and `{DATA_FILE}` beside this "
-        "report; `elicit-jax report --rebuild <this folder>` recomputes every table, interval "
-        "and figure from them."
-        if getattr(data, "raw_results", False)
-        else "Raw results: not kept beside this report, so it cannot be rebuilt from its folder."
-    )
-    return [
-        provenance_line(data.provenance),
-        f"Seeds: training {seeds or '–'}, evaluation {evals or '–'}. {raw}",
-    ]
-
-
 def _intro(data: ReportData) -> list[str]:
-    lines = provenance_intro(data)
-    lines.append(
-        f"Pipeline **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
-    )
-    if data.profile == "cpu":
-        lines.append(CPU_NOTE)
-    if data.description:
-        lines.append(data.description)
+    lines = intro_lines(data, "Pipeline")
     lines += list(data.notes)
     lines += selection_lines((*data.results, *data.heldout))
     if data.results or data.heldout:
@@ -127,6 +84,15 @@ def _intro(data: ReportData) -> list[str]:
         lines.append(STD_NOTE)
         lines += across_note(data)
     return lines
+
+
+def summary_tables(data: ReportData) -> list[tuple[str, Any]]:
+    """The tables a finished run prints (the paper's layout): the across-collections tables
+    of a study over several collections, then each results table followed by its differences
+    from Naive with their paired 95% intervals, then the model comparison."""
+    results = results_tables(data)
+    paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
+    return across_tables(data) + paired + models_table(data)
 
 
 def render_markdown(data: ReportData, map_dir: str = "") -> str:
@@ -171,58 +137,37 @@ def write_report(
     rebuilt_from: Path | None = None,
 ) -> tuple[Path, Path]:
     """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``maps/*.png``,
-    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``;
-    returns the Markdown and HTML paths.
+    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``
+    (:func:`~elicit_jax.pipeline.report_folder.write_report_folder`); returns the Markdown
+    and HTML paths.
 
     Args:
       data: what the report shows.
       out_dir: the report folder.
-      rollouts: the per-rollout table the results were computed from (``None``: none kept,
-        and the report says it cannot be rebuilt).
+      rollouts: the per-rollout table the results were computed from (default
+        ``data.rollouts``; ``None``: none kept, and the report says it cannot be rebuilt).
       rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
         are (byte for byte) instead of written anew.
     """
-    from elicit_jax.artifact import make_header
+    if rollouts is not None:
+        data = dataclasses.replace(data, rollouts=rollouts)
+    return write_report_folder(
+        data,
+        out_dir,
+        kind="pipeline-report",
+        write_data=write_data,
+        draw=_draw,
+        render=lambda d: (render_markdown(d, map_dir="maps/"), render_html(d)),
+        rebuilt_from=rebuilt_from,
+    )
+
+
+def _draw(folder: Path, data: ReportData) -> tuple[ReportData, list[str]]:
+    """Copy the maps into ``folder/maps`` and draw the λ-sensitivity figure there."""
     from elicit_jax.pipeline.figures import sensitivity_figure
 
-    out_dir = Path(out_dir)
-    with atomic_path(out_dir) as tmp:
-        (tmp / "maps").mkdir(parents=True)
-        if rebuilt_from is not None:
-            for name in (ROLLOUTS_FILE, DATA_FILE):
-                (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
-        elif rollouts is not None:
-            write_rollouts_table(tmp / ROLLOUTS_FILE, rollouts, data.pipeline, data.profile)
-            write_data(tmp / DATA_FILE, data)
-        kept = [n for n in (ROLLOUTS_FILE, DATA_FILE) if (tmp / n).is_file()]
-        data = dataclasses.replace(data, raw_results=bool(kept))
-        for _, png in data.maps:
-            (tmp / "maps" / Path(png).name).write_bytes(Path(png).read_bytes())
-        figures = sensitivity_figure(data, tmp / "maps" / "lambda-sensitivity.png")
-        data = dataclasses.replace(data, figures=tuple(figures))
-        (tmp / "report.md").write_text(render_markdown(data, map_dir="maps/"))
-        (tmp / "report.html").write_text(render_html(data))
-        findings = write_beside(data.findings, tmp)
-        seeds = sorted({r.seed for r in (*data.results, *data.heldout)})
-        header = make_header(
-            "pipeline-report",
-            1,
-            config={"pipeline": data.pipeline, "profile": data.profile},
-            inputs={name: tmp / name for name in kept},
-            seed=seeds[0] if seeds else None,
-            training_seeds=seeds,
-            run=dict(data.provenance),
-            **({"rebuilt_from": str(rebuilt_from)} if rebuilt_from is not None else {}),
-            n_results=len(data.results),
-            files=[
-                "report.md",
-                "report.html",
-                *kept,
-                *([findings["file"]] if findings else []),
-            ],
-            **({"findings": findings} if findings else {}),
-        )
-        for entry in header["inputs"].values():
-            entry["path"] = Path(entry["path"]).name
-        (tmp / "artifact.json").write_text(dumps(header) + "\n")
-    return out_dir / "report.md", out_dir / "report.html"
+    (folder / "maps").mkdir()
+    for _, png in data.maps:
+        (folder / "maps" / Path(png).name).write_bytes(Path(png).read_bytes())
+    figures = sensitivity_figure(data, folder / "maps" / "lambda-sensitivity.png")
+    return dataclasses.replace(data, figures=tuple(figures)), []

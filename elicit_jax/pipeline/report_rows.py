@@ -130,8 +130,21 @@ class LambdaPoint:
 
 
 @dataclasses.dataclass(frozen=True)
-class ReportData:
-    """Everything a report shows."""
+class RunReport:
+    """What every report of a run shows, whatever its kind (a filtering or models study:
+    :class:`ReportData`; an elicitation study:
+    :class:`~elicit_jax.pipeline.elicitation.gather.StudyData`), besides its own rows.
+
+    Attributes:
+      pipeline, profile, description, spec_text: the definition run.
+      run_dir: where it ran.
+      results: per trained policy and seed, the success at its chosen checkpoint.
+      notes: lines the report states first (training setup, unfinished stages).
+      findings: the authors' reading of the run, put first in the report.
+      provenance: the run's provenance (code commits, command, versions).
+      raw_results: the raw results are kept beside the report (it can be rebuilt).
+      rollouts: the per-rollout table ``results`` were computed from (``None``: not kept).
+    """
 
     pipeline: str
     profile: str
@@ -139,6 +152,17 @@ class ReportData:
     run_dir: str
     spec_text: str
     results: tuple[ResultRow, ...]
+    notes: tuple[str, ...] = dataclasses.field(default=(), kw_only=True)
+    findings: Findings | None = dataclasses.field(default=None, kw_only=True)
+    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict, kw_only=True)
+    raw_results: bool = dataclasses.field(default=False, kw_only=True)
+    rollouts: Any = dataclasses.field(default=None, kw_only=True, compare=False, repr=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class ReportData(RunReport):
+    """Everything a filtering or models report shows."""
+
     thresholds: tuple[ThresholdRow, ...] = ()
     lengths: tuple[LengthRow, ...] = ()
     filters: tuple[FilterRow, ...] = ()
@@ -149,11 +173,16 @@ class ReportData:
     figures: tuple[tuple[str, str], ...] = ()
     configs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     versions: Mapping[str, str] = dataclasses.field(default_factory=dict)
-    notes: tuple[str, ...] = ()
-    findings: Findings | None = None
-    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    raw_results: bool = False
 
+
+ROW_FIELDS = {
+    "thresholds": ThresholdRow,
+    "lengths": LengthRow,
+    "filters": FilterRow,
+    "curation": CurationRow,
+    "lambda_points": LambdaPoint,
+}
+"""The :class:`ReportData` fields that hold rows read from the run's stages, and their row type."""
 
 Table = tuple[list[str], list[list[str]]]
 

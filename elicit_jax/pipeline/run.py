@@ -12,10 +12,11 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import make_header, write_json
-from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND, gather, gather_with_rollouts
+from elicit_jax.pipeline.definition import DEFAULT_KIND
+from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.runner import RunResult, StageFn, print_summary, run_graph, run_lock
-from elicit_jax.pipeline.spec import PipelineSpec, load_spec
+from elicit_jax.pipeline.spec import PipelineSpec
 
 REPORT_DIR = "report"
 
@@ -62,22 +63,11 @@ def default_run_dir(spec: PipelineSpec, tasks: tuple[str, ...] | None = None) ->
 
 
 def plan_run(config: PipelineRunConfig) -> tuple[Any, Graph, Callable[[], Mapping[str, StageFn]]]:
-    """The definition, its stage graph and its stage registry: a filtering pipeline, or an
-    elicitation study (``[pipeline] kind = "elicitation"``)."""
-    from elicit_jax.pipeline.elicitation.spec import KIND, load_study, read_kind
-    from elicit_jax.pipeline.spec import resolve_path
+    """The definition, its stage graph and its stage registry, by the definition's study kind
+    (:mod:`elicit_jax.pipeline.study_kinds`: filtering, elicitation)."""
+    from elicit_jax.pipeline.study_kinds import plan_definition
 
-    if read_kind(resolve_path(config.pipeline)) == KIND:
-        from elicit_jax.pipeline.elicitation.plan import build_study_graph
-        from elicit_jax.pipeline.elicitation.stages import resolve_study_config, study_registry
-
-        study = load_study(config.pipeline, config.profile, config.tasks)
-        return study, build_study_graph(study, resolve_study_config), study_registry
-    from elicit_jax.pipeline.plan import build_graph
-    from elicit_jax.pipeline.stages import real_registry, resolve_config
-
-    spec = load_spec(config.pipeline, config.profile, config.tasks)
-    return spec, build_graph(spec, resolve_config), real_registry
+    return plan_definition(config.pipeline, config.profile, config.tasks)
 
 
 def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
@@ -98,7 +88,7 @@ def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
         1,
         config={
             "pipeline": spec.name,
-            "kind": getattr(spec, "kind", "filtering"),
+            "kind": spec.kind,
             "profile": spec.profile,
             "description": spec.description,
             "source": spec.source,
@@ -198,57 +188,38 @@ def _collections_note(spec: Any) -> str:
 
 
 def print_results(run_dir: Path, console: Any) -> None:
-    """Print the run's result tables (paper layout) from its finished artifacts, each followed
-    by its differences from Naive with their paired 95% intervals, after the across-collections
-    tables of a study over several collections (as in the report)."""
-    from elicit_jax.pipeline.across import across_tables
-    from elicit_jax.pipeline.tables import difference_tables, models_table, results_tables
-
-    if _is_study(run_dir):
-        return _print_study(run_dir, console)
-    data = gather(run_dir)
-    results = results_tables(data)
-    paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
-    _print_tables(across_tables(data) + paired + models_table(data), data.notes, console)
-
-
-def _print_tables(tables: list, notes: Any, console: Any) -> None:
+    """Print the run's result tables from its finished artifacts, as its study kind lays them
+    out (a filtering study: the paper's layout, each table followed by its differences from
+    Naive with their paired 95% intervals; an elicitation study: Table 2 and its ablations),
+    then the run's notes."""
     from rich.table import Table
 
-    for title, (header, rows) in tables:
+    kind = _kind_of_run(run_dir)
+    data = kind.gather(run_dir)
+    for title, (header, rows) in kind.summary(data):
         table = Table(title=title)
         for col in header:
             table.add_column(col)
         for row in rows:
             table.add_row(*row)
         console.print(table)
-    for note in notes:
+    for note in data.notes:
         console.print(f"[yellow]{note}[/]")
 
 
-def _is_study(run_dir: Path) -> bool:
-    from elicit_jax.pipeline.elicitation.spec import KIND
+def _kind_of_run(run_dir: Path) -> Any:
+    """The study kind of a run directory (recorded in its manifest)."""
     from elicit_jax.pipeline.gather import read_manifest
+    from elicit_jax.pipeline.study_kinds import study_kind
 
-    return read_manifest(run_dir)["config"].get("kind") == KIND
-
-
-def _print_study(run_dir: Path, console: Any) -> None:
-    """Print an elicitation study's Table 2 and, per task, its ablation."""
-    from elicit_jax.pipeline.elicitation.gather import gather_study
-    from elicit_jax.pipeline.elicitation.tables import ablation_table, cells_of, table2
-
-    data = gather_study(run_dir)
-    tables = [("Base / Naive / Naive + M-filtered / Informed (success %)", table2(data))]
-    tables += [(f"{t} ({m}): ablation", ablation_table(data, t, m)) for t, m in cells_of(data)]
-    _print_tables(tables, data.notes, console)
+    return study_kind(read_manifest(run_dir)["config"].get("kind", DEFAULT_KIND), run_dir)
 
 
 def render_run_report(
     run_dir: str | Path, out: str | Path | None = None, findings: str | Path | None = None
 ) -> tuple[Path, Path]:
-    """(Re)write the report of a run directory (a filtering pipeline or an elicitation
-    study); returns the Markdown and HTML paths.
+    """(Re)write the report of a run directory, as its study kind writes it (a filtering
+    pipeline, an elicitation study); returns the Markdown and HTML paths.
 
     Args:
       run_dir: the run directory.
@@ -257,22 +228,13 @@ def render_run_report(
         and copied beside it (:mod:`elicit_jax.pipeline.findings`); it may live in ``out``.
     """
     from elicit_jax.pipeline.findings import read_findings
-    from elicit_jax.pipeline.report import write_report
 
     run_dir = Path(run_dir)
     target = Path(out) if out else run_dir / REPORT_DIR
     notes = None if findings is None else read_findings(findings)
-    if _is_study(run_dir):
-        from elicit_jax.pipeline.elicitation.evidence import round_trip_study
-        from elicit_jax.pipeline.elicitation.gather import gather_study
-        from elicit_jax.pipeline.elicitation.report import write_study_report
-
-        study = round_trip_study(dataclasses.replace(gather_study(run_dir), findings=notes))
-        return write_study_report(study, target)
-    from elicit_jax.pipeline.evidence import round_trip
-
-    data, rollouts = gather_with_rollouts(run_dir)
-    return write_report(round_trip(dataclasses.replace(data, findings=notes)), target, rollouts)
+    kind = _kind_of_run(run_dir)
+    data = kind.round_trip(dataclasses.replace(kind.gather(run_dir), findings=notes))
+    return kind.write_report(data, target)
 
 
 def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
@@ -285,20 +247,15 @@ def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[P
       out: where to write the rebuilt report (default: ``folder`` itself, replaced
         atomically).
     """
-    from elicit_jax.pipeline.elicitation.evidence import study_from_json
-    from elicit_jax.pipeline.elicitation.report import write_study_report
-    from elicit_jax.pipeline.evidence import STUDY_DATA_KIND, read_raw, report_data_of
+    from elicit_jax.pipeline.evidence import read_raw
     from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
-    from elicit_jax.pipeline.report import write_report
+    from elicit_jax.pipeline.study_kinds import kind_of_data
 
     folder = Path(folder)
     header, rollouts = read_raw(folder)
     findings = None
     if (folder / FINDINGS_FILE).is_file():
         findings = read_findings(folder / FINDINGS_FILE)
-    target = Path(out) if out else folder
-    if header["kind"] == STUDY_DATA_KIND:
-        study = dataclasses.replace(study_from_json(header, rollouts), findings=findings)
-        return write_study_report(study, target, rebuilt_from=folder)
-    data = dataclasses.replace(report_data_of(header, rollouts, folder), findings=findings)
-    return write_report(data, target, rollouts, rebuilt_from=folder)
+    kind = kind_of_data(header["kind"])
+    data = dataclasses.replace(kind.from_raw(header, rollouts, folder), findings=findings)
+    return kind.write_report(data, Path(out) if out else folder, rebuilt_from=folder)

@@ -208,6 +208,22 @@ def run_stage(run_dir: Path, graph: Graph, stage: Stage, fn: StageFn, console: A
     return seconds
 
 
+def stage_progress(label: str, console: Any, show: bool) -> Any:
+    """The overall progress bar of a run (stages done of all, time, the stage running)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn(f"[bold]{label}[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.description}"),
+        console=console,
+        disable=not show,
+        transient=False,
+    )
+
+
 def run_graph(
     graph: Graph,
     run_dir: str | Path,
@@ -235,7 +251,6 @@ def run_graph(
       which stages ran and which were skipped, with timings.
     """
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     run_dir = Path(run_dir)
     missing = sorted({s.kind for s in graph} - set(registry))
@@ -243,16 +258,7 @@ def run_graph(
         raise ElicitError(f"no stage function registered for kind(s): {', '.join(missing)}")
     console = console or Console()
     results: dict[str, StageResult] = {s.id: StageResult(s, "pending") for s in graph}
-    progress = Progress(
-        TextColumn("[bold]pipeline[/]"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.description}"),
-        console=console,
-        disable=not show_progress,
-        transient=False,
-    )
+    progress = stage_progress("pipeline", console, show_progress)
     with run_lock(run_dir) if lock else contextlib.nullcontext(), progress:
         clean_temporaries(run_dir)
         bar = progress.add_task("", total=len(graph))

@@ -21,26 +21,32 @@ reported when the stage graph is built.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from collections.abc import Callable, Mapping
 from importlib import resources
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.spec_parts import (
+from elicit_jax.pipeline.definition import (
+    DEFAULT_KIND,
+    HEAD_KEYS,
     PROFILES,
+    Definition,
+    Layout,
+    check_keys,
+    read_frame,
+    read_toml,
+    sub_table,
+    task_table,
+)
+from elicit_jax.pipeline.spec_parts import (
     CollectionsSpec,
     SensitivitySpec,
     TaskSpec,
-    check_keys,
     check_rollout_methods,
     parse_collections,
     parse_sensitivity,
     parse_task,
-    sub_table,
-    task_table,
 )
 
 __all__ = [  # the parts re-exported: other parsers (elicitation studies) use them from here
@@ -91,49 +97,33 @@ METHODS = (
     "filtered-valley",
     *CURATION_METHODS,
 )
-_PROFILE_PIPELINE_KEYS = {"seeds", "models", "methods", "collect_seed"}
-_TOP_KEYS = {"pipeline", "task", "profiles", "sensitivity", "collections", *SECTIONS}
-_PIPELINE_KEYS = {"name", "description", "profile", "seeds", "models", "methods", "collect_seed"}
-_PROFILE_KEYS = {*SECTIONS, "task", "pipeline", "collections"}
+LAYOUT = Layout(
+    top=frozenset({"pipeline", "task", "profiles", "sensitivity", "collections", *SECTIONS}),
+    head=frozenset({*HEAD_KEYS, "methods"}),
+    sections=SECTIONS,
+    profile=frozenset({*SECTIONS, "task", "pipeline", "collections"}),
+    profile_head=frozenset({"seeds", "models", "methods", "collect_seed"}),
+)
+"""The tables and keys a filtering definition allows."""
 
 
 @dataclasses.dataclass(frozen=True)
-class PipelineSpec:
-    """A parsed pipeline definition under one profile.
+class PipelineSpec(Definition):
+    """A parsed pipeline definition under one profile: what every definition has
+    (:class:`~elicit_jax.pipeline.definition.Definition`; its tasks are :class:`TaskSpec`),
+    and the training sets compared.
 
     Attributes:
-      name: pipeline name.
-      description: one paragraph shown in reports.
-      profile: ``paper`` (the paper's sizes) or ``cpu`` (shrunk to fit a 2-core machine).
-      seeds: training seeds; results are reported as mean (std) over them.
-      models: policy kinds (``mlp``, ``mdn``, ``lstm``).
       methods: training sets compared (``base``, ``naive``, ``filtered``, baselines).
-      collect_seed: base seed of demonstration collection.
-      tasks: the tasks with their operators.
-      sections: stage name -> config overrides (profile overrides already merged in).
-      source: where the definition was read from.
-      text: the definition's exact text, reproduced in reports.
       sensitivity: the λ-sensitivity study, if the definition asks for one.
       collections: the study over several collections, if the definition asks for it.
+      kind: the study kind (:mod:`elicit_jax.pipeline.study_kinds`).
     """
 
-    name: str
-    description: str
-    profile: str
-    seeds: tuple[int, ...]
-    models: tuple[str, ...]
     methods: tuple[str, ...]
-    collect_seed: int
-    tasks: tuple[TaskSpec, ...]
-    sections: Mapping[str, Mapping[str, Any]]
-    source: str
-    text: str
     sensitivity: SensitivitySpec | None = None
     collections: CollectionsSpec | None = None
-
-    def section(self, name: str) -> dict[str, Any]:
-        """A copy of the overrides for stage ``name`` (empty if none)."""
-        return dict(self.sections.get(name, {}))
+    kind: str = DEFAULT_KIND
 
     @property
     def n_cells(self) -> int:
@@ -185,11 +175,7 @@ def load_spec(
       ElicitError: one line naming the file and the offending key.
     """
     path = resolve_path(name_or_path)
-    text = path.read_text()
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ElicitError(f"malformed TOML ({e})", path) from e
+    data, text = read_toml(path)
     spec = (parse or parse_spec)(data, source=str(path), text=text, profile=profile)
     if tasks:
         known = [t.name for t in spec.tasks]
@@ -207,64 +193,21 @@ def parse_spec(
     data: Mapping[str, Any], *, source: str = "<spec>", text: str = "", profile: str | None = None
 ) -> PipelineSpec:
     """Build a :class:`PipelineSpec` from parsed TOML ``data`` (see :func:`load_spec`)."""
-    check_keys(data, _TOP_KEYS, "top level", source)
-    head = data.get("pipeline")
-    if not isinstance(head, Mapping):
-        raise ElicitError("missing [pipeline] table", source)
-    check_keys(head, _PIPELINE_KEYS, "[pipeline]", source)
-    profile = profile or head.get("profile", "paper")
-    if profile not in PROFILES:
-        raise ElicitError(
-            f"unknown profile '{profile}' (choose from {', '.join(PROFILES)})", source
-        )
-    overrides = data.get("profiles", {}).get(profile, {})
-    check_keys(overrides, _PROFILE_KEYS, f"[profiles.{profile}]", source)
-    head_over = sub_table(overrides, "pipeline", source)
-    check_keys(head_over, _PROFILE_PIPELINE_KEYS, f"[profiles.{profile}.pipeline]", source)
-    head = {**head, **head_over}
-    for prof in data.get("profiles", {}):
-        if prof not in PROFILES:
-            raise ElicitError(f"[profiles.{prof}]: unknown profile name", source)
-    sections = {}
-    for name in SECTIONS:
-        merged = {**sub_table(data, name, source), **sub_table(overrides, name, source)}
-        sections[name] = MappingProxyType(merged)
-    tasks_raw = data.get("task", [])
-    if not isinstance(tasks_raw, list) or not tasks_raw:
-        raise ElicitError("needs at least one [[task]] table", source)
-    task_over = sub_table(overrides, "task", source)
-    tasks = tuple(parse_task(task_table(t, task_over, profile, source), source) for t in tasks_raw)
-    if len({t.name for t in tasks}) != len(tasks):
-        raise ElicitError("a task is listed twice", source)
+    frame = read_frame(data, LAYOUT, source, profile)
+    head, sections = frame.head, frame.sections
+    tasks = frame.tasks(lambda raw: parse_task(raw, source), source)
     methods = _methods(head, source)
-    seeds = tuple(int(s) for s in head.get("seeds", (0,)))
-    models = tuple(str(m) for m in head.get("models", ("mlp",)))
-    if not seeds or not models:
-        raise ElicitError("[pipeline] seeds and models must not be empty", source)
-    if len(set(seeds)) != len(seeds):
-        raise ElicitError("[pipeline] seeds are listed twice", source)
-    sensitivity = parse_sensitivity(data, seeds, methods, sections["evaluate"], source)
+    sensitivity = parse_sensitivity(data, frame.seeds, methods, sections["evaluate"], source)
     if sensitivity is not None:
         unknown = sorted(set(sensitivity.tasks) - {t.name for t in tasks})
         if unknown:
             raise ElicitError(f"[sensitivity] tasks {', '.join(unknown)} are not [[task]]s", source)
     collections = None
-    if "collections" in data or "collections" in overrides:
-        raw = {**sub_table(data, "collections", source)}
-        raw |= sub_table(overrides, "collections", source)
-        collections = parse_collections(raw, methods, source)
+    if "collections" in data or "collections" in frame.overrides:
+        collections = parse_collections(frame.table(data, "collections", source), methods, source)
     return PipelineSpec(
-        name=str(head.get("name", Path(source).stem)),
-        description=str(head.get("description", "")).strip(),
-        profile=profile,
-        seeds=seeds,
-        models=models,
+        **frame.definition(source, text, tasks),
         methods=methods,
-        collect_seed=int(head.get("collect_seed", 0)),
-        tasks=tasks,
-        sections=MappingProxyType(sections),
-        source=source,
-        text=text,
         sensitivity=sensitivity,
         collections=collections,
     )

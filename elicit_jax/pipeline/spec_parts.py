@@ -1,6 +1,6 @@
 """The parts of a pipeline definition below ``[pipeline]``: its tasks, the λ-sensitivity study
-and the collections table, each a frozen dataclass with its parser, and the TOML table helpers
-every definition parser shares (:func:`check_keys`, :func:`sub_table`, :func:`task_table`).
+and the collections table, each a frozen dataclass with its parser. The TOML table helpers
+every definition parser shares are :mod:`elicit_jax.pipeline.definition`'s.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.policy.config import PIPELINE_PROFILES as PROFILES
+from elicit_jax.pipeline.definition import ContrastTask, check_keys, contrast_fields, sub_table
 
 SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators", "tasks"}
 COLLECTIONS_KEYS = {"seeds", "methods"}
@@ -28,30 +28,17 @@ TASK_KEYS = {
 
 
 @dataclasses.dataclass(frozen=True)
-class TaskSpec:
-    """One task of the grid and the demonstrations collected for it.
+class TaskSpec(ContrastTask):
+    """One task of the grid and the demonstrations collected for it: D_base and the contrast
+    sets (:class:`~elicit_jax.pipeline.definition.ContrastTask`), and one D_new per operator.
 
     Attributes:
-      name: task name (``square-nut``, ``reach-pillar``, ...).
-      base_operator: the proficient operator whose demos form D_base.
       operators: the new operators, each contributing one D_new.
-      base_episodes: size of D_base.
       new_episodes: size of each D_new.
-      holdout_episodes: held-out base demos (collected with another seed): the compatible
-        contrast set used to fit the thresholds.
-      incompatible_operator: operator known a priori to conflict with the base style.
-      incompatible_episodes: its demos (another seed, disjoint from every D_new): the
-        incompatible contrast set.
     """
 
-    name: str
-    base_operator: str
     operators: tuple[str, ...]
-    base_episodes: int
     new_episodes: int
-    holdout_episodes: int
-    incompatible_operator: str
-    incompatible_episodes: int
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,97 +101,14 @@ def parse_sensitivity(
     return spec
 
 
-def check_keys(table: Any, allowed: set[str], where: str, source: str) -> None:
-    """Check that ``table`` is a table whose keys are all in ``allowed``.
-
-    Args:
-      table: the parsed TOML value.
-      allowed: the keys it may hold.
-      where: how the error names the table (``"[pipeline]"``).
-      source: the spec file, for the error.
-
-    Raises:
-      ElicitError: not a table, or an unknown key (the allowed ones are listed).
-    """
-    if not isinstance(table, Mapping):
-        raise ElicitError(f"{where} must be a table", source)
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ElicitError(
-            f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})",
-            source,
-        )
-
-
-def sub_table(data: Mapping[str, Any], name: str, source: str) -> dict[str, Any]:
-    """The table ``data[name]`` as a dict (empty when absent).
-
-    Raises:
-      ElicitError: ``data[name]`` is not a table.
-    """
-    value = data.get(name, {})
-    if not isinstance(value, Mapping):
-        raise ElicitError(f"[{name}] must be a table", source)
-    return dict(value)
-
-
-def task_table(
-    raw: Any, profile_over: Mapping[str, Any], profile: str, source: str
-) -> dict[str, Any]:
-    """A [[task]] table with the profile's overrides for every task, then its own.
-
-    Args:
-      raw: one parsed ``[[task]]`` entry.
-      profile_over: the profile's ``[profiles.<name>.task]`` overrides for every task.
-      profile: the chosen profile name.
-      source: the spec file, for the error.
-
-    Returns:
-      The task's keys, later layers winning: own keys, profile overrides, own profile block.
-
-    Raises:
-      ElicitError: not a table, or an unknown profile name in the task's ``profiles``.
-    """
-    if not isinstance(raw, Mapping):
-        raise ElicitError("each [[task]] must be a table", source)
-    own = raw.get("profiles", {})
-    if not isinstance(own, Mapping):
-        raise ElicitError(f"[[task]] {raw.get('name')}: profiles must be a table", source)
-    for prof in own:
-        if prof not in PROFILES:
-            raise ElicitError(f"[task.profiles.{prof}]: unknown profile name", source)
-    base = {k: v for k, v in raw.items() if k != "profiles"}
-    return {**base, **profile_over, **sub_table(own, profile, source)}
-
-
 def parse_task(raw: Mapping[str, Any], source: str) -> TaskSpec:
-    """One ``[[task]]`` table (profile overrides merged, :func:`task_table`), validated."""
+    """One ``[[task]]`` table (profile overrides merged), validated."""
     check_keys(raw, TASK_KEYS, "[[task]]", source)
-    for key in ("name", "operators", "incompatible_operator"):
-        if key not in raw:
-            raise ElicitError(f"[[task]] is missing '{key}'", source)
+    fields = contrast_fields(raw, source, ("operators",), (("new_episodes", 50),))
     operators = tuple(str(o) for o in raw["operators"])
     if not operators:
-        raise ElicitError(f"[[task]] {raw['name']}: operators must not be empty", source)
-    counts = {
-        k: int(raw.get(k, d))
-        for k, d in (
-            ("base_episodes", 50),
-            ("new_episodes", 50),
-            ("holdout_episodes", 5),
-            ("incompatible_episodes", 3),
-        )
-    }
-    for k, v in counts.items():
-        if v < 1:
-            raise ElicitError(f"[[task]] {raw['name']}: {k} must be at least 1, got {v}", source)
-    return TaskSpec(
-        name=str(raw["name"]),
-        base_operator=str(raw.get("base_operator", "base")),
-        operators=operators,
-        incompatible_operator=str(raw["incompatible_operator"]),
-        **counts,
-    )
+        raise ElicitError(f"[[task]] {fields['name']}: operators must not be empty", source)
+    return TaskSpec(operators=operators, **fields)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,6 +14,7 @@ from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.curation_stages import resolve_cupid, resolve_quality
+from elicit_jax.pipeline.definition import section_fields
 
 FILTER_METHODS = {
     "filtered": ("m", "pair"),
@@ -25,17 +26,6 @@ FILTER_METHODS = {
     "likelihood": ("likelihood", None),
     "novelty": ("novelty", None),
 }
-
-
-def _fields(cls: type, overrides: Mapping[str, Any], stage: str) -> dict[str, Any]:
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ElicitError(
-            f"[{stage}] unknown option(s) {', '.join(unknown)} "
-            f"(allowed: {', '.join(sorted(names))})"
-        )
-    return dict(overrides)
 
 
 def _split(raw: Mapping[str, Any], meta: tuple[str, ...]) -> tuple[dict, dict]:
@@ -53,7 +43,7 @@ def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
             f"task '{over['task']}' has no operator '{over['operator']}' "
             f"(known: {', '.join(known)})"
         )
-    cfg = CollectConfig(**_fields(CollectConfig, over, "collect"))
+    cfg = CollectConfig(**section_fields(CollectConfig, over, "collect"))
     return {**meta, "collect": dataclasses.asdict(cfg)}
 
 
@@ -61,7 +51,7 @@ def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.policy.config import TrainConfig
 
     meta, over = _split(raw, ("task", "profile", "method", "operator", "study", "point"))
-    cfg = TrainConfig.from_profile(meta["profile"], **_fields(TrainConfig, over, "train"))
+    cfg = TrainConfig.from_profile(meta["profile"], **section_fields(TrainConfig, over, "train"))
     return {**meta, "train": cfg.to_dict()}
 
 
@@ -70,7 +60,7 @@ def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
 
     meta, over = _split(raw, ("task", "model", "policy_seed", "set", "checkpoint"))
     meta.setdefault("checkpoint", "best")
-    return {**meta, "score": config_dict(ScoreConfig(**_fields(ScoreConfig, over, "score")))}
+    return {**meta, "score": config_dict(ScoreConfig(**section_fields(ScoreConfig, over, "score")))}
 
 
 def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
@@ -92,7 +82,7 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
         raise ElicitError("[thresholds] give both lambda and eta (manual), or neither (fit)")
     if meta["compatible_operator"] == meta["incompatible_operator"]:
         raise ElicitError("incompatible_operator must differ from the base operator")
-    fit = FitConfig(**_fields(FitConfig, over, "thresholds"))
+    fit = FitConfig(**section_fields(FitConfig, over, "thresholds"))
     return {**meta, "fit": dataclasses.asdict(fit)}
 
 
@@ -102,7 +92,7 @@ def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
     meta, over = _split(raw, ("task", "model", "method", "operator"))
     method, level = FILTER_METHODS[meta["method"]]
     over = {**over, "method": method, **({"level": level} if level else {})}
-    cfg = FilterConfig(**_fields(FilterConfig, over, "filter"))
+    cfg = FilterConfig(**section_fields(FilterConfig, over, "filter"))
     if cfg.lambda_ is not None:
         raise ElicitError("[filter] takes its thresholds from the fit stage; set [thresholds]")
     return {**meta, "filter": dataclasses.asdict(cfg)}
@@ -116,7 +106,7 @@ def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
     meta, over = _split(raw, (*keys, "selection", "select_seed"))
     over = {"checkpoints": ["all"], "select": "best", **over}
     over["checkpoints"] = tuple(str(c) for c in over["checkpoints"])
-    cfg = EvalConfig(**_fields(EvalConfig, over, "evaluate"))
+    cfg = EvalConfig(**section_fields(EvalConfig, over, "evaluate"))
     return {**meta, **selection_meta(meta, cfg.seed), "evaluate": dataclasses.asdict(cfg)}
 
 
@@ -126,7 +116,7 @@ def _resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
     meta, over = _split(raw, ("task", "operator"))
     return {
         **meta,
-        "deminf": dataclasses.asdict(DemInfConfig(**_fields(DemInfConfig, over, "deminf"))),
+        "deminf": dataclasses.asdict(DemInfConfig(**section_fields(DemInfConfig, over, "deminf"))),
     }
 
 
@@ -134,7 +124,7 @@ def _resolve_demo_score(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.curation.demo_score import DemoScoreConfig
 
     meta, over = _split(raw, ("model", "operator"))
-    cfg = DemoScoreConfig(**_fields(DemoScoreConfig, over, "demo_score"))
+    cfg = DemoScoreConfig(**section_fields(DemoScoreConfig, over, "demo_score"))
     return {**meta, "task": cfg.task, "demo_score": dataclasses.asdict(cfg)}
 
 
@@ -145,8 +135,8 @@ def _resolve_curate(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.curation.deminf import DemInfConfig
 
     meta, _ = _split(raw, ("task", "model", "method", "operator"))
-    filt = FilterConfig(**_fields(FilterConfig, raw.get("filter", {}), "filter"))
-    deminf = DemInfConfig(**_fields(DemInfConfig, raw.get("deminf", {}), "deminf"))
+    filt = FilterConfig(**section_fields(FilterConfig, raw.get("filter", {}), "filter"))
+    deminf = DemInfConfig(**section_fields(DemInfConfig, raw.get("deminf", {}), "deminf"))
     return {
         **meta,
         "rate": "m" if meta["method"].endswith("-matched") else "own",

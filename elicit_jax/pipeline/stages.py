@@ -16,7 +16,7 @@ config and re-runs the stage.
 
 from __future__ import annotations
 
-from elicit_jax.artifact import atomic_path, make_header, write_json
+from elicit_jax.artifact import atomic_path
 from elicit_jax.pipeline.curation_stages import cupid_stage, quality_stage
 from elicit_jax.pipeline.runner import StageContext, StageFn
 from elicit_jax.pipeline.stage_config import resolve_config
@@ -27,6 +27,7 @@ from elicit_jax.pipeline.stages_compat import (
     lambda_valley_stage,
     map_stage,
     score_stage,
+    write_filter_header,
 )
 from elicit_jax.pipeline.stages_policy import (
     DEMOS_FILE,
@@ -107,31 +108,18 @@ def curate_stage(ctx: StageContext) -> None:
         )
         files = [] if result.out_path is None else [DEMOS_FILE, result.log_path.name]
         reason = result.reason if files else result.reason + "; the retraining uses D_base alone"
-        header = make_header(
-            "pipeline-filter",
-            1,
-            config=dict(cfg),
-            inputs=dict(ctx.inputs),
-            thresholds={"lambda": lam, "eta": eta},
-            reason=reason,
-            files=files,
-            trusted=scores.trusted,
-            pairs_in=result.pairs_in,
-            pairs_dropped=result.pairs_dropped,
-            episodes_in=result.episodes_in,
-            episodes_out=result.episodes_out,
-        )
-        write_json(tmp / "artifact.json", header)
+        counts = {"pairs_in": result.pairs_in, "pairs_dropped": result.pairs_dropped}
+        counts |= {"episodes_in": result.episodes_in, "episodes_out": result.episodes_out}
+        write_filter_header(ctx, tmp, (lam, eta), reason, files, counts, trusted=scores.trusted)
 
 
 def report_stage(ctx: StageContext) -> None:
     """Gather the run's artifacts and write the Markdown + HTML report."""
     from elicit_jax.pipeline.evidence import round_trip
-    from elicit_jax.pipeline.gather import gather_with_rollouts
+    from elicit_jax.pipeline.gather import gather
     from elicit_jax.pipeline.report import write_report
 
-    data, rollouts = gather_with_rollouts(ctx.run_dir)
-    write_report(round_trip(data), ctx.output, rollouts)
+    write_report(round_trip(gather(ctx.run_dir)), ctx.output)
 
 
 def real_registry() -> dict[str, StageFn]:

@@ -155,14 +155,39 @@ def write_filter_output(
         files = [DEMOS_FILE, *keep, result.log_path.name]
     elif drop is not None:
         reason += "; every pair dropped, so the retraining uses D_base alone"
+    write_filter_header(ctx, tmp, (cfg.lambda_, cfg.eta), reason, files, counts)
+
+
+def write_filter_header(
+    ctx: StageContext,
+    tmp: Path,
+    thresholds: tuple[float, float],
+    reason: str,
+    files: list[str],
+    counts: dict[str, int],
+    **extra: Any,
+) -> None:
+    """The header of every filter-like stage's output (M-filter, baselines, curation cuts,
+    a session's M-filter): what it kept of its input and why.
+
+    Args:
+      ctx: the stage.
+      tmp: the output directory being written.
+      thresholds: the (λ, η) it ran under.
+      reason: what the filter did, in words.
+      files: the files of ``tmp`` it wrote (none: the retraining uses D_base alone).
+      counts: ``pairs_in``, ``pairs_dropped``, ``episodes_in``, ``episodes_out``.
+      **extra: other header fields (a curation cut: whether its scores are trusted).
+    """
     header = make_header(
         "pipeline-filter",
         1,
         config=dict(ctx.config),
         inputs=dict(ctx.inputs),
-        thresholds={"lambda": cfg.lambda_, "eta": cfg.eta},
+        thresholds={"lambda": thresholds[0], "eta": thresholds[1]},
         reason=reason,
         files=files,
+        **extra,
         **counts,
     )
     write_json(tmp / "artifact.json", header)
@@ -188,18 +213,26 @@ def map_stage(ctx: StageContext) -> None:
     write_png(scores, lam, eta, ctx.output, axis=ctx.config.get("axis", "likelihood-error"))
 
 
-def lambda_point_stage(ctx: StageContext) -> None:
-    """Thresholds with λ at point k of ``points`` evenly spaced over the fit's margin range
-    (η as fitted), for the sensitivity study."""
-    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+def _fitted_margin(ctx: StageContext, refusal: str) -> tuple[float, float, tuple[float, float]]:
+    """The fitted (λ, η) of the stage's ``thresholds`` input and the λ range of the fit's
+    margin; thresholds set by hand, or without a margin, are refused with ``refusal``."""
+    from elicit_jax.compat.thresholds import read_thresholds
 
     lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
     lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
     if fit.get("method", "fit") != "fit" or lo is None:
-        raise ElicitError(
-            "the λ-sensitivity study needs fitted thresholds with a margin, not manual ones",
-            ctx.inputs["thresholds"],
-        )
+        raise ElicitError(refusal, ctx.inputs["thresholds"])
+    return lam, eta, (lo, hi)
+
+
+def lambda_point_stage(ctx: StageContext) -> None:
+    """Thresholds with λ at point k of ``points`` evenly spaced over the fit's margin range
+    (η as fitted), for the sensitivity study."""
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND
+
+    lam, eta, (lo, hi) = _fitted_margin(
+        ctx, "the λ-sensitivity study needs fitted thresholds with a margin, not manual ones"
+    )
     k, n = int(ctx.config["point"]), int(ctx.config["points"])
     point = float(lo + (hi - lo) * k / (n - 1))
     header = make_header(
@@ -220,16 +253,12 @@ def lambda_valley_stage(ctx: StageContext) -> None:
     import numpy as np
 
     from elicit_jax.compat.score_file import read_scores
-    from elicit_jax.compat.thresholds import THRESHOLDS_KIND, read_thresholds
+    from elicit_jax.compat.thresholds import THRESHOLDS_KIND
     from elicit_jax.compat.valley import valley_lambda
 
-    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
-    lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
-    if fit.get("method", "fit") != "fit" or lo is None:
-        raise ElicitError(
-            "the valley rule moves a fitted λ inside its margin; these thresholds were not fitted",
-            ctx.inputs["thresholds"],
-        )
+    lam, eta, (lo, hi) = _fitted_margin(
+        ctx, "the valley rule moves a fitted λ inside its margin; these thresholds were not fitted"
+    )
     cols = ("likelihood", "novelty")
     parts = [
         read_scores(p / SCORES_FILE, cols)[1] for n, p in ctx.inputs.items() if n != "thresholds"

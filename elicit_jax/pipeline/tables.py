@@ -12,7 +12,7 @@ table is :mod:`elicit_jax.pipeline.across`'s. The tables of fits, filters and cu
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -141,15 +141,7 @@ def results_tables(data: ReportData) -> list[tuple[str, Table]]:
 def _results(data: ReportData) -> list[tuple[str, Table]]:
     cells = _cells(data.results)
     out = []
-    for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
-        methods = [
-            m
-            for m in METHOD_LABELS
-            if m != "base" and (task, model, m) in {(k[0], k[1], k[2]) for k in cells}
-        ]
-        ops = list(
-            dict.fromkeys(k[3] for k in cells if k[:2] == (task, model) and k[3] is not None)
-        )
+    for task, model, methods, ops in _grid(data.results, cells):
         header = ["operator", *[METHOD_LABELS[m] for m in methods]]
         base = mean_std(cells.get((task, model, "base", None), []))
         rows = [[f"base only: {base}", *["" for _ in methods]]]
@@ -163,6 +155,19 @@ def _results(data: ReportData) -> list[tuple[str, Table]]:
             )
         )
     return out
+
+
+def _grid(
+    results: Sequence[ResultRow], keys: Iterable[tuple]
+) -> Iterator[tuple[str, str, list[str], list[str]]]:
+    """Each task × model of ``results`` (in order of appearance) with its methods (in
+    :data:`METHOD_LABELS` order, ``base`` aside) and operators (in the order of ``keys``),
+    among result keys (task, model, method, operator)."""
+    keys = list(keys)
+    for task, model in dict.fromkeys((r.task, r.model) for r in results):
+        mine = [k for k in keys if k[:2] == (task, model)]
+        methods = [m for m in METHOD_LABELS if m != "base" and any(k[2] == m for k in mine)]
+        yield task, model, methods, list(dict.fromkeys(k[3] for k in mine if k[3] is not None))
 
 
 def paired_diff(a: Sequence[ResultRow], b: Sequence[ResultRow]) -> PairedDiff | None:
@@ -195,15 +200,7 @@ def difference_tables(data: ReportData) -> list[tuple[str, Table]]:
 def _differences(data: ReportData) -> list[tuple[str, Table]]:
     rows_of = _rows(data.results)
     out = []
-    for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
-        methods = [
-            m
-            for m in METHOD_LABELS
-            if m != "base" and any(k[:3] == (task, model, m) for k in rows_of)
-        ]
-        ops = list(
-            dict.fromkeys(k[3] for k in rows_of if k[:2] == (task, model) and k[3] is not None)
-        )
+    for task, model, methods, ops in _grid(data.results, rows_of):
         base = rows_of.get((task, model, "base", None), [])
         columns = [(m, "base" if m == "naive" else "naive") for m in methods]
         columns += [(m, "base") for m in FROM_BASE if m in methods and base]

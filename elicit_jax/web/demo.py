@@ -30,6 +30,8 @@ RECIPE_FILE = "recipe.json"
 MODEL = "mlp"
 LAYOUT = "pipeline-run/1"
 """The cache directory's layout (part of the hash: a cache of another layout is not reused)."""
+DEMO_SOURCE = "serve --demo"
+"""How the demo's definition is named in its run manifest and errors."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,12 +119,9 @@ def demo_graph(recipe: DemoRecipe) -> Any:
     fitted thresholds need (collect D_base and the two contrast sets, train, score the
     contrast sets, fit)."""
     from elicit_jax.pipeline.graph import Graph
-    from elicit_jax.pipeline.plan import build_graph
-    from elicit_jax.pipeline.spec import parse_spec
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.study_kinds import plan_data
 
-    spec = parse_spec(demo_definition(recipe), source="serve --demo")
-    full = build_graph(spec, resolve_config)
+    _, full, _ = plan_data(demo_definition(recipe), DEMO_SOURCE)
     keep, frontier = set(), set(_targets(recipe))
     while frontier:
         keep |= frontier
@@ -193,8 +192,7 @@ def demo_inputs(
     from elicit_jax.artifact import read_json, write_json
     from elicit_jax.pipeline.run import write_manifest
     from elicit_jax.pipeline.runner import run_graph, run_lock
-    from elicit_jax.pipeline.spec import parse_spec
-    from elicit_jax.pipeline.stages import real_registry
+    from elicit_jax.pipeline.study_kinds import plan_data
 
     digest = recipe_hash(recipe)
     out = Path(root or default_demo_root()) / digest[:16]
@@ -205,10 +203,11 @@ def demo_inputs(
         return _paths(out, recipe)
     echo(f"building the demo inputs for {recipe.task} (once; cached in {out})")
     graph = demo_graph(recipe)
+    spec, _, registry = plan_data(demo_definition(recipe), DEMO_SOURCE)
     out.mkdir(parents=True, exist_ok=True)
     with run_lock(out):
-        write_manifest(out, parse_spec(demo_definition(recipe), source="serve --demo"), graph)
-        run_graph(graph, out, real_registry(), console=console, lock=False)
+        write_manifest(out, spec, graph)
+        run_graph(graph, out, registry(), console=console, lock=False)
         write_json(
             out / RECIPE_FILE,
             {"kind": "serve-demo-inputs", "sha256": digest, "recipe": dataclasses.asdict(recipe)},

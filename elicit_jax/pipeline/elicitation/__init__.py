@@ -1,4 +1,6 @@
-"""Elicitation studies: simulated people through the elicitation interface, end to end.
+"""Elicitation studies: simulated people through the elicitation interface, end to end; what
+the study kind ``elicitation`` adds to the one pipeline engine
+(:mod:`elicit_jax.pipeline.study_kinds`).
 
 * :mod:`.spec` — the study definition (``[pipeline] kind = "elicitation"``);
 * :mod:`.plan` — its stage graph (sessions per person and condition, retraining, evaluation);

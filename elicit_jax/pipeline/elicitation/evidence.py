@@ -35,8 +35,9 @@ def study_to_json(data: StudyData) -> dict[str, Any]:
     return make_header(STUDY_DATA_KIND, 1, seed=seeds[0] if seeds else None, data=body)
 
 
-def study_from_json(header: Mapping[str, Any], rollouts: Any) -> StudyData:
-    """The inverse of :func:`study_to_json`, results recomputed from ``rollouts``."""
+def study_from_json(header: Mapping[str, Any], rollouts: Any, folder: Any = None) -> StudyData:
+    """The inverse of :func:`study_to_json`, results recomputed from ``rollouts`` (``folder``,
+    the report folder read, is not needed: a study's figures are drawn anew)."""
     body = dict(header["data"])
     return StudyData(
         **{

@@ -17,15 +17,8 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
-from elicit_jax.pipeline.evidence import (
-    cell_frame,
-    empty_rollouts,
-    result_rows_of,
-    run_provenance,
-)
-from elicit_jax.pipeline.findings import Findings
-from elicit_jax.pipeline.gather import read_manifest
-from elicit_jax.pipeline.tables import ResultRow
+from elicit_jax.pipeline.gather import kept_counts, walk_run
+from elicit_jax.pipeline.report_rows import RunReport
 
 PERSON_FILE = "person.json"
 """Beside a study's session: the person's traits, starting and final choices, every change."""
@@ -83,15 +76,10 @@ class FilterCount:
 
 
 @dataclasses.dataclass(frozen=True)
-class StudyData:
-    """Everything the study report shows."""
+class StudyData(RunReport):
+    """Everything the study report shows: what every report shows (:class:`RunReport`) and
+    the sessions, D_base's lengths and first states, the thresholds and the M-filter counts."""
 
-    pipeline: str
-    profile: str
-    description: str
-    run_dir: str
-    spec_text: str
-    results: tuple[ResultRow, ...]
     sessions: tuple[SessionData, ...]
     base_lengths: Mapping[str, tuple[float, float, int]]
     base_states: Mapping[str, tuple[Any, ...]]
@@ -99,11 +87,6 @@ class StudyData:
     filters: tuple[FilterCount, ...]
     configs: Mapping[str, Any]
     versions: Mapping[str, str]
-    notes: tuple[str, ...] = ()
-    findings: Findings | None = None
-    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    rollouts: Any = None
-    raw_results: bool = False
 
 
 def _lengths(path: Path) -> tuple[float, float, int]:
@@ -148,90 +131,52 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
 
 
 def _filter_count(cfg: Mapping[str, Any], path: Path) -> FilterCount:
-    h = read_header(path)
-    return FilterCount(
-        task=cfg["task"],
-        model=cfg["model"],
-        person=cfg["person"],
-        pairs_kept=int(h["pairs_in"]) - int(h["pairs_dropped"]),
-        pairs_total=int(h["pairs_in"]),
-        episodes_kept=int(h["episodes_out"]),
-        episodes_total=int(h["episodes_in"]),
-    )
+    where = {"task": cfg["task"], "model": cfg["model"], "person": cfg["person"]}
+    return FilterCount(**where, **kept_counts(read_header(path)))
 
 
 def gather_study(run_dir: str | Path) -> StudyData:
     """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
-    import pandas as pd
-
-    from elicit_jax.pipeline.gather import training_note
-
-    run_dir = Path(run_dir)
-    manifest = read_manifest(run_dir)
-    head = manifest["config"]
-    results: list[ResultRow] = []
     sessions: list[SessionData] = []
     filters: list[FilterCount] = []
     base_lengths: dict[str, tuple[float, float, int]] = {}
     base_states: dict[str, tuple[Any, ...]] = {}
     thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
-    configs: dict[str, dict[str, Any]] = {}
-    missing = []
-    frames = []
-    for stage in manifest["stages"]:
-        kind, cfg, path = stage["kind"], stage["config"], run_dir / stage["output"]
-        configs.setdefault(kind, {})[stage["id"]] = cfg
-        if kind == "study-report":
-            continue
-        if not path.exists():
-            missing.append(stage["id"])
-            continue
-        if kind == "evaluate":
-            frames.append(cell_frame(cfg, path))
-            results += result_rows_of(frames[-1])
-        elif kind == "session":
+
+    def take(stage: Mapping[str, Any], path: Path) -> bool:
+        kind, cfg = stage["kind"], stage["config"]
+        if kind == "session":
             data = session_data(stage, path)
-            if data is None:
-                missing.append(stage["id"])
-            else:
-                sessions.append(data)
-        elif kind == "collect" and cfg.get("role") == "base":
+            sessions.extend([] if data is None else [data])
+            return data is not None
+        if kind == "collect" and cfg.get("role") == "base":
             base_lengths[cfg["collect"]["task"]] = _lengths(path)
             base_states[cfg["collect"]["task"]] = _first_states(path)
         elif kind == "fit-thresholds":
-            data = read_json(path)
-            report = dict(data.get("report", {}))
-            thresholds[(cfg["task"], cfg["model"])] = {
-                "lambda": float(data["lambda"]),
-                "eta": float(data["eta"]),
-                "method": data.get("method", "fit"),
-                "trust": report.get("trust"),
-                "balanced_accuracy": report.get("balanced_accuracy"),
-            }
+            thresholds[(cfg["task"], cfg["model"])] = _thresholds(path)
         elif kind == "filter-session":
             filters.append(_filter_count(cfg, path))
-    notes = [training_note(configs["train"])] if configs.get("train") else []
-    if missing:
-        notes.append(
-            f"{len(missing)} stage(s) have not finished, so their results are absent: "
-            + ", ".join(missing[:8])
-            + (" …" if len(missing) > 8 else "")
-        )
+        return True
+
+    run = walk_run(run_dir, "study-report", take)
     return StudyData(
-        pipeline=head["pipeline"],
-        profile=head["profile"],
-        description=head.get("description", ""),
-        run_dir=str(run_dir),
-        spec_text=head.get("spec_text", ""),
-        results=tuple(results),
+        **run,
         sessions=tuple(sessions),
         base_lengths=base_lengths,
         base_states=base_states,
         thresholds=thresholds,
         filters=tuple(filters),
-        configs=configs,
-        versions=manifest.get("versions", {}),
-        notes=tuple(notes),
-        provenance=run_provenance(manifest, run_dir),
-        rollouts=pd.concat(frames, ignore_index=True) if frames else empty_rollouts(),
     )
+
+
+def _thresholds(path: Path) -> dict[str, Any]:
+    """The fitted (λ, η) a study's sessions and M-filter ran under, and how far to trust it."""
+    data = read_json(path)
+    report = dict(data.get("report", {}))
+    return {
+        "lambda": float(data["lambda"]),
+        "eta": float(data["eta"]),
+        "method": data.get("method", "fit"),
+        "trust": report.get("trust"),
+        "balanced_accuracy": report.get("balanced_accuracy"),
+    }

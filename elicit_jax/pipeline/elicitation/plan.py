@@ -21,7 +21,12 @@ from typing import Any
 
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
 from elicit_jax.pipeline.graph import Graph, Stage
-from elicit_jax.pipeline.plan import collect_seed, threshold_stages
+from elicit_jax.pipeline.plan import (
+    collect_stages,
+    contrast_sets,
+    report_stage,
+    threshold_stages,
+)
 
 ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
@@ -68,49 +73,15 @@ def build_study_graph(spec: StudySpec, resolve: ConfigResolver = _identity) -> G
         for model in spec.models:
             stages += _cell_stages(spec, task, model, resolve)
     kinds = ("collect", "fit-thresholds", "evaluate", "session", "filter-session")
-    stages.append(
-        Stage(
-            id="report",
-            kind="study-report",
-            output="report",
-            config=resolve(
-                "study-report",
-                {
-                    **spec.section("report"),
-                    "pipeline": spec.name,
-                    "profile": spec.profile,
-                    "spec_text": spec.text,
-                },
-            ),
-            inputs={s.id: s.id for s in stages if s.kind in kinds},
-            label="report",
-        )
-    )
+    stages.append(report_stage(spec, "study-report", stages, kinds, resolve))
     return Graph(stages)
 
 
 def _collect_stages(spec: StudySpec, task: StudyTask, resolve: ConfigResolver) -> list[Stage]:
-    sets = [
-        ("base", task.base_operator, task.base_episodes),
-        ("holdout", task.base_operator, task.holdout_episodes),
-        ("incompatible", task.incompatible_operator, task.incompatible_episodes),
-    ]
-    out = []
-    for role, operator, episodes in sets:
-        seed = collect_seed(spec, task, role)
-        raw = {**spec.section("collect"), "task": task.name, "operator": operator}
-        raw |= {"episodes": episodes, "seed": seed, "role": role}
-        out.append(
-            Stage(
-                id=f"collect/{task.name}/{role}",
-                kind="collect",
-                output=f"data/{task.name}/{role}.parquet",
-                config=resolve("collect", raw),
-                seed=seed,
-                label=f"collect {task.name} {role} ({episodes} demos of {operator})",
-            )
-        )
-    return out
+    base = ("base", task.base_operator, task.base_episodes, "base")
+    return collect_stages(
+        spec, task, [base, *contrast_sets(task, ("holdout", "incompatible"))], resolve
+    )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -4,13 +4,11 @@ report's style: the same table rendering, figures inlined as base64 PNG, no exte
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import atomic_path, dumps, make_header
 from elicit_jax.pipeline.elicitation.evidence import write_study_data
 from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.pipeline.elicitation.success import (
@@ -32,15 +30,14 @@ from elicit_jax.pipeline.elicitation.tables import (
     table2,
     threshold_table,
 )
-from elicit_jax.pipeline.evidence import (
-    DATA_FILE,
-    ROLLOUTS_FILE,
-    selection_lines,
-    write_rollouts_table,
-)
-from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.evidence import selection_lines
 from elicit_jax.pipeline.render import html_document, markdown_document
-from elicit_jax.pipeline.report import CPU_NOTE, provenance_blocks, provenance_intro
+from elicit_jax.pipeline.report_folder import (
+    CPU_NOTE,
+    intro_lines,
+    provenance_blocks,
+    write_report_folder,
+)
 from elicit_jax.pipeline.tables import STD_NOTE
 from elicit_jax.render import html_figure
 
@@ -131,16 +128,17 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
 
 
 def _intro(data: StudyData) -> list[str]:
-    lines = [
-        *provenance_intro(data),
-        f"Study **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`.",
-    ]
-    if data.profile == "cpu":
-        lines.append(CPU_NOTE)
-    if data.description:
-        lines.append(data.description)
+    lines = intro_lines(data, "Study")
     lines += [MODEL_NOTE, *selection_lines(data.results), INTERVAL_NOTE, STD_NOTE]
     return [*lines, *_verdicts(data), *data.notes]
+
+
+def summary_tables(data: StudyData) -> list[tuple[str, Any]]:
+    """The tables a finished study prints: Table 2 and, per task × model, its ablation."""
+    tables = [("Base / Naive / Naive + M-filtered / Informed (success %)", table2(data))]
+    return tables + [
+        (f"{t} ({m}): ablation", ablation_table(data, t, m)) for t, m in cells_of(data)
+    ]
 
 
 def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
@@ -178,8 +176,9 @@ def write_study_report(
     data: StudyData, out_dir: str | Path, rebuilt_from: Path | None = None
 ) -> tuple[Path, Path]:
     """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``figures/*.png``,
-    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``;
-    returns the Markdown and HTML paths.
+    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``
+    (:func:`~elicit_jax.pipeline.report_folder.write_report_folder`); returns the Markdown
+    and HTML paths.
 
     Args:
       data: what the report shows (``data.rollouts``: the per-rollout table; ``None``: no
@@ -188,48 +187,25 @@ def write_study_report(
       rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
         are (byte for byte).
     """
-    out_dir = Path(out_dir)
     figures = {}
     for task, model in cells_of(data):
         png = _figure(data, task, model)
         if png is not None:
             figures[f"{task}-{model}-learning.png"] = png
-    with atomic_path(out_dir) as tmp:
-        (tmp / FIGURES).mkdir(parents=True)
-        if rebuilt_from is not None:
-            for name in (ROLLOUTS_FILE, DATA_FILE):
-                (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
-        elif data.rollouts is not None:
-            write_rollouts_table(tmp / ROLLOUTS_FILE, data.rollouts, data.pipeline, data.profile)
-            write_study_data(tmp / DATA_FILE, data)
-        kept = [n for n in (ROLLOUTS_FILE, DATA_FILE) if (tmp / n).is_file()]
-        data = dataclasses.replace(data, raw_results=bool(kept))
+
+    def draw(folder: Path, shown: StudyData) -> tuple[StudyData, list[str]]:
+        (folder / FIGURES).mkdir()
         for name, png in figures.items():
-            (tmp / FIGURES / name).write_bytes(png)
-        (tmp / "report.md").write_text(render_markdown(data, figures))
-        (tmp / "report.html").write_text(render_html(data, figures))
-        findings = write_beside(data.findings, tmp)
-        header = make_header(
-            "study-report",
-            1,
-            config={"pipeline": data.pipeline, "profile": data.profile},
-            n_results=len(data.results),
-            n_sessions=len(data.sessions),
-            run=dict(data.provenance),
-            inputs={name: tmp / name for name in kept},
-            **({"rebuilt_from": str(rebuilt_from)} if rebuilt_from is not None else {}),
-            seed=min((r.seed for r in data.results), default=None),
-            training_seeds=sorted({r.seed for r in data.results}),
-            files=[
-                "report.md",
-                "report.html",
-                *kept,
-                *[f"{FIGURES}/{n}" for n in figures],
-                *([findings["file"]] if findings else []),
-            ],
-            **({"findings": findings} if findings else {}),
-        )
-        for entry in header["inputs"].values():
-            entry["path"] = Path(entry["path"]).name
-        (tmp / "artifact.json").write_text(dumps(header) + "\n")
-    return out_dir / "report.md", out_dir / "report.html"
+            (folder / FIGURES / name).write_bytes(png)
+        return shown, [f"{FIGURES}/{n}" for n in figures]
+
+    return write_report_folder(
+        data,
+        out_dir,
+        kind="study-report",
+        write_data=write_study_data,
+        draw=draw,
+        render=lambda d: (render_markdown(d, figures), render_html(d, figures)),
+        rebuilt_from=rebuilt_from,
+        n_sessions=len(data.sessions),
+    )

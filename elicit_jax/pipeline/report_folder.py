@@ -1,0 +1,141 @@
+"""What every report kind shares (a filtering or models study's report, an elicitation
+study's): its first lines (provenance, seeds, the run, the CPU note), its closing blocks (the
+definition, the stage configs, the versions) and its folder (:func:`write_report_folder`:
+``report.md``, ``report.html``, the raw results, the figures and ``artifact.json``, written
+atomically).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from elicit_jax.artifact import atomic_path, dumps, make_header, provenance_line
+from elicit_jax.pipeline.evidence import DATA_FILE, ROLLOUTS_FILE, write_rollouts_table
+from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.report_rows import RunReport
+
+CPU_NOTE = (
+    "**CPU profile**: network sizes and epochs are shrunk to fit a 2-core machine "
+    "(sizes below); the numbers are not the paper's setting."
+)
+RAW_FILES = (ROLLOUTS_FILE, DATA_FILE)
+"""The raw results a report folder keeps, so that it can be rebuilt."""
+
+
+def training_seeds(data: RunReport) -> list[int]:
+    """The training seeds of a report's results (held-out ones included)."""
+    return sorted({r.seed for r in (*data.results, *getattr(data, "heldout", ()))})
+
+
+def provenance_blocks(data: Any, definition_title: str) -> list[tuple[str, Any]]:
+    """The closing blocks every report ends with: the definition's text, each stage's config
+    and the library versions (``data`` has ``spec_text``, ``configs`` and ``versions``)."""
+    return [
+        (definition_title, ("code", data.spec_text or "(not recorded)")),
+        ("Stage configs", ("code", dumps(dict(data.configs)))),
+        ("Library versions", ("code", dumps(dict(data.versions)))),
+    ]
+
+
+def provenance_intro(data: RunReport) -> list[str]:
+    """The first lines of every study report: where its numbers came from (the run's code
+    commit, versions and command line; the seeds), and how to rebuild it from its folder."""
+    seeds = training_seeds(data)
+    evals = sorted(
+        {s for r in (*data.results, *getattr(data, "heldout", ())) for s in r.eval_seeds}
+    )
+    raw = (
+        f"Raw results: `{ROLLOUTS_FILE}` (one row per rollout) and `{DATA_FILE}` beside this "
+        "report; `elicit-jax report --rebuild <this folder>` recomputes every table, interval "
+        "and figure from them."
+        if data.raw_results
+        else "Raw results: not kept beside this report, so it cannot be rebuilt from its folder."
+    )
+    return [
+        provenance_line(data.provenance),
+        f"Seeds: training {seeds or '–'}, evaluation {evals or '–'}. {raw}",
+    ]
+
+
+def intro_lines(data: RunReport, noun: str) -> list[str]:
+    """The first lines of a report: provenance and seeds (:func:`provenance_intro`), what
+    ran (``noun``: ``Pipeline``, ``Study``) under which profile and where, the CPU note of the
+    ``cpu`` profile and the definition's description."""
+    lines = provenance_intro(data)
+    lines.append(
+        f"{noun} **{data.pipeline}**, profile **{data.profile}**, run directory `{data.run_dir}`."
+    )
+    if data.profile == "cpu":
+        lines.append(CPU_NOTE)
+    if data.description:
+        lines.append(data.description)
+    return lines
+
+
+def write_report_folder(
+    data: RunReport,
+    out_dir: str | Path,
+    *,
+    kind: str,
+    write_data: Callable[[Path, Any], None],
+    draw: Callable[[Path, Any], tuple[Any, list[str]]],
+    render: Callable[[Any], tuple[str, str]],
+    rebuilt_from: Path | None = None,
+    **fields: Any,
+) -> tuple[Path, Path]:
+    """Atomically write a report folder; returns the Markdown and HTML paths.
+
+    The folder holds ``report.md``, ``report.html``, the raw results (``rollouts.parquet``
+    and ``report-data.json``, when ``data.rollouts`` is kept), the figures, the findings and
+    ``artifact.json``.
+
+    Args:
+      data: what the report shows.
+      out_dir: the report folder.
+      kind: the folder's artifact kind (``pipeline-report``, ``study-report``).
+      write_data: writes the kind's ``report-data.json`` of ``data``.
+      draw: ``(folder, data) -> (data, files)``: writes the report's figures into the folder
+        being written, returns ``data`` as rendered and the figure files to list in its header.
+      render: ``data -> (markdown, html)``.
+      rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
+        are (byte for byte) instead of written anew.
+      **fields: further fields of the header (counts of the kind's own rows).
+    """
+    out_dir = Path(out_dir)
+    with atomic_path(out_dir) as tmp:
+        tmp.mkdir(parents=True)
+        if rebuilt_from is not None:
+            for name in RAW_FILES:
+                (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
+        elif data.rollouts is not None:
+            write_rollouts_table(tmp / ROLLOUTS_FILE, data.rollouts, data.pipeline, data.profile)
+            write_data(tmp / DATA_FILE, data)
+        kept = [n for n in RAW_FILES if (tmp / n).is_file()]
+        data, drawn = draw(tmp, dataclasses.replace(data, raw_results=bool(kept)))
+        markdown, html = render(data)
+        (tmp / "report.md").write_text(markdown)
+        (tmp / "report.html").write_text(html)
+        findings = write_beside(data.findings, tmp)
+        seeds = training_seeds(data)
+        header = make_header(
+            kind,
+            1,
+            config={"pipeline": data.pipeline, "profile": data.profile},
+            inputs={name: tmp / name for name in kept},
+            seed=seeds[0] if seeds else None,
+            training_seeds=seeds,
+            run=dict(data.provenance),
+            **({"rebuilt_from": str(rebuilt_from)} if rebuilt_from is not None else {}),
+            n_results=len(data.results),
+            files=["report.md", "report.html", *kept, *drawn]
+            + ([findings["file"]] if findings else []),
+            **({"findings": findings} if findings else {}),
+            **fields,
+        )
+        for entry in header["inputs"].values():
+            entry["path"] = Path(entry["path"]).name
+        (tmp / "artifact.json").write_text(dumps(header) + "\n")
+    return out_dir / "report.md", out_dir / "report.html"
