@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline import stages as filtering_stages
 from elicit_jax.pipeline.definition import DEFAULT_KIND, read_kind
 from elicit_jax.pipeline.elicitation import evidence as study_evidence
 from elicit_jax.pipeline.elicitation import gather as study_gather
@@ -32,7 +33,7 @@ from elicit_jax.pipeline.plan_cell import ConfigResolver
 from elicit_jax.pipeline.report import summary_tables, write_report
 from elicit_jax.pipeline.runner import StageFn
 from elicit_jax.pipeline.spec import load_spec, parse_spec, resolve_path
-from elicit_jax.pipeline.stages import real_registry, resolve_config
+from elicit_jax.pipeline.stages import resolve_config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,7 +45,8 @@ class StudyKind:
       parse: ``(data, *, source, text, profile) -> spec``: the definition parser.
       build_graph: ``(spec, resolve) -> Graph``: the stage graph of a parsed definition.
       resolve: ``(stage kind, raw config) -> config``: each stage's full, validated config.
-      registry: ``() -> {stage kind: function}``: the stage functions.
+      registry: ``() -> {stage kind: function}``: the stage functions (looked up in their
+        module when called, so a test that replaces the module's registry is obeyed).
       gather: ``run_dir -> data``: what the report shows, read from a run directory.
       round_trip: ``data -> data`` as a rebuild reads it back (first report = its rebuilds).
       from_raw: ``(report-data.json header, rollout table, folder) -> data``: a report's data
@@ -71,13 +73,14 @@ class StudyKind:
 STUDY_KINDS = {
     DEFAULT_KIND: StudyKind(
         name=DEFAULT_KIND, parse=parse_spec, build_graph=build_graph, resolve=resolve_config,
-        registry=real_registry, gather=gather, round_trip=round_trip, from_raw=report_data_of,
+        registry=lambda: filtering_stages.real_registry(), gather=gather,
+        round_trip=round_trip, from_raw=report_data_of,
         write_report=write_report, summary=summary_tables, data_kind=DATA_KIND,
     ),
     study_spec.KIND: StudyKind(
         name=study_spec.KIND, parse=study_spec.parse_study,
         build_graph=study_plan.build_study_graph, resolve=study_stages.resolve_study_config,
-        registry=study_stages.study_registry, gather=study_gather.gather_study,
+        registry=lambda: study_stages.study_registry(), gather=study_gather.gather_study,
         round_trip=study_evidence.round_trip_study, from_raw=study_evidence.study_from_json,
         write_report=study_report.write_study_report, summary=study_report.summary_tables,
         data_kind=STUDY_DATA_KIND,
