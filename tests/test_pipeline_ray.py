@@ -151,14 +151,17 @@ def test_elicit_error_in_a_stage_keeps_its_message(cluster, tmp_path):
 _LOCAL_SCRIPT = textwrap.dedent(
     """
     import sys
+    sys.path.insert(0, sys.argv[2])  # elicit_jax through sys.path, as `python -m` in a checkout
+    import elicit_jax
     from elicit_jax.artifact import make_header, read_json, write_json
     from elicit_jax.pipeline.graph import Graph, Stage
     from elicit_jax.pipeline.ray_runner import run_graph_ray
 
     def add(ctx):
+        import elicit_jax
         total = ctx.config["value"] + sum(read_json(p)["value"] for p in ctx.inputs.values())
         write_json(ctx.output, {**make_header("test-add", 1, config=dict(ctx.config)),
-                                "value": total})
+                                "value": total, "package": elicit_jax.__file__})
 
     graph = Graph([Stage("a", "add", "a.json", {"value": 1}),
                    Stage("b", "add", "b.json", {"value": 2}, inputs={"x": "a"})])
@@ -166,23 +169,34 @@ _LOCAL_SCRIPT = textwrap.dedent(
                            show_progress=False)
     import ray
     print("ran", ",".join(result.ran), "connected-after", ray.is_initialized())
+    print("driver-package", elicit_jax.__file__)
     """
 )
 
 
 def test_address_local_starts_and_stops_its_own_cluster(tmp_path):
+    """Also: its workers import the driver's elicit_jax, not the installed one."""
+    import elicit_jax
+
     script = tmp_path / "local_ray.py"
     script.write_text(_LOCAL_SCRIPT)
+    checkout = tmp_path / "checkout"
+    checkout.mkdir()
+    (checkout / "elicit_jax").symlink_to(Path(elicit_jax.__file__).parent)
     out = subprocess.run(
-        [sys.executable, str(script), str(tmp_path / "run")],
+        [sys.executable, str(script), str(tmp_path / "run"), str(checkout)],
         capture_output=True,
         text=True,
         timeout=120,
         env={**os.environ, "RAY_ADDRESS": ""},
+        cwd=tmp_path,  # Ray puts the driver's folder first on its workers' sys.path
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert "ran a,b connected-after False" in out.stdout
-    assert read_json(tmp_path / "run" / "b.json")["value"] == 3  # 2 + a's 1
+    b = read_json(tmp_path / "run" / "b.json")
+    assert b["value"] == 3  # 2 + a's 1
+    assert f"driver-package {checkout}" in out.stdout
+    assert b["package"].startswith(str(checkout)), b["package"]
 
 
 def test_missing_ray_is_a_one_line_install_hint(monkeypatch):

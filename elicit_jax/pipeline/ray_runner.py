@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import elicit_jax
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.runner import (
@@ -58,6 +60,8 @@ def ray_session(address: str) -> Iterator[Any]:
       address: ``local`` (start a private Ray instance on this machine, shut down afterwards),
         ``auto`` (the cluster started with ``ray start`` on this machine), ``HOST:PORT`` (a
         cluster's GCS address, driver on a cluster node) or ``ray://HOST:PORT`` (Ray Client).
+        A local instance's workers import the driver's elicit_jax
+        (:func:`driver_pythonpath`).
         If this process is already connected (``ray.init`` was called), that connection is
         used whatever the address.
     """
@@ -68,6 +72,7 @@ def ray_session(address: str) -> Iterator[Any]:
     kwargs: dict[str, Any] = {"address": address, "log_to_driver": True}
     if address == "local":
         kwargs["include_dashboard"] = False
+        kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": driver_pythonpath()}}
     try:
         ray.init(**kwargs)
     except (ConnectionError, RuntimeError, ValueError) as e:
@@ -76,6 +81,18 @@ def ray_session(address: str) -> Iterator[Any]:
         yield ray
     finally:
         ray.shutdown()
+
+
+def driver_pythonpath() -> str:
+    """``PYTHONPATH`` for a local cluster's workers: the driver's own elicit_jax comes first.
+
+    A driver that found elicit_jax through ``sys.path`` (``python -m`` from a checkout, a
+    notebook's ``sys.path.insert``) would otherwise have workers that import whichever
+    elicit_jax is installed, and record that code's commit for the stages they run.
+    """
+    root = str(Path(elicit_jax.__file__).absolute().parent.parent)
+    inherited = os.environ.get("PYTHONPATH", "")
+    return os.pathsep.join(p for p in (root, inherited) if p)
 
 
 def stage_payload(stage: Stage) -> dict[str, Any]:
