@@ -30,14 +30,14 @@ def test_an_edited_quote_fails(tmp_path):
     readme = (ROOT / "README.md").read_text()
     (tmp_path / "README.md").write_text(readme)
     assert check_file(tmp_path / "README.md", tmp_path) == []
-    # HG-DAgger's informed cell, 32.0, edited to 34.0
-    assert "| Informed HG-DAgger | 32.0 (10.5) |" in readme
+    # HG-DAgger's informed cell, 40.6, edited to 42.6
+    assert "| Informed HG-DAgger | 40.6 (7.1) |" in readme
     edited = readme.replace(
-        "| Informed HG-DAgger | 32.0 (10.5) |", "| Informed HG-DAgger | 34.0 (10.5) |"
+        "| Informed HG-DAgger | 40.6 (7.1) |", "| Informed HG-DAgger | 42.6 (7.1) |"
     )
     (tmp_path / "README.md").write_text(edited)
     (problem,) = check_file(tmp_path / "README.md", tmp_path)
-    assert "34.0 10.5 not in docs/results/elicitation-cpu-round-nut/report.md" in problem
+    assert "42.6 7.1 not in docs/results/elicitation-cpu-round-nut/report.md" in problem
     # a quote naming a report that is not there
     (tmp_path / "README.md").write_text("<!-- from docs/results/nope/report.md -->\n| 1.5 |\n")
     assert "does not exist" in check_file(tmp_path / "README.md", tmp_path)[0]
