@@ -94,6 +94,21 @@ def _installed_commit() -> str:
     return "unknown (not a git checkout)"
 
 
+COMMAND_ENV = "ELICIT_JAX_COMMAND"
+"""Environment variable holding the command that asked for the work, set where the process
+running it is not the one the user started (a Ray worker runs a stage of the driver's
+``pipeline run``; without it the worker would record its own launcher's command line)."""
+
+
+def current_command() -> str:
+    """The command line that asked for what this process makes: :data:`COMMAND_ENV` when set,
+    else this process's own arguments (the program's file name, then its arguments)."""
+    given = os.environ.get(COMMAND_ENV)
+    if given:
+        return given
+    return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""
+
+
 def provenance() -> dict[str, Any]:
     """Where an artifact made now comes from: code commit and dirty flag, the command line,
     the elicit-jax and library versions and the UTC time (kept under
@@ -103,7 +118,7 @@ def provenance() -> dict[str, Any]:
         **code_commit(),
         "elicit_jax": versions.get("elicit-jax", "unknown"),
         "versions": versions,
-        "command": shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else "",
+        "command": current_command(),
         "python": platform.python_version(),
         "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }

@@ -286,4 +286,3 @@ def test_nothing_points_outside_the_repository():
         if outside.search(line)
     ]
     assert hits == []
-

@@ -175,7 +175,8 @@ _LOCAL_SCRIPT = textwrap.dedent(
 
 
 def test_address_local_starts_and_stops_its_own_cluster(tmp_path):
-    """Also: its workers import the driver's elicit_jax, not the installed one."""
+    """Also: its workers import the driver's elicit_jax, not the installed one, and record the
+    driver's command line, not their own."""
     import elicit_jax
 
     script = tmp_path / "local_ray.py"
@@ -197,6 +198,8 @@ def test_address_local_starts_and_stops_its_own_cluster(tmp_path):
     assert b["value"] == 3  # 2 + a's 1
     assert f"driver-package {checkout}" in out.stdout
     assert b["package"].startswith(str(checkout)), b["package"]
+    command = b["provenance"]["command"]
+    assert command == f"local_ray.py {tmp_path / 'run'} {checkout}", command
 
 
 def test_missing_ray_is_a_one_line_install_hint(monkeypatch):

@@ -15,8 +15,9 @@ def _file(tmp_path, report, scale=None):
     scores = tmp_path / "scores.txt"  # not a scores artifact: raw units unless patched below
     scores.write_text("hand-set")
     path = tmp_path / "t.json"
-    write_thresholds(path, lambda_=0.25, eta=0.125, method="hand", scores_path=scores,
-                     config={}, report=report)
+    write_thresholds(
+        path, lambda_=0.25, eta=0.125, method="hand", scores_path=scores, config={}, report=report
+    )
     if scale is not None:
         data = json.loads(path.read_text())
         data["action_scale"] = scale
@@ -27,7 +28,12 @@ def _file(tmp_path, report, scale=None):
 def test_a_preset_and_a_given_pair_resolve_to_their_numbers():
     t = resolve_thresholds(None, None, None, "square-nut")
     assert (t.pair, t.source, t.file, t.verdict, t.verdict_line()) == (
-        (0.4, 0.05), "preset square-nut", None, None, None)
+        (0.4, 0.05),
+        "preset square-nut",
+        None,
+        None,
+        None,
+    )
     t = resolve_thresholds(None, 0.3, 0.5)
     assert (t.lam, t.eta, t.source) == (0.3, 0.5, "given")
     assert resolve_thresholds(None, None, None) is None
@@ -35,13 +41,16 @@ def test_a_preset_and_a_given_pair_resolve_to_their_numbers():
         t.lam = 1.0
 
 
-@pytest.mark.parametrize("args, message", [
-    ((None, 0.3, None), "--lambda and --eta go together"),
-    ((None, 0.3, 0.5, "square-nut"), "give only one of"),
-    ((None, None, None, "no-such"), "unknown preset 'no-such'"),
-    ((None, float("nan"), 0.5), "finite"),
-    ((None, None, None, "round-nut", "std"), "--preset round-nut is in raw action units"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        ((None, 0.3, None), "--lambda and --eta go together"),
+        ((None, 0.3, 0.5, "square-nut"), "give only one of"),
+        ((None, None, None, "no-such"), "unknown preset 'no-such'"),
+        ((None, float("nan"), 0.5), "finite"),
+        ((None, None, None, "round-nut", "std"), "--preset round-nut is in raw action units"),
+    ],
+)
 def test_bad_flags_are_one_line_errors(args, message):
     with pytest.raises(ElicitError, match=message):
         resolve_thresholds(*args)
@@ -67,7 +76,6 @@ def test_a_file_without_a_recorded_verdict_is_noted(tmp_path):
     bad = Verdict(problems=("one demonstration per set",)).to_dict()
     line = resolve_thresholds(_file(tmp_path, {"trust": bad}), None, None).verdict_line()
     assert line.startswith("warning: ") and "one demonstration per set" in line
-
 
 
 def test_without_thresholds_score_takes_the_tasks_preset_or_borrows_square_nuts():

@@ -39,6 +39,7 @@ from elicit_jax.pipeline.runner import (
     stage_progress,
     stage_up_to_date,
 )
+from elicit_jax.provenance import COMMAND_ENV, current_command
 
 RAY_HINT = "pip install 'elicit-jax[ray]'"
 
@@ -109,7 +110,11 @@ def stage_payload(stage: Stage) -> dict[str, Any]:
 
 
 def execute_remote(
-    run_dir: str, payload: dict[str, Any], upstream: list[dict[str, Any]], fn_bytes: bytes
+    run_dir: str,
+    payload: dict[str, Any],
+    upstream: list[dict[str, Any]],
+    fn_bytes: bytes,
+    command: str,
 ) -> tuple[float, str]:
     """Body of a stage's Ray task: set up JAX, rebuild the stage, run it, record it.
 
@@ -119,6 +124,8 @@ def execute_remote(
       upstream: payloads of the stages it reads from (only their ids and outputs are used).
       fn_bytes: the stage function, pickled on the driver and unpickled here after
         :func:`elicit_jax.runtime.configure`.
+      command: the driver's command line, recorded in the provenance of what the stage
+        writes (instead of the worker process's own).
 
     Returns:
       seconds the stage took, and what it printed on its console (without progress bars,
@@ -127,6 +134,7 @@ def execute_remote(
     from elicit_jax.runtime import configure
 
     configure()
+    os.environ[COMMAND_ENV] = command
     import io
 
     from ray import cloudpickle
@@ -256,7 +264,11 @@ def _drive(
                         continue
                     upstream = [stage_payload(graph[d]) for d in stage.inputs.values()]
                     ref = remote.remote(
-                        str(run_dir), stage_payload(stage), upstream, pickled[stage.kind]
+                        str(run_dir),
+                        stage_payload(stage),
+                        upstream,
+                        pickled[stage.kind],
+                        current_command(),
                     )
                     state.running[ref] = stage
         if not state.running:
