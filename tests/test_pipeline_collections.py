@@ -16,6 +16,7 @@ from elicit_jax.pipeline.across import (
     format_collections_diff,
     paired_by_collection,
 )
+from elicit_jax.pipeline.evidence import selection_meta
 from elicit_jax.pipeline.plan import COLLECTION_STRIDE, build_graph
 from elicit_jax.pipeline.spec import load_spec, parse_spec
 from elicit_jax.pipeline.tables import ReportData, ResultRow, results_tables
@@ -167,6 +168,34 @@ def test_shipped_filtering_cpu_runs_three_collections():
     score = graph["score/round-nut/mlp/mild"]
     assert score.inputs["thresholds"] == "fit-thresholds/round-nut/mlp"
     assert "thresholds" not in graph["score/round-nut/mlp/contrast"].inputs
+
+
+def test_shipped_phenomenon_is_base_and_naive_on_five_collections():
+    """The phenomenon on the pipeline engine: per task, Base and Naive per operator on 5
+    collections × 3 training seeds, nothing else (no contrast sets, scores or filters)."""
+    spec = load_spec("phenomenon", "paper")
+    assert spec.methods == ("base", "naive") and spec.seeds == (0, 1, 2)
+    assert spec.collections.seeds == (0, 1, 2, 3, 4)
+    graph = build_graph(spec)
+    kinds = sorted({s.kind for s in graph})
+    assert kinds == ["collect", "evaluate", "report", "train"]
+    per_task = 5 * (1 + 2)  # collections × (Base + Naive per operator)
+    assert sum(s.kind == "train" for s in graph) == 3 * per_task
+    train = graph["train/square-nut/mlp/naive/conflict-flip-pause"]
+    assert (train.config["hidden"], train.config["ensemble_size"], train.config["epochs"]) == (
+        [256, 256], 2, 150,
+    )  # fmt: skip
+    evaluate = graph["evaluate/square-nut/mlp/base"].config
+    assert selection_meta(evaluate, 0) == {"selection": "heldout", "select_seed": 100}
+
+
+def test_shipped_robosuite_phenomenon_evaluates_the_final_checkpoint_only():
+    spec = load_spec("phenomenon-robosuite", "paper", ("robosuite-square",))
+    graph = build_graph(spec)
+    assert sum(s.kind == "train" for s in graph) == 5 * (1 + 3)
+    evaluate = graph["evaluate/robosuite-square/mlp/naive-conflict-flip-pause"].config
+    assert evaluate["checkpoints"] == ["final"]
+    assert selection_meta(evaluate, 0) == {"selection": "reported"}
 
 
 # --- the across-collections table -------------------------------------------------------------

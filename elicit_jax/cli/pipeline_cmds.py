@@ -26,7 +26,8 @@ def _tasks(value: str | None) -> tuple[str, ...] | None:
 def pipeline_run(
     definition: str = typer.Argument(
         ...,
-        help="A pipeline TOML file, or a shipped one: quickstart, filtering, models, elicitation.",
+        help="A pipeline TOML file, or a shipped one: quickstart, filtering, models, elicitation, "
+        "phenomenon, robosuite, phenomenon-robosuite.",
     ),
     profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),

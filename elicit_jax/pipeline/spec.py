@@ -137,7 +137,7 @@ def builtin_dir() -> Path:
 
 
 def builtin_names() -> list[str]:
-    """Names of the shipped definitions (quickstart, filtering, models, elicitation)."""
+    """Names of the shipped definitions (the TOML files in :func:`builtin_dir`)."""
     return sorted(p.stem for p in builtin_dir().glob("*.toml"))
 
 
