@@ -19,9 +19,14 @@ import os
 import time
 
 import numpy as np
-from bench_rollouts import OBS, log, paper_policy
+from bench_score import paper_policy
+from bench_score_report import OBS
 
 from elicit_jax.sim.env import make_task
+
+
+def log(name: str, value: object) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {name}: {value}", flush=True)
 
 
 def bench_robosuite_serial(spec, policy, seeds: np.ndarray, horizon: int, barrier=None) -> dict:

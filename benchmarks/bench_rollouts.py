@@ -59,7 +59,7 @@ configure(mjx=True)
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from bench_score import bench_policy  # noqa: E402
+from bench_score import paper_policy  # noqa: E402
 
 from elicit_jax.sim.env import make_task  # noqa: E402
 from elicit_jax.sim.evaluate import rollout_mujoco_policy  # noqa: E402
@@ -70,11 +70,6 @@ HIDDEN = (1024, 1024)
 MEMBERS = 5
 OBS, ACT = 23, 7
 FLOP_PER_STEP = 2 * MEMBERS * (OBS * 1024 + 1024 * 1024 + 1024 * ACT)  # 10.8 MFLOP
-
-
-def paper_policy():
-    """The paper's policy (5 MLPs of 1024-1024, no dropout), as :mod:`bench_score` builds it."""
-    return bench_policy(HIDDEN[0], dropout=0.0)
 
 
 _members = jax.jit(lambda p, o: p.members(o))

@@ -104,6 +104,12 @@ def spread(values: list[float]) -> dict[str, float]:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
+def paper_policy():
+    """The paper's policy (5 MLPs of 1024-1024) without dropout, as the rollout benchmarks
+    act with it."""
+    return bench_policy(HIDDEN, dropout=0.0)
+
+
 def bench_policy(hidden: int, mean=None, std=None, dropout: float = 0.5):
     """The benchmarked policy: the paper's ensemble of K MLPs with two ``hidden``-unit layers
     on OBS-dim observations (normalized by ``mean``/``std`` when given), seed 0."""
