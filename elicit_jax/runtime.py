@@ -15,6 +15,10 @@ MJX_CPU_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 CACHE_ENV = "ELICIT_JAX_CACHE_DIR"
 MJX_MIN_THREADS = 4
 LOG_ENV = "ELICIT_JAX_LOG"
+THREADS_OWNER_ENV = "ELICIT_JAX_PJRT_NPROC_DEFAULT"
+"""Set (to ``1``) when :func:`configure` chose ``PJRT_NPROC``, so that a child process (a Ray
+worker inherits its driver's environment) may size it anew for its own CPUs; a user's
+``PJRT_NPROC`` never carries it and is left alone."""
 
 
 def default_cache_dir() -> Path:
@@ -25,7 +29,7 @@ def default_cache_dir() -> Path:
     return Path(base) / "elicit-jax" / "jax"
 
 
-def configure(cache_dir: Path | None = None, *, mjx: bool = False) -> None:
+def configure(cache_dir: Path | None = None, *, mjx: bool = False, cpus: int | None = None) -> None:
     """Set XLA flags, XLA's CPU thread count and JAX's compilation cache via the environment.
 
     Must run before JAX is imported. User-set ``XLA_FLAGS``, ``PJRT_NPROC`` and
@@ -38,9 +42,15 @@ def configure(cache_dir: Path | None = None, *, mjx: bool = False) -> None:
     Args:
       cache_dir: cache location; defaults to :func:`default_cache_dir`.
       mjx: this process will step MJX on the CPU.
+      cpus: the CPUs this process's work may use, when fewer than it can run on (a Ray task
+        holding one CPU of two); a ``PJRT_NPROC`` inherited from a parent's
+        :func:`configure` is sized anew for them.
     """
     os.environ.setdefault("XLA_FLAGS", MJX_CPU_XLA_FLAGS)
-    os.environ.setdefault("PJRT_NPROC", str(cpu_threads(mjx)))
+    ours = os.environ.get(THREADS_OWNER_ENV) == "1"
+    if "PJRT_NPROC" not in os.environ or (ours and cpus is not None):
+        os.environ["PJRT_NPROC"] = str(cpu_threads(mjx, cpus))
+        os.environ[THREADS_OWNER_ENV] = "1"
     if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
         path = cache_dir or default_cache_dir()
         try:
@@ -52,9 +62,10 @@ def configure(cache_dir: Path | None = None, *, mjx: bool = False) -> None:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
 
 
-def cpu_threads(mjx: bool = False) -> int:
-    """XLA CPU threads for a process: one per CPU; at least :data:`MJX_MIN_THREADS` with MJX."""
-    cpus = available_cpus()
+def cpu_threads(mjx: bool = False, cpus: int | None = None) -> int:
+    """XLA CPU threads for a process: one per CPU (``cpus``, default all it may run on); at
+    least :data:`MJX_MIN_THREADS` with MJX."""
+    cpus = max(1, int(cpus)) if cpus is not None else available_cpus()
     return max(MJX_MIN_THREADS, cpus) if mjx else cpus
 
 

@@ -19,6 +19,7 @@ from elicit_jax.artifact import make_header, read_json, write_json
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.runner import StageContext, record_path, run_graph
+from elicit_jax.runtime import THREADS_OWNER_ENV
 
 ray = pytest.importorskip("ray")
 # Ray forks-and-execs its own processes from a driver that may already have imported JAX.
@@ -35,7 +36,8 @@ def add_stage(ctx: StageContext) -> None:
     for path in ctx.inputs.values():
         total += read_json(path)["value"]
     header = make_header("test-add", 1, config=dict(ctx.config), inputs=dict(ctx.inputs))
-    header.update(value=total, pid=os.getpid(), xla_flags=os.environ.get("XLA_FLAGS", ""))
+    header.update(value=total, pid=os.getpid(), xla_flags=os.environ.get("XLA_FLAGS", ""),
+                  pjrt_nproc=os.environ.get("PJRT_NPROC"))  # fmt: skip
     write_json(ctx.output, header)
 
 
@@ -104,6 +106,9 @@ def test_grid_on_ray_matches_local_executor_and_second_run_skips(cluster, tmp_pa
     assert out["kind"] == "test-add" and "schema_version" in out
     assert out["pid"] != os.getpid()  # the work happened in a Ray worker process
     assert "--xla_cpu_use_fusion_emitters=false" in out["xla_flags"]  # runtime configured
+    # each task holds 1 CPU: XLA's pool is sized to it, unless the user set PJRT_NPROC
+    ours = os.environ.get(THREADS_OWNER_ENV) == "1"
+    assert out["pjrt_nproc"] == ("1" if ours else os.environ.get("PJRT_NPROC"))
     assert record_path(tmp_path / "ray", graph["report"]).exists()
     assert not list((tmp_path / "ray").rglob(".*.tmp"))
 

@@ -20,6 +20,7 @@ def test_threads_per_workload(monkeypatch):
 def test_configure_sizes_the_pool_and_keeps_a_user_setting(monkeypatch):
     monkeypatch.setattr(runtime, "available_cpus", lambda: 2)
     monkeypatch.delenv("PJRT_NPROC", raising=False)
+    monkeypatch.delenv(runtime.THREADS_OWNER_ENV, raising=False)
     runtime.configure()
     assert os.environ["PJRT_NPROC"] == "2"
     monkeypatch.delenv("PJRT_NPROC")
@@ -28,6 +29,26 @@ def test_configure_sizes_the_pool_and_keeps_a_user_setting(monkeypatch):
     monkeypatch.setenv("PJRT_NPROC", "3")
     runtime.configure(mjx=True)
     assert os.environ["PJRT_NPROC"] == "3"
+
+
+def test_a_child_given_fewer_cpus_resizes_an_inherited_default_only(monkeypatch):
+    """A Ray task holding 1 CPU of 2 inherits its driver's PJRT_NPROC=2: sized anew to 1 when
+    elicit-jax chose the 2, kept when the user did."""
+    monkeypatch.setattr(runtime, "available_cpus", lambda: 2)
+    monkeypatch.delenv("PJRT_NPROC", raising=False)
+    monkeypatch.delenv(runtime.THREADS_OWNER_ENV, raising=False)
+    runtime.configure()  # the driver
+    assert (os.environ["PJRT_NPROC"], os.environ[runtime.THREADS_OWNER_ENV]) == ("2", "1")
+    runtime.configure()  # a child told nothing more keeps it
+    assert os.environ["PJRT_NPROC"] == "2"
+    runtime.configure(cpus=1)  # a one-CPU task
+    assert os.environ["PJRT_NPROC"] == "1"
+    runtime.configure(mjx=True, cpus=1)
+    assert os.environ["PJRT_NPROC"] == "4"
+    monkeypatch.delenv(runtime.THREADS_OWNER_ENV)
+    monkeypatch.setenv("PJRT_NPROC", "3")  # the user's
+    runtime.configure(cpus=1)
+    assert os.environ["PJRT_NPROC"] == "3" and runtime.THREADS_OWNER_ENV not in os.environ
 
 
 def test_mjx_refuses_a_pool_that_deadlocks_it(monkeypatch):
