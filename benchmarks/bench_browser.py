@@ -47,17 +47,9 @@ from pathlib import Path
 
 from machine import busy_cores, busy_text
 
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",
-    "--use-angle=swiftshader",
-]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "web"))
+from chromium import FLAGS  # the browser tests' headless flags: the same browser
+
 # In the page: count drawn frames, press keys, time each key to the first drawn move.
 PROBE = """(duration) => new Promise((resolve) => {
   const view = window.elicit.view;
