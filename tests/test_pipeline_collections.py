@@ -180,7 +180,7 @@ def test_shipped_phenomenon_is_base_and_naive_on_five_collections():
     kinds = sorted({s.kind for s in graph})
     assert kinds == ["collect", "evaluate", "report", "train"]
     per_task = 5 * (1 + 2)  # collections × (Base + Naive per operator)
-    assert sum(s.kind == "train" for s in graph) == 3 * per_task
+    assert sum(s.kind == "train" for s in graph) == 4 * per_task
     train = graph["train/square-nut/mlp/naive/conflict-flip-pause"]
     assert (train.config["hidden"], train.config["ensemble_size"], train.config["epochs"]) == (
         [256, 256], 2, 150,
