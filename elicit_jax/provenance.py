@@ -102,11 +102,16 @@ running it is not the one the user started (a Ray worker runs a stage of the dri
 
 def current_command() -> str:
     """The command line that asked for what this process makes: :data:`COMMAND_ENV` when set,
-    else this process's own arguments (the program's file name, then its arguments)."""
+    else this process's own arguments (the program's file name, then its arguments;
+    ``python -c …`` for code given on the command line, which Python does not keep)."""
     given = os.environ.get(COMMAND_ENV)
     if given:
         return given
-    return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""
+    if not sys.argv:
+        return ""
+    # `python -c CODE ARGS` leaves "-c" in argv[0] and drops CODE: say so rather than "-c ARGS"
+    program = "python -c …" if sys.argv[0] == "-c" else shlex.quote(Path(sys.argv[0]).name)
+    return " ".join([program, *map(shlex.quote, sys.argv[1:])])
 
 
 def provenance() -> dict[str, Any]:

@@ -356,3 +356,15 @@ def test_a_report_shortens_the_machines_absolute_paths_in_the_recorded_command()
     assert "command `elicit-jax quickstart`" in provenance_line(
         {**prov, "command": "elicit-jax quickstart"}
     )
+
+
+def test_the_recorded_command_names_the_program(monkeypatch):
+    from elicit_jax import provenance
+
+    monkeypatch.delenv(provenance.COMMAND_ENV, raising=False)
+    monkeypatch.setattr("sys.argv", ["/venv/bin/elicit-jax", "report", "runs/a b"])
+    assert provenance.current_command() == "elicit-jax report 'runs/a b'"
+    monkeypatch.setattr("sys.argv", ["-c", "report", "runs/x"])  # python -c CODE report runs/x
+    assert provenance.current_command() == "python -c … report runs/x"
+    monkeypatch.setenv(provenance.COMMAND_ENV, "elicit-jax pipeline run filtering")  # Ray task
+    assert provenance.current_command() == "elicit-jax pipeline run filtering"
