@@ -75,6 +75,37 @@ def first_run(tmp_path: Path, text: str):
 
 
 @pytest.mark.slow
+def _check_heldout_evaluation(spec: Path, out: Path, cell: str) -> None:
+    """Every checkpoint rolled out on the selection seed, only the chosen one on the reported
+    seed, and its rollouts exactly those it has when every checkpoint is rolled out there."""
+    import dataclasses
+
+    import pandas as pd
+
+    from elicit_jax.pipeline.evidence import choose_checkpoint
+    from elicit_jax.pipeline.plan import build_graph
+    from elicit_jax.pipeline.spec import load_spec
+    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.sim.evaluate import EvalConfig, evaluate_refs, expand_policies
+
+    stage = build_graph(load_spec(spec), resolve_config)[f"evaluate/reach-pillar/mlp/{cell}"]
+    raw = dict(stage.config["evaluate"])
+    cfg = EvalConfig(**{**raw, "checkpoints": tuple(raw["checkpoints"])})
+    frame = pd.read_parquet(out / stage.output)
+    select = frame[frame["eval_seed"] == stage.config["select_seed"]]
+    report = frame[frame["eval_seed"] == cfg.seed]
+    assert select["checkpoint"].nunique() == 3  # epochs 5, 10 and the best-validation one
+    (chosen,) = report["checkpoint"].unique()
+    assert chosen == choose_checkpoint(select)[0]
+    refs = expand_policies([f"{cell}={out / 'policies/reach-pillar/mlp' / cell}"], ["all"])
+    every = evaluate_refs(refs, dataclasses.replace(cfg, seed=cfg.seed))
+    alone = every[every["checkpoint"] == chosen]
+    cols = ["seed", "rollout", "init_seed", "success", "length"]
+    pd.testing.assert_frame_equal(
+        alone[cols].reset_index(drop=True), report[cols].reset_index(drop=True)
+    )
+
+
 def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
     spec, out, first = first_run(tmp_path, TINY)
     assert len(first.result.ran) == 16
@@ -95,6 +126,7 @@ def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
     assert "data:image/png;base64," in page and "CPU profile" in page
     assert "M-Filtered" in first.report_md.read_text()
     assert read_header(out / "policies/reach-pillar/mlp/base")["config"]["hidden"] == [16, 16]
+    _check_heldout_evaluation(spec, out, "naive-conflict-right")
 
     second = run(spec, out)
     assert second.result.ran == []

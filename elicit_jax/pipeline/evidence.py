@@ -173,6 +173,15 @@ def _per_checkpoint(frame: Any) -> Any:
     )
 
 
+def choose_checkpoint(rollouts: Any) -> tuple[str, float]:
+    """The checkpoint with the highest success among one training seed's rollouts, and that
+    success; ties go to the first checkpoint in the rollouts' order (the earliest saved). The
+    evaluate stage and the report choose with this one rule."""
+    per = _per_checkpoint(rollouts)
+    best = per.loc[per["success"].idxmax()]
+    return str(best["checkpoint"]), float(best["success"])
+
+
 def _cell_rows(cell: Any) -> list[ResultRow]:
     """Per training seed of one cell: the chosen checkpoint and its reported success."""
     first = cell.iloc[0]
@@ -184,11 +193,10 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
             raise ElicitError(
                 f"held-out selection but no selection rollouts for {first['method']} seed {seed}"
             )
-        chosen = _per_checkpoint(choose)
-        best = chosen.loc[chosen["success"].idxmax()]  # ties: the earliest saved
-        single = len(chosen) == 1 and report["checkpoint"].nunique() == 1
-        shown = _per_checkpoint(report).set_index("checkpoint").loc[best["checkpoint"]]
-        reported = report[report["checkpoint"] == best["checkpoint"]]
+        checkpoint, select_success = choose_checkpoint(choose)
+        single = choose["checkpoint"].nunique() == 1 and report["checkpoint"].nunique() == 1
+        shown = _per_checkpoint(report).set_index("checkpoint").loc[checkpoint]
+        reported = report[report["checkpoint"] == checkpoint]
         rows.append(
             ResultRow(
                 task=str(first["task"]),
@@ -199,13 +207,13 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
                 success=float(shown["success"]),
                 mean_length=float(shown["length"]),
                 n_rollouts=int(shown["n"]),
-                checkpoint=str(best["checkpoint"]),
+                checkpoint=checkpoint,
                 init_states=init_states_id(reported["init_seed"].to_numpy()),
                 study=str(first["study"]),
                 point=None if int(first["point"]) < 0 else int(first["point"]),
                 selection="single" if single else str(first["selection"]),
                 eval_seeds=tuple(sorted({int(s) for s in g["eval_seed"]})),
-                select_success=float(best["success"]),
+                select_success=select_success,
                 collection=int(first["collection"]),
             )
         )

@@ -114,10 +114,25 @@ def reuse_training(ctx: StageContext, demos: Any, config: Any, files: Mapping[st
     return True
 
 
+def chosen_refs(refs: list[Any], select: Any) -> list[Any]:
+    """Of ``refs``, each training seed's checkpoint chosen on the selection rollouts
+    ``select`` (an evaluation frame: ``seed``, ``checkpoint``, ``success``), by the report's
+    rule (:func:`elicit_jax.pipeline.evidence.choose_checkpoint`)."""
+    from elicit_jax.pipeline.evidence import choose_checkpoint
+
+    chosen = {int(s): choose_checkpoint(g)[0] for s, g in select.groupby("seed", sort=True)}
+    return [r for r in refs if chosen.get(int(r.seed)) == str(r.checkpoint)]
+
+
 def evaluate_stage(ctx: StageContext) -> None:
-    """Roll out every seed and checkpoint of one training run on the same initial states;
-    with held-out checkpoint selection, also on the selection seed's initial states (the
-    Parquet's ``eval_seed`` column says which rollouts are which)."""
+    """Roll out every seed and checkpoint of one training run on the same initial states.
+
+    With held-out checkpoint selection, every checkpoint is rolled out on the selection seed's
+    initial states and only each training seed's chosen checkpoint on the reported seed's (the
+    Parquet's ``eval_seed`` column says which rollouts are which): the report's numbers need
+    no more, and it saves most of the second evaluation. Rollouts are seeded per initial
+    state, so the chosen checkpoint's rollouts are those it would have had beside the others.
+    """
     import numpy as np
     import pandas as pd
     from rich.progress import Progress
@@ -134,22 +149,27 @@ def evaluate_stage(ctx: StageContext) -> None:
     cfg = EvalConfig(**{**raw, "checkpoints": tuple(raw["checkpoints"])})
     label = Path(ctx.stage.output).stem
     refs = expand_policies([f"{label}={ctx.inputs['policy']}"], cfg.checkpoints)
-    seeds = [cfg.seed]
-    if ctx.config.get("selection") == "heldout":
-        seeds = [int(ctx.config["select_seed"]), cfg.seed]
+    heldout = ctx.config.get("selection") == "heldout"
     frames = []
     with Progress(console=ctx.console, transient=True) as progress:
-        for seed in seeds:
+
+        def roll(refs_now: list[Any], seed: int) -> Any:
             bar = progress.add_task(
                 f"evaluate {label} (evaluation seed {seed}, {cfg.rollouts} rollouts each)",
-                total=len(refs),
+                total=len(refs_now),
             )
             frame = evaluate_refs(
-                refs,
+                refs_now,
                 dataclasses.replace(cfg, seed=seed),
-                lambda ref, success, bar=bar: progress.advance(bar),
+                lambda ref, success: progress.advance(bar),
             )
-            frames.append(frame.assign(eval_seed=np.int32(seed)))
+            return frame.assign(eval_seed=np.int32(seed))
+
+        report_refs = refs
+        if heldout:  # choose on the selection seed; report only the chosen checkpoints
+            frames.append(roll(refs, int(ctx.config["select_seed"])))
+            report_refs = chosen_refs(refs, frames[0])
+        frames.append(roll(report_refs, cfg.seed))
     rollouts = pd.concat(frames, ignore_index=True)
     reported = rollouts[rollouts["eval_seed"] == cfg.seed]
     write_rollouts(ctx.output, rollouts, summarize(reported, cfg.select), cfg, refs)
