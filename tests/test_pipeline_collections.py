@@ -237,3 +237,34 @@ def test_pairs_on_different_initial_states_are_not_compared():
     assert paired_by_collection(a, b, [0]) is None
     b = [dataclasses.replace(b[0], init_states="x")]
     assert paired_by_collection(a, b, [0]) == [[0.25]]
+
+
+_ORDER_SCRIPT = """
+from tests.test_pipeline_collections import _data, _row
+from elicit_jax.pipeline.across import across_tables
+ops = ["same-style", "mild", "conflict-flip-pause", "op-d", "op-e"]
+rows = [_row(c, "base", None, s, 0.5) for c in (0, 1) for s in (0, 1)]
+rows += [_row(c, "naive", op, s, 0.25) for op in ops for c in (0, 1) for s in (0, 1)]
+((_, (_, table)),) = across_tables(_data(rows))
+print(",".join(r[0] for r in table[1:]))
+"""
+
+
+def test_across_table_lists_operators_in_the_study_order_under_any_hash_seed():
+    """The table's rows follow the results (the definition's operator order), not a set's
+    iteration order: string hashing is salted per process, and a report must rebuild byte for
+    byte in another process."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    want = "same-style,mild,conflict-flip-pause,op-d,op-e"
+    for seed in ("0", "1", "2", "3", "4", "5"):
+        env = {**os.environ, "PYTHONHASHSEED": seed, "JAX_PLATFORMS": "cpu"}
+        out = subprocess.run(
+            [sys.executable, "-c", _ORDER_SCRIPT], cwd=root, env=env, capture_output=True,
+            text=True, check=True,
+        )  # fmt: skip
+        assert out.stdout.strip() == want, f"PYTHONHASHSEED={seed}: {out.stdout.strip()}"

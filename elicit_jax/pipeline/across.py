@@ -193,7 +193,13 @@ def across_cells(data: ReportData) -> list[AcrossCell]:
     for task, model in dict.fromkeys((r.task, r.model) for r in data.results):
         base = rows_of.get((task, model, "base", None), [])
         out.append(AcrossCell(task, model, "base", None, _succ(base), None, None))
-        ops = dict.fromkeys(k[3] for k in everywhere if k[:2] == (task, model) and k[3])
+        ops = dict.fromkeys(
+            r.operator
+            for r in data.results
+            if (r.task, r.model) == (task, model)
+            and r.operator
+            and (task, model, r.method, r.operator) in everywhere
+        )
         for op in ops:
             naive = rows_of.get((task, model, "naive", op), [])
             for m in (m for m in METHOD_LABELS if (task, model, m, op) in everywhere):
