@@ -39,7 +39,7 @@ def sensitivity_figure(data: ReportData, out: str | Path) -> list[tuple[str, str
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(cells), figsize=(5.5 * len(cells), 4), squeeze=False)
+    fig, axes = plt.subplots(1, len(cells), figsize=(5.5 * len(cells), 5), squeeze=False)
     for ax, (task, model) in zip(axes[0], cells, strict=True):
         pts = sorted(
             (p for p in data.lambda_points if (p.task, p.model) == (task, model)),
@@ -76,11 +76,13 @@ def sensitivity_figure(data: ReportData, out: str | Path) -> list[tuple[str, str
         ax.set_ylabel("held-out success %")
         ax.set_ylim(0, 100)
         ax.set_title(f"{task}, {model}")
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(
+            fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False
+        )
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
     plt.close(fig)
     caption = (
         "λ sensitivity: held-out success of the M-filtered policy across the fitted margin "
