@@ -14,6 +14,7 @@ import functools
 import json
 import os
 import platform
+import re
 import shlex
 import subprocess
 import sys
@@ -164,6 +165,32 @@ def shown_command(prov: Mapping[str, Any]) -> str:
     return " ".join(
         f"…/{shlex.quote(Path(w).name)}" if w.startswith("/") else shlex.quote(w) for w in words
     )
+
+
+def shown_path(path: str | Path, root: str | Path | None = None) -> str:
+    """A path as a report shows it: a relative path unchanged; an absolute one (a folder of
+    the machine that made it) relative to the folder named like ``root``'s last part when it
+    lies below one, else shortened to ``…/`` and its last part, as :func:`shown_command` does.
+
+    >>> shown_path("/home/me/runs/study/policies/seed0", "runs/study")
+    'policies/seed0'
+    >>> shown_path("/home/me/runs/study")
+    '…/study'
+    """
+    p = Path(path)
+    if not p.is_absolute():
+        return str(p)
+    name = Path(root).name if root is not None else None
+    parts = p.parts
+    if name and name in parts[:-1]:
+        below = parts[len(parts) - parts[::-1].index(name) :]
+        return str(Path(*below))
+    return f"…/{p.name}"
+
+
+def shown_paths_in(text: str, root: str | Path | None = None) -> str:
+    """``text`` with every absolute path in it shown by :func:`shown_path`."""
+    return re.sub(r"(?<![\w.~])/[^\s,;()`'\"]+", lambda m: shown_path(m.group(0), root), text)
 
 
 def runtime_settings() -> dict[str, Any]:

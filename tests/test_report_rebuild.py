@@ -368,3 +368,40 @@ def test_the_recorded_command_names_the_program(monkeypatch):
     assert provenance.current_command() == "python -c … report runs/x"
     monkeypatch.setenv(provenance.COMMAND_ENV, "elicit-jax pipeline run filtering")  # Ray task
     assert provenance.current_command() == "elicit-jax pipeline run filtering"
+
+
+def test_a_report_names_no_folder_of_the_machine_that_ran_the_study(tmp_path):
+    from elicit_jax.artifact import write_json
+
+    text = SPEC.replace('methods = ["base", "naive"]', 'methods = ["base", "naive", "filtered"]')
+    run = _tiny_run(tmp_path, text)  # an absolute run directory, as a Ray worker records it
+    spec = load_spec(tmp_path / "tiny.toml")
+    fit = next(s for s in build_graph(spec, resolve_config) if s.kind == "fit-thresholds")
+    seed_dir = run / "policies" / "reach-pillar" / "mlp" / "base" / "seed0"
+    write_json(
+        run / fit.output,
+        {
+            "lambda": 0.5,
+            "eta": 0.1,
+            "method": "fit",
+            "report": {
+                "training_check": {
+                    "demos": 4,
+                    "rejected": 0,
+                    "source": f"4 scored now under {seed_dir}",
+                },
+                "elsewhere": "/opt/other/place/x.parquet",
+            },
+        },
+    )
+    md, html = render_run_report(run, tmp_path / "report")
+    data = (md.parent / DATA_FILE).read_text()
+    for text in (md.read_text(), html.read_text(), data):
+        assert str(tmp_path) not in text and "/opt/other" not in text
+    assert "run directory `…/run`" in md.read_text()
+    shown = read_json(md.parent / DATA_FILE)["data"]["thresholds"][0]["metrics"]
+    assert (
+        shown["training_check"]["source"]
+        == "4 scored now under policies/reach-pillar/mlp/base/seed0"
+    )
+    assert shown["elsewhere"] == "…/x.parquet"

@@ -27,6 +27,7 @@ from elicit_jax.pipeline.evidence import (
     run_provenance,
 )
 from elicit_jax.pipeline.report_rows import ReportData, ResultRow
+from elicit_jax.provenance import shown_path, shown_paths_in
 
 MANIFEST = "run.json"
 MANIFEST_KIND = "pipeline-run"
@@ -66,9 +67,22 @@ def _length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.Lengt
     return rows
 
 
+def _shown(value: Any, run_dir: Path) -> Any:
+    """``value`` with the absolute paths in its strings shown relative to ``run_dir``
+    (:func:`~elicit_jax.provenance.shown_path`): a report names no folder of the machine."""
+    if isinstance(value, str):
+        return shown_paths_in(value, run_dir)
+    if isinstance(value, Mapping):
+        return {k: _shown(v, run_dir) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(_shown(v, run_dir) for v in value)
+    return value
+
+
 def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
     data = read_json(path)
-    report = dict(data.get("report", {}))
+    run_dir = path.parents[len(Path(stage["output"]).parts) - 1]
+    report = _shown(dict(data.get("report", {})), run_dir)
     cfg = stage["config"]
     method = data.get("method", "fit")
     report.setdefault("margin", report.get("margin_quantile"))
@@ -276,7 +290,7 @@ def walk_run(
         "pipeline": head["pipeline"],
         "profile": head["profile"],
         "description": head.get("description", ""),
-        "run_dir": str(run_dir),
+        "run_dir": shown_path(run_dir),
         "spec_text": head.get("spec_text", ""),
         "results": tuple(result_rows_of(rollouts)) if frames else (),
         "rollouts": rollouts,
