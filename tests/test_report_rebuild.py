@@ -405,3 +405,15 @@ def test_a_report_names_no_folder_of_the_machine_that_ran_the_study(tmp_path):
         == "4 scored now under policies/reach-pillar/mlp/base/seed0"
     )
     assert shown["elsewhere"] == "…/x.parquet"
+
+
+def test_every_committed_report_names_its_run_directory_as_a_relative_path():
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    named = {
+        md.parent.name: line.split("run directory `", 1)[1].split("`", 1)[0]
+        for md in results.glob("*/report.md")
+        for line in md.read_text().splitlines()
+        if "run directory `" in line
+    }
+    assert len(named) >= 9
+    assert {k: v for k, v in named.items() if v.startswith(("/", "…"))} == {}
