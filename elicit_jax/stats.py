@@ -61,9 +61,16 @@ class PairedDiff:
     n: int
 
     @property
+    def no_spread(self) -> bool:
+        """True when every seed's difference is the same, so the interval has no width: it
+        then says nothing about noise (the rollouts' own noise is not in it)."""
+        return self.n > 1 and abs(self.high - self.low) <= 1e-9
+
+    @property
     def excludes_zero(self) -> bool:
-        """True when the whole interval lies on one side of 0 (a difference beyond noise)."""
-        return self.n > 1 and (self.low > 0 or self.high < 0)
+        """True when the whole interval lies on one side of 0 (a difference beyond noise); never
+        for an interval without spread (:attr:`no_spread`)."""
+        return self.n > 1 and not self.no_spread and (self.low > 0 or self.high < 0)
 
 
 def sample_std(values: Sequence[float] | np.ndarray) -> float:
@@ -134,13 +141,16 @@ def welch_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEVE
 
 
 def format_diff(diff: PairedDiff | None, scale: float = 100.0) -> str:
-    """``+10.0 [−5.2, +25.2]`` in points (× ``scale``); ``*`` marks an interval excluding 0."""
+    """``+10.0 [−5.2, +25.2]`` in points (× ``scale``); ``*`` marks an interval excluding 0; a
+    non-zero difference without spread over seeds says it is not a test."""
     if diff is None:
         return "–"
     m = diff.mean * scale
     if diff.n < 2:
         return f"{m:+.1f} (1 seed)"
     mark = " *" if diff.excludes_zero else ""
+    if diff.no_spread and abs(m) >= 0.05:
+        mark = f" (all {diff.n} seeds differ by the same: no spread, not a test)"
     return f"{m:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}"
 
 

@@ -118,3 +118,14 @@ def test_curation_table_says_when_demo_score_is_no_better_than_chance():
     _, body = curation_table(data)
     assert "rollout balanced accuracy 0.50 (no better than chance" in body[0][-1]
     assert "balanced accuracy 0.87" in body[1][-1] and "chance" not in body[1][-1]
+
+
+def test_a_difference_without_spread_over_seeds_is_not_called_beyond_the_noise():
+    # the phenomenon's square-nut collection 0: base 32, 20, 34 and same-style 82, 70, 84
+    d = paired_t_interval([0.82, 0.70, 0.84], [0.32, 0.20, 0.34])
+    assert d.mean == pytest.approx(0.5) and d.no_spread and not d.excludes_zero
+    assert format_diff(d) == (
+        "+50.0 [+50.0, +50.0] (all 3 seeds differ by the same: no spread, not a test)"
+    )
+    same = paired_t_interval([0.4, 0.5], [0.4, 0.5])  # identical policies: exactly no difference
+    assert same.no_spread and format_diff(same) == "+0.0 [+0.0, +0.0]"
