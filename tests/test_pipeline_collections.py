@@ -63,6 +63,16 @@ def test_two_constant_collections_bound_the_interval_by_their_values():
     assert format_collections_diff(d) == "+20.0 [+10.0, +30.0] *; 2/2 collections agree in sign"
 
 
+def test_a_pooled_difference_without_spread_is_not_called_beyond_the_noise():
+    d = collections_interval([[0.1] * 3, [0.1] * 3])  # every pair differs by exactly 10 points
+    assert d.no_spread and not d.excludes_zero
+    assert format_collections_diff(d) == (
+        "+10.0 [+10.0, +10.0] (no spread, not a test); 2/2 collections agree in sign"
+    )
+    same = collections_interval([[0.0] * 3, [0.0] * 3])  # identical policies
+    assert format_collections_diff(same) == "+0.0 [+0.0, +0.0]; 2/2 collections agree in sign"
+
+
 def test_one_collection_resamples_its_training_seeds_only():
     # seeds 0 and 1: a draw's mean is 0 (P = 1/4), 0.5 (1/2) or 1 (1/4)
     d = collections_interval([[0.0, 1.0]])

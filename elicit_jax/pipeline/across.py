@@ -58,9 +58,15 @@ class CollectionsDiff:
     n_boot: int
 
     @property
+    def no_spread(self) -> bool:
+        """True when every pooled difference is the same: an interval of no width, which
+        says nothing about noise."""
+        return self.n_pairs > 1 and abs(self.high - self.low) <= 1e-9
+
+    @property
     def excludes_zero(self) -> bool:
-        """True when the whole interval lies on one side of 0."""
-        return self.n_pairs > 1 and (self.low > 0 or self.high < 0)
+        """True when the whole interval lies on one side of 0; never without spread."""
+        return self.n_pairs > 1 and not self.no_spread and (self.low > 0 or self.high < 0)
 
     @property
     def agreeing(self) -> int:
@@ -136,6 +142,8 @@ def format_collections_diff(diff: CollectionsDiff | None, scale: float = 100.0) 
         return "–"
     k = len(diff.per_collection)
     mark = " *" if diff.excludes_zero else ""
+    if diff.no_spread and abs(diff.mean * scale) >= 0.05:
+        mark = " (no spread, not a test)"
     return (
         f"{diff.mean * scale:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}; "
         f"{diff.agreeing}/{k} collections agree in sign"
