@@ -64,13 +64,22 @@ class PairedDiff:
     def no_spread(self) -> bool:
         """True when every seed's difference is the same, so the interval has no width: it
         then says nothing about noise (the rollouts' own noise is not in it)."""
-        return self.n > 1 and abs(self.high - self.low) <= 1e-9
+        return self.n > 1 and interval_without_spread(self.low, self.high)
 
     @property
     def excludes_zero(self) -> bool:
         """True when the whole interval lies on one side of 0 (a difference beyond noise); never
         for an interval without spread (:attr:`no_spread`)."""
         return self.n > 1 and not self.no_spread and (self.low > 0 or self.high < 0)
+
+
+def interval_without_spread(low: float, high: float) -> bool:
+    """True when an interval has no width (every paired difference the same): it then
+    measures no noise, so it never counts as excluding 0."""
+    return abs(high - low) <= 1e-9
+
+
+NO_SPREAD_NOTE = "no spread, not a test"
 
 
 def sample_std(values: Sequence[float] | np.ndarray) -> float:
@@ -150,7 +159,7 @@ def format_diff(diff: PairedDiff | None, scale: float = 100.0) -> str:
         return f"{m:+.1f} (1 seed)"
     mark = " *" if diff.excludes_zero else ""
     if diff.no_spread and abs(m) >= 0.05:
-        mark = f" (all {diff.n} seeds differ by the same: no spread, not a test)"
+        mark = f" (all {diff.n} seeds differ by the same: {NO_SPREAD_NOTE})"
     return f"{m:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}"
 
 

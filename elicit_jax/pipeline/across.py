@@ -32,6 +32,7 @@ from elicit_jax.pipeline.tables import (
     collections_of,
     mean_std,
 )
+from elicit_jax.stats import NO_SPREAD_NOTE, interval_without_spread
 
 N_BOOT = 10_000
 BOOT_SEED = 0
@@ -61,7 +62,7 @@ class CollectionsDiff:
     def no_spread(self) -> bool:
         """True when every pooled difference is the same: an interval of no width, which
         says nothing about noise."""
-        return self.n_pairs > 1 and abs(self.high - self.low) <= 1e-9
+        return self.n_pairs > 1 and interval_without_spread(self.low, self.high)
 
     @property
     def excludes_zero(self) -> bool:
@@ -143,7 +144,7 @@ def format_collections_diff(diff: CollectionsDiff | None, scale: float = 100.0) 
     k = len(diff.per_collection)
     mark = " *" if diff.excludes_zero else ""
     if diff.no_spread and abs(diff.mean * scale) >= 0.05:
-        mark = " (no spread, not a test)"
+        mark = f" ({NO_SPREAD_NOTE})"
     return (
         f"{diff.mean * scale:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}; "
         f"{diff.agreeing}/{k} collections agree in sign"
