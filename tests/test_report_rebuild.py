@@ -249,6 +249,25 @@ def _committed_studies() -> list[Path]:
     )
 
 
+def test_every_committed_report_keeps_the_raw_results_it_rebuilds_from():
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    reports = sorted(md.parent for md in results.glob("*/report.md"))
+    assert len(reports) >= 10
+    assert reports == _committed_studies()
+
+
+def test_no_committed_report_has_an_unknown_seed_empty_inputs_or_no_commit():
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    for record in sorted(results.glob("*/artifact.json")):
+        head = read_json(record)
+        where = record.parent.name
+        assert isinstance(head["seed"], int) and head["training_seeds"], where
+        assert set(head["inputs"]) == {ROLLOUTS_FILE, DATA_FILE}, where
+        assert len(head["provenance"]["commit"]) == 40, where
+        assert isinstance(head["provenance"]["dirty"], bool), where
+        assert len(head["run"]["commit"]) == 40 and head["run"]["dirty"] is False, where
+
+
 def test_every_committed_study_with_raw_results_rebuilds_byte_for_byte(tmp_path):
     studies = _committed_studies()
     assert [s.name for s in studies if s.name == "quickstart-cpu"] == ["quickstart-cpu"]
