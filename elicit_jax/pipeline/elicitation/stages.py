@@ -17,7 +17,9 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.elicitation.gather import PERSON_FILE
 from elicit_jax.pipeline.runner import StageContext, StageFn
 
-_PLACEHOLDERS = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
+# Session fields only known when the stage runs: stand-ins while the settings are validated,
+# removed again before they are recorded.
+_SET_AT_RUN_TIME = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
 _META = ("task", "model", "person", "condition")
 
 
@@ -27,7 +29,7 @@ def _resolve_session(raw: dict[str, Any]) -> dict[str, Any]:
     meta = {k: raw[k] for k in _META if k in raw}
     fields = {k: v for k, v in raw.items() if k not in ("model", "person", "condition")}
     try:
-        config = SessionConfig.from_dict({**fields, **_PLACEHOLDERS})
+        config = SessionConfig.from_dict({**fields, **_SET_AT_RUN_TIME})
     except ElicitError as e:
         raise ElicitError(f"[session] {e}") from None
     settings = config.to_dict()
