@@ -110,6 +110,10 @@ def test_per_task_profile_overrides_and_task_filter():
     assert [t.name for t in only.tasks] == ["square-nut"]
     assert only.tasks[0].operators == ("same-style", "mild", "conflict-flip-pause")
     assert len(load_spec("filtering", "paper").tasks) == 3
+    # robosuite's cpu study keeps the conflicting D_new only; the paper profile all three
+    rs_cpu, rs_paper = load_spec("robosuite", "cpu"), load_spec("robosuite", "paper")
+    assert {t.operators for t in rs_cpu.tasks} == {("conflict-flip-pause",)}
+    assert {t.operators for t in rs_paper.tasks} == {("same-style", "mild", "conflict-flip-pause")}
     with pytest.raises(ElicitError, match="no task nowhere in this definition"):
         load_spec("filtering", "cpu", tasks=("nowhere",))
 
