@@ -20,7 +20,7 @@ def test_numbers_are_normalised():
 def test_every_quoted_number_is_in_its_report():
     count, problems = check_repository(ROOT)
     assert problems == []
-    assert count >= 2  # the filtering table and HG-DAgger's
+    assert count >= 2  # the filtering tables and HG-DAgger's
 
 
 def test_an_edited_quote_fails(tmp_path):
@@ -30,14 +30,15 @@ def test_an_edited_quote_fails(tmp_path):
     readme = (ROOT / "README.md").read_text()
     (tmp_path / "README.md").write_text(readme)
     assert check_file(tmp_path / "README.md", tmp_path) == []
-    # HG-DAgger's informed cell, 40.6, edited to 42.6
-    assert "| Informed HG-DAgger | 40.6 (7.1) |" in readme
+    # robosuite-square's M-filtered cell, 28.7, edited to 27.8
+    assert "| M-Filtered (pairs, forced fit) | 28.7 (3.1) |" in readme
     edited = readme.replace(
-        "| Informed HG-DAgger | 40.6 (7.1) |", "| Informed HG-DAgger | 42.6 (7.1) |"
+        "| M-Filtered (pairs, forced fit) | 28.7 (3.1) |",
+        "| M-Filtered (pairs, forced fit) | 27.8 (3.1) |",
     )
     (tmp_path / "README.md").write_text(edited)
     (problem,) = check_file(tmp_path / "README.md", tmp_path)
-    assert "42.6 7.1 not in docs/results/elicitation-cpu-round-nut/report.md" in problem
+    assert "27.8 3.1 not in docs/results/filtering-cpu-robosuite-square/report.md" in problem
     # a quote naming a report that is not there
     (tmp_path / "README.md").write_text("<!-- from docs/results/nope/report.md -->\n| 1.5 |\n")
     assert "does not exist" in check_file(tmp_path / "README.md", tmp_path)[0]
