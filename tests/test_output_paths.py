@@ -162,10 +162,10 @@ def test_std_scaled_scores_refuse_raw_unit_thresholds(work, tmp_path):
     assert json.loads((tmp_path / "raw.json").read_text())["action_scale"] == "none"
     r = invoke(*score, "-o", tmp_path / "a.parquet", "--thresholds", tmp_path / "raw.json")
     assert "--action-scale none scores" in str(r.exception)
-    # no thresholds: scored, and M / accept-reject are said and recorded to be placeholders
+    # no thresholds: scored, and M / accept-reject are said and recorded not to be verdicts
     r = cli_ok(*score, "-o", tmp_path / "std.parquet")
-    assert "placeholders, not verdicts" in r.output
-    assert read_header(tmp_path / "std.parquet")["thresholds_source"].startswith("placeholder")
+    assert "accept/reject in this file are not verdicts" in r.output
+    assert read_header(tmp_path / "std.parquet")["thresholds_source"].startswith("raw-unit preset")
     # thresholds fitted on std-scaled scores apply to std-scaled scores only
     cli_ok("fit-thresholds", "--scores", tmp_path / "std.parquet", "--lambda", "2", "--eta", "1",
            "-o", tmp_path / "std.json")  # fmt: skip

@@ -84,9 +84,9 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     d = walk["dir"]
     header, s = read_scores(d / "scores.parquet")
     assert header["config"]["action_scale"] == "std"
-    # the task's preset is in raw action units: with std scaling it is only a placeholder
+    # the task's preset is in raw action units: with std scaling its M is not a verdict
     # for M and accept/reject, and recorded as such (docs/thresholds.md)
-    assert header["thresholds_source"].startswith("placeholder")
+    assert header["thresholds_source"].startswith("raw-unit preset")
     assert "preset square-nut (task NutAssemblySquare)" in header["thresholds_source"]
     ops = s["operator"].astype(str)
     assert s["likelihood"][ops == "op_alt"].mean() > 5 * s["likelihood"][ops == "op_base"].mean()

@@ -88,7 +88,7 @@ def test_without_thresholds_score_takes_the_tasks_preset_or_borrows_square_nuts(
     t, [note] = task_thresholds("hammer-drawer", action_scale="std")  # presets are raw units
     assert t.pair == (0.35, 0.06)
     assert t.source == (
-        "placeholder, not valid for --action-scale std scores: preset hammer-drawer "
-        "(task hammer-drawer) (raw units)"
+        "raw-unit preset, not valid for --action-scale std scores: preset hammer-drawer "
+        "(task hammer-drawer)"
     )
     assert note.startswith("warning: --action-scale std: the paper presets are in raw")

@@ -108,8 +108,9 @@ def task_thresholds(task: str, action_scale: str = "none") -> tuple[Thresholds, 
     """The thresholds to score with when none are given, and what to tell the user.
 
     The paper preset of ``task``; a task without one borrows square-nut's values (a warning
-    says so, and the source records it). Scores in ``std`` units get the preset only as a
-    placeholder: the presets are in raw action units.
+    says so, and the source records it). Scores in ``std`` units get the preset too, recorded
+    as a raw-unit preset whose M and accept/reject are not verdicts: the presets are in raw
+    action units.
 
     Args:
       task: the demonstrations' task.
@@ -137,9 +138,9 @@ def task_thresholds(task: str, action_scale: str = "none") -> tuple[Thresholds, 
         return Thresholds(lam, eta, source), [note]
     note = (
         "warning: --action-scale std: the paper presets are in raw action units, so M and "
-        "accept/reject in this file are placeholders, not verdicts; ℓ and ν are std-scaled. "
+        "accept/reject in this file are not verdicts; ℓ and ν are std-scaled. "
         "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
         "filter and map."
     )
-    source = f"placeholder, not valid for --action-scale std scores: {source} (raw units)"
+    source = f"raw-unit preset, not valid for --action-scale std scores: {source}"
     return Thresholds(lam, eta, source), [note]
