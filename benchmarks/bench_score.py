@@ -387,6 +387,5 @@ def main() -> None:
         a.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
 
 
-
 if __name__ == "__main__":
     main()

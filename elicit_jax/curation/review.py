@@ -12,6 +12,7 @@ of the robomimic file with ``mask/<key>`` listing them, or a LeRobot episode lis
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from elicit_jax.errors import ElicitError
 STATE_FILE = "review.json"
 KEPT_FILE = "kept.parquet"
 MAX_REASON = 200
+MASK_KEY_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,59}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -189,6 +191,10 @@ class Review:
         copy of the source file with ``mask/<mask_key>`` (``OUT/reviewed.hdf5``), with
         ``lerobot`` an episode list (``OUT/episodes.json``).
 
+        A mask key the source file already has (its own ``base``, an operator's mask, an
+        earlier export's) is refused: the review adds a list of demos, it never replaces one.
+        Errors say what the review page offers instead (its errors are shown there).
+
         Returns:
           ``{"kept", "dropped", "demos", "export"}`` (paths as strings).
         """
@@ -200,6 +206,14 @@ class Review:
         keep = [e for e in self.bounds if e not in self.flags]
         if not keep:
             raise ElicitError("every episode is flagged: nothing to keep")
+        instead = (
+            f"choose 'demos artifact only': {KEPT_FILE} holds the kept episodes"
+            if fmt == "robomimic"
+            else f"choose 'demos artifact only' or '+ robomimic mask': {KEPT_FILE} holds the "
+            "kept episodes"
+        )
+        if fmt == "robomimic":
+            self._check_mask_key(mask_key, instead)
         self._save()  # the folder is a review's from its first file on (see check_review_folder)
         kept = self.out / KEPT_FILE
         spec = SubsetSpec(episodes=",".join(str(e) for e in keep))
@@ -212,8 +226,28 @@ class Review:
                 format=fmt,  # type: ignore[arg-type]
                 out=str(dest),
                 mask_key=mask_key if fmt == "robomimic" else None,
-                overwrite=True,
+                overwrite=True,  # the review's own earlier export (mask keys are checked above)
             )
-            export_dataset(cfg)
+            export_dataset(cfg, instead=instead)
             result["export"] = str(dest)
         return result
+
+    def _check_mask_key(self, key: str, instead: str) -> None:
+        """Error unless ``key`` is a new mask of the demos' source robomimic file."""
+        from elicit_jax.data.export import mask_source
+        from elicit_jax.data.robomimic import open_hdf5
+
+        if not MASK_KEY_RE.fullmatch(key):
+            raise ElicitError(
+                "a mask key is 1-60 letters, digits, '_', '-' or '.' (a letter or digit first), "
+                f"not {key[:60]!r}"
+            )
+        source = mask_source(str(self.config.demos), instead)
+        with open_hdf5(source) as f:
+            taken = sorted(f["mask"].keys()) if "mask" in f else []
+        if key in taken:
+            raise ElicitError(
+                f"the source file already has a mask '{key}' (its masks: {', '.join(taken)}); "
+                "type a new mask key: the review never replaces an existing mask",
+                source,
+            )

@@ -159,6 +159,13 @@ def _source(
     return prov, str(cfg.source or prov["source"]), sel
 
 
+def mask_source(selection: str, instead: str) -> str:
+    """The robomimic file a ``--mask-key`` export of ``selection`` marks (its source as
+    recorded at import); ``instead`` ends the error when there is none."""
+    cfg = ExportConfig(selection=selection, format="robomimic", out=selection)
+    return _source(cfg, read_selection(selection), "robomimic", instead)[1]
+
+
 def _fps(cfg: ExportConfig, demos: Demos) -> tuple[int, str]:
     """Frame rate of a new LeRobot dataset and where it came from."""
     if cfg.fps is not None:
@@ -185,13 +192,17 @@ def _fps(cfg: ExportConfig, demos: Demos) -> tuple[int, str]:
     return round(rate), why
 
 
-def export_dataset(cfg: ExportConfig, progress: Any = None) -> dict[str, Any]:
+def export_dataset(
+    cfg: ExportConfig, progress: Any = None, instead: str | None = None
+) -> dict[str, Any]:
     """Export the selected episodes; returns a summary (what was written where, and notes).
 
     Args:
       cfg: what to export and how.
       progress: optional callable ``progress(bytes)``, advanced while an in-place mask
         export hashes the file.
+      instead: what the caller's user can do when the selection cannot be a mask or an
+        episode list of its source (None: the command line's advice, e.g. drop --mask-key).
     """
     sel = read_selection(cfg.selection, cfg.episodes)
     if not cfg.in_place:
@@ -203,11 +214,11 @@ def export_dataset(cfg: ExportConfig, progress: Any = None) -> dict[str, Any]:
     )
     summary: dict[str, Any] = {"format": cfg.format, "out": cfg.out, "episodes": len(sel.episodes)}
     if cfg.format == "robomimic" and cfg.mask_key:
-        summary.update(_mask(cfg, sel, header, progress))
+        summary.update(_mask(cfg, sel, header, progress, instead))
     elif cfg.format == "robomimic":
         summary.update(_fresh_robomimic(cfg, sel, header))
     elif cfg.format == "lerobot" and Path(cfg.out or "").suffix == ".json":
-        summary.update(_episode_list(cfg, sel))
+        summary.update(_episode_list(cfg, sel, instead))
     elif cfg.format == "lerobot":
         summary.update(_lerobot(cfg, sel, header))
     else:
@@ -252,12 +263,15 @@ def _without_duplicates(cfg: ExportConfig, sel: Selection) -> tuple[Selection, s
     )
 
 
-def _mask(cfg: ExportConfig, sel: Selection, header: dict, progress: Any) -> dict[str, Any]:
+def _mask(
+    cfg: ExportConfig, sel: Selection, header: dict, progress: Any, advice: str | None
+) -> dict[str, Any]:
     from elicit_jax.data.robomimic_export import add_mask
 
-    instead = "drop --mask-key to write them as a new robomimic file"
+    instead = advice or "drop --mask-key to write them as a new robomimic file"
     prov, source, sel = _source(cfg, sel, "robomimic", instead)
-    check_selection(sel, prov, source, "robomimic", instead + " with only the kept steps")
+    kept = advice or instead + " with only the kept steps"
+    check_selection(sel, prov, source, "robomimic", kept)
     names = add_mask(
         source,
         None if cfg.in_place else cfg.out,
@@ -330,10 +344,10 @@ def _flat(bound: Any) -> list[float]:
     return list(bound) if isinstance(bound, tuple | list) else [bound]
 
 
-def _episode_list(cfg: ExportConfig, sel: Selection) -> dict[str, Any]:
+def _episode_list(cfg: ExportConfig, sel: Selection, advice: str | None) -> dict[str, Any]:
     instead = "an episode list names episodes of a LeRobot dataset; write a folder instead"
-    prov, source, sel = _source(cfg, sel, "lerobot", instead)
-    check_selection(sel, prov, source, "lerobot", "write a folder with --fresh instead")
+    prov, source, sel = _source(cfg, sel, "lerobot", advice or instead)
+    check_selection(sel, prov, source, "lerobot", advice or "write a folder with --fresh instead")
     indices = lerobot_indices(sel.source_episodes, prov, source)
     sel = dataclasses.replace(sel, source_episodes=tuple(str(i) for i in indices))
     write_episode_list(

@@ -12,11 +12,19 @@ the dashboard, same-origin WebSockets always.
   only this machine reaches the server. Bound anywhere else every request must carry it, as
   ``?token=...`` (the URL the server prints) or as the cookie the page sets on first load;
   anything else gets 403.
+* **Cookies.** Cookies ignore ports, so every server names its cookies after its port
+  (``elicit_jax_token_8765``, ``elicit_jax_admin_8765``): two servers on one machine (two
+  reviews, a review beside ``serve``) never overwrite each other's.
 * **Admin.** ``/admin`` and everything under it need the admin token (``?token=...`` once,
   then a cookie) even on loopback; it is distinct from the operators' token, so an operator's
   link never opens the dashboard. The admin token also passes where the operators' does.
-* **Origin.** WebSocket handshakes and dashboard actions whose ``Origin`` is another site
-  are refused, so a page on another site cannot act through a browser that holds a cookie.
+* **Origin.** A request whose ``Origin`` is not this server's own (scheme aside: the same
+  host name *and port*; a page served from another port of 127.0.0.1 is another site) is
+  refused with 403, whatever its method, and so are WebSocket handshakes. Unsafe methods
+  (anything but GET, HEAD, OPTIONS) must moreover come from this server's own pages: a
+  browser names the page's origin in ``Origin`` (or ``Sec-Fetch-Site``) on every such
+  request, so a page elsewhere cannot act through a browser that holds a cookie. A request
+  with neither header is not a browser's (a script holding the token) and passes.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from urllib.parse import parse_qs, urlsplit
 
 TOKEN_COOKIE = "elicit_jax_token"
 ADMIN_COOKIE = "elicit_jax_admin"
+SAFE_METHODS = ("GET", "HEAD", "OPTIONS")
 ADMIN_PREFIX = "/admin"
 CSP = (
     "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
@@ -81,6 +90,16 @@ class AccessPolicy:
     any_ip: bool = False
     token: str | None = None
     admin_token: str = ""
+
+    @property
+    def token_cookie(self) -> str:
+        """This server's name of the operators' (or reviewer's) token cookie."""
+        return f"{TOKEN_COOKIE}_{self.port}"
+
+    @property
+    def admin_cookie(self) -> str:
+        """This server's name of the admin token cookie."""
+        return f"{ADMIN_COOKIE}_{self.port}"
 
     def host_allowed(self, header: str) -> bool:
         """Is ``header`` (a request's ``Host``) one of this server's names?"""
@@ -138,7 +157,7 @@ def _cookie(scope: dict[str, Any], name: str) -> str:
     return morsel.value if morsel else ""
 
 
-def scope_token(scope: dict[str, Any], cookie: str = TOKEN_COOKIE) -> str:
+def scope_token(scope: dict[str, Any], cookie: str) -> str:
     """The token a request carries (query parameter first, then ``cookie``), or ''."""
     query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
     if query.get("token"):
@@ -147,12 +166,25 @@ def scope_token(scope: dict[str, Any], cookie: str = TOKEN_COOKIE) -> str:
 
 
 def same_origin(scope: dict[str, Any]) -> bool:
-    """False when the request names an ``Origin`` whose host differs from ``Host``."""
+    """False when the request names an ``Origin`` whose host or port differs from ``Host``
+    (``Origin: null``, a sandboxed or file page, is another origin too)."""
     headers = _headers(scope)
     origin = headers.get("origin")
-    if not origin:
+    if origin is None:
         return True
-    return urlsplit(origin).netloc.lower() == headers.get("host", "").lower()
+    return urlsplit(origin.strip()).netloc.lower() == headers.get("host", "").strip().lower()
+
+
+def from_own_page(scope: dict[str, Any]) -> bool:
+    """May this request change something? True for safe methods; an unsafe one must name
+    this server as its origin (``Origin``, else ``Sec-Fetch-Site: same-origin``); one with
+    neither header is not a browser's and passes (the token still decides)."""
+    if scope["type"] == "http" and scope.get("method") in SAFE_METHODS:
+        return True
+    headers = _headers(scope)
+    if "origin" in headers:
+        return same_origin(scope)
+    return headers.get("sec-fetch-site", "same-origin") in ("same-origin", "none")
 
 
 def is_admin_path(path: str) -> bool:
@@ -180,17 +212,16 @@ class AccessGuard:
         p = self.policy
         if not p.host_allowed(_headers(scope).get("host", "")):
             return 400
-        admin = _equal(scope_token(scope, ADMIN_COOKIE), p.admin_token) or _equal(
-            _cookie(scope, ADMIN_COOKIE), p.admin_token
+        if not same_origin(scope) or not from_own_page(scope):
+            return 403
+        admin = _equal(scope_token(scope, p.admin_cookie), p.admin_token) or _equal(
+            _cookie(scope, p.admin_cookie), p.admin_token
         )
         if is_admin_path(scope.get("path", "")):
-            unsafe = scope["type"] == "websocket" or scope.get("method") not in ("GET", "HEAD")
-            return 0 if admin and (same_origin(scope) or not unsafe) else 403
-        if scope["type"] == "websocket" and not same_origin(scope):
-            return 403
+            return 0 if admin else 403
         if p.token is None or admin:
             return 0
-        return 0 if _equal(scope_token(scope), p.token) else 403
+        return 0 if _equal(scope_token(scope, p.token_cookie), p.token) else 403
 
     async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
         status = self.verdict(scope) if scope["type"] in ("http", "websocket") else 0

@@ -100,12 +100,12 @@ def _json(data: Any, status: int = 200) -> Any:
 def _page(request: Any) -> Any:
     from starlette.responses import FileResponse
 
-    from elicit_jax.web.access import ADMIN_COOKIE, PAGE_HEADERS
+    from elicit_jax.web.access import PAGE_HEADERS
 
     response = FileResponse(STATIC / "admin.html", headers=PAGE_HEADERS)
-    token = request.query_params.get("token")
+    token, cookie = request.query_params.get("token"), request.app.state.access.admin_cookie
     if token:  # the guard let it in: it is the admin token
-        response.set_cookie(ADMIN_COOKIE, token, httponly=True, samesite="strict")
+        response.set_cookie(cookie, token, httponly=True, samesite="strict")
     return response
 
 

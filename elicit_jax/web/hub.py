@@ -129,6 +129,12 @@ class OperatorHub:
                     CLOSE_KEY,
                     f"the session '{name}' has no key yet: ask the experimenter for a link",
                 )
+            if rec is not None and key and rec.issued_by == "experimenter" and not rec.matches(key):
+                raise Refused(
+                    CLOSE_KEY,
+                    f"the key this page holds for '{name}' was replaced by a newer personal "
+                    "link: open the newest link the experimenter gave you",
+                )
             if rec is not None and not rec.matches(key):
                 raise Refused(
                     CLOSE_KEY,

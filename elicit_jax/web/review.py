@@ -8,7 +8,12 @@ per-step M, ``POST /api/flag`` flag/unflag an episode with a reason, ``POST /api
 the selection. The server binds 127.0.0.1 only, answers only requests whose ``Host`` is that
 address (or ``localhost``) at its port (a DNS-rebinding page cannot reach it; the same
 guard as ``serve``'s, :mod:`elicit_jax.web.access`), and requires the
-access token it prints (``?token=`` on first load, then a same-site cookie) on every request.
+access token it prints (``?token=`` on first load, then a cookie named after the port) on
+every request. As on ``/admin``, a POST must come from the page itself (its ``Origin`` is
+this server's, port included): a page of another site — another port of 127.0.0.1 — cannot
+flag or export through the reviewer's browser. The POST bodies are strict JSON: an episode is
+an integer, ``flagged`` true or false, NaN and Infinity are refused; anything else gets one
+400 line saying what is wrong.
 """
 
 from __future__ import annotations
@@ -62,6 +67,51 @@ CSP = (
 """The page's Content-Security-Policy: everything from this server, nothing inline."""
 
 
+MAX_BODY = 4096
+FLAG_FIELDS = {"episode": ("an episode number", int), "flagged": ("true or false", bool),
+               "reason": ("a string", str)}  # fmt: skip
+EXPORT_FIELDS = {"format": ("a string or null", (str, type(None))),
+                 "mask_key": ("a string or null", (str, type(None)))}  # fmt: skip
+REQUIRED = {"episode", "flagged"}
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+async def json_body(request: Any, fields: dict[str, tuple[str, Any]], what: str) -> dict:
+    """The request's JSON object, each field of the type ``fields`` names (an integer is
+    never a bool or a float, a flag never a string; NaN and Infinity are refused).
+
+    Raises:
+      ElicitError: one line naming the first problem (the page shows it).
+    """
+    import json
+
+    raw = await request.body()
+    try:
+        if len(raw) > MAX_BODY:
+            raise ValueError(f"longer than {MAX_BODY} bytes")
+        body = json.loads(raw, parse_constant=_no_constant)
+        if not isinstance(body, dict):
+            raise ValueError("not a JSON object")
+        extra = sorted(set(body) - set(fields))
+        if extra:
+            raise ValueError(f"unknown field(s) {', '.join(map(repr, extra))}")
+        for key, (kind, types) in fields.items():
+            if key not in body:
+                if key in REQUIRED:
+                    raise ValueError(f"no {key!r}")
+                continue
+            value = body[key]
+            exact_int = types is int and type(value) is int  # bool is an int subclass
+            if not (exact_int or (types is not int and isinstance(value, types))):
+                raise ValueError(f"{key!r} must be {kind}, not {json.dumps(value)[:40]}")
+    except (ValueError, RecursionError) as err:  # JSONDecodeError is a ValueError
+        raise ElicitError(f"malformed {what} request: {err}") from None
+    return body
+
+
 def _bad(e: ElicitError) -> Any:
     from starlette.responses import JSONResponse
 
@@ -79,16 +129,16 @@ class ReviewRoutes:
         """The page; a ``?token=`` becomes the access cookie."""
         from starlette.responses import FileResponse
 
-        from elicit_jax.web.access import TOKEN_COOKIE
         from elicit_jax.web.server import STATIC
 
         response = FileResponse(
             STATIC / "review.html",
             headers={"Cache-Control": "no-store", "Content-Security-Policy": CSP},
         )
-        if request.query_params.get("token"):
+        if request.query_params.get("token"):  # the guard let it in: it is the token
+            cookie = request.app.state.access.token_cookie
             response.set_cookie(
-                TOKEN_COOKIE, request.query_params["token"], httponly=True, samesite="strict"
+                cookie, request.query_params["token"], httponly=True, samesite="strict"
             )
         return response
 
@@ -117,11 +167,14 @@ class ReviewRoutes:
         """An episode's body poses (base64 float32) and per-step M."""
         from starlette.responses import JSONResponse
 
+        given = request.path_params["episode"]
+        if not given.isdecimal() or len(given) > 9:
+            return _bad(ElicitError(f"not an episode number: {given[:20]!r}"))
+        e = int(given)
         try:
-            e = int(request.path_params["episode"])
             data = self.review.episode(e)
-        except (ValueError, ElicitError) as err:
-            return _bad(ElicitError(str(err)))
+        except ElicitError as err:
+            return _bad(err)
         poses = self.clips.poses(e)
         return JSONResponse(
             {
@@ -140,11 +193,8 @@ class ReviewRoutes:
         from starlette.responses import JSONResponse
 
         try:
-            body = await request.json()
-            flagged = bool(body["flagged"])
-            self.review.flag(int(body["episode"]), flagged, str(body.get("reason", "")))
-        except (ValueError, KeyError, TypeError) as err:
-            return _bad(ElicitError(f"malformed flag request ({err})"))
+            body = await json_body(request, FLAG_FIELDS, "flag")
+            self.review.flag(body["episode"], body["flagged"], body.get("reason", ""))
         except ElicitError as err:
             return _bad(err)
         return JSONResponse({"ok": True, "flagged": len(self.review.flags)})
@@ -154,11 +204,9 @@ class ReviewRoutes:
         from starlette.responses import JSONResponse
 
         try:
-            body = await request.json()
+            body = await json_body(request, EXPORT_FIELDS, "export")
             fmt = body.get("format") or None
-            result = self.review.export(fmt, str(body.get("mask_key") or "reviewed"))
-        except (ValueError, AttributeError) as err:
-            return _bad(ElicitError(f"malformed export request ({err})"))
+            result = self.review.export(fmt, body.get("mask_key") or "reviewed")
         except ElicitError as err:
             return _bad(err)
         return JSONResponse(result)
@@ -175,7 +223,8 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
     from elicit_jax.web.server import STATIC
 
     r = ReviewRoutes(review)
-    return Starlette(
+    policy = access_policy(HOST, port, token)
+    app = Starlette(
         routes=[
             Route("/", r.index),
             Route("/api/episodes", r.episodes),
@@ -185,10 +234,10 @@ def create_review_app(review: Any, token: str, port: int) -> Any:
             Route("/api/export", r.export, methods=["POST"]),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ],
-        middleware=[
-            Middleware(AccessGuard, policy=access_policy(HOST, port, token)),
-        ],
+        middleware=[Middleware(AccessGuard, policy=policy)],
     )
+    app.state.access = policy
+    return app
 
 
 def serve_review(review: Any, port: int, echo: Callable[[str], None]) -> None:

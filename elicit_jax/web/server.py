@@ -143,12 +143,10 @@ async def operator_socket(websocket: Any) -> None:
 def _index(request: Any) -> Any:
     from starlette.responses import FileResponse
 
-    from elicit_jax.web.access import TOKEN_COOKIE
-
     response = FileResponse(STATIC / "index.html", headers=PAGE_HEADERS)
-    token = request.query_params.get("token")
-    if token and request.app.state.access.token:
-        response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
+    token, access = request.query_params.get("token"), request.app.state.access
+    if token and access.token:
+        response.set_cookie(access.token_cookie, token, httponly=True, samesite="strict")
     return response
 
 

@@ -7,52 +7,17 @@ from __future__ import annotations
 import urllib.error
 import urllib.request
 
-import numpy as np
 import pytest
 from chromium import page_with_errors
 from cli_server import CliServer
-from fixtures_data import cli_ok, robomimic_demo, write_robomimic
+from fixtures_data import cli_ok
+from review_data import imported_demos
 
 
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
-    """Six robomimic demos (episode 3 with jumpy actions), imported as square-nut data, with
-    their quality flags."""
-    d = tmp_path_factory.mktemp("review")
-    rng = np.random.default_rng(0)
-    demos = {}
-    for i in range(6):
-        demo = robomimic_demo(rng, 12)
-        smooth = np.linspace(-0.2, 0.2, 12)[:, None] * np.ones((1, 7))
-        demo["actions"] = np.where(i == 3, demo["actions"], smooth)
-        demos[f"demo_{i}"] = demo
-    src = write_robomimic(d / "teleop.hdf5", demos)
-    cli_ok("import", src, "--task", "square-nut", "-o", d / "demos.parquet")
-    cli_ok("quality", d / "demos.parquet", "-o", d / "quality.parquet")
-    _m_scores(d / "scores.parquet")
-    return d
-
-
-def _m_scores(path):
-    """Compatibility scores by hand: episode e's 12 steps have M = 1 - e / 10, except that
-    episode 4's last 6 steps are incompatible (M = 0), so its mean M (0.3) is the lowest."""
-    import pyarrow as pa
-
-    from elicit_jax.artifact import make_header, write_parquet
-
-    ep = np.repeat(np.arange(6), 12)
-    m = 1 - ep / 10
-    m[4 * 12 + 6 : 5 * 12] = 0.0
-    table = pa.table(
-        {
-            "episode": pa.array(ep.astype(np.int64)),
-            "operator": pa.array(["unknown"] * len(ep)),
-            "step": pa.array(np.tile(np.arange(12), 6).astype(np.int32)),
-            "compatibility": pa.array(m.astype(np.float32)),
-            "incompatible": pa.array(m == 0),
-        }
-    )
-    write_parquet(path, table, make_header("scores", 1))
+    """Six robomimic demos imported as square-nut data (see review_data.imported_demos)."""
+    return imported_demos(tmp_path_factory.mktemp("review"))
 
 
 def _status(url: str, host: str | None = None) -> int:

@@ -190,11 +190,16 @@ def test_the_dashboard_needs_its_own_token_even_on_loopback(served):
     assert client.get("/admin/api/state?token=operator-token").status_code == 403
     r = client.get(f"/admin?token={ADMIN}")
     assert r.status_code == 200 and "admin.js" in r.text
-    assert "elicit_jax_admin=" in r.headers["set-cookie"]
+    assert "elicit_jax_admin_8765=" in r.headers["set-cookie"]  # named after the port
+    page = client.get("/?token=operator-token")
+    assert "elicit_jax_token_8765=operator-token" in page.headers["set-cookie"]
     assert client.get("/admin/api/state").status_code == 200  # the cookie carries it now
     assert client.get("/static/admin.js").status_code == 200
-    foreign = {"origin": "http://evil.example"}
-    assert client.post("/admin/api/operators/ana/link", headers=foreign).status_code == 403
+    for origin in ("http://evil.example", "http://127.0.0.1:9999", "null"):  # other sites
+        foreign = {"origin": origin}
+        assert client.post("/admin/api/operators/ana/link", headers=foreign).status_code == 403
+    own = {"origin": "http://127.0.0.1:8765"}
+    assert client.post("/admin/api/operators/ana/link", headers=own).status_code == 200
     client.cookies.clear()
     assert client.get("/admin/api/state").status_code == 403
     loopback, _ = served()

@@ -260,7 +260,7 @@ def test_the_token_guards_every_request_off_loopback(make_client):
     assert client.get("/").status_code == 403
     assert client.get("/static/app.js").status_code == 403
     r = client.get("/?token=s3cret-token")
-    assert r.status_code == 200 and "elicit_jax_token=s3cret-token" in r.headers["set-cookie"]
+    assert r.status_code == 200 and "elicit_jax_token_8765=s3cret-token" in r.headers["set-cookie"]
     assert client.get("/static/app.js").status_code == 200  # the cookie carries it now
     client.cookies.clear()
     with pytest.raises(WebSocketDisconnect), client.websocket_connect("/ws"):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from elicit_jax.web.access import is_loopback, same_origin, scope_token
+from elicit_jax.web.access import from_own_page, is_loopback, same_origin, scope_token
 from elicit_jax.web.protocol import (
     CLOSE_POLICY,
     ProtocolError,
@@ -141,15 +141,24 @@ def test_loopback_hosts(host, loopback):
 
 
 def test_tokens_come_from_the_query_or_the_cookie_and_origins_must_match():
+    cookie = "elicit_jax_token_8765"
     scope = {"query_string": b"a=1&token=xyz", "headers": []}
-    assert scope_token(scope) == "xyz"
-    scope = {"query_string": b"", "headers": [(b"cookie", b"x=1; elicit_jax_token=abc")]}
-    assert scope_token(scope) == "abc"
-    assert scope_token({"query_string": b"", "headers": [(b"cookie", b"\x00bad")]}) == ""
+    assert scope_token(scope, cookie) == "xyz"
+    scope = {"query_string": b"", "headers": [(b"cookie", b"x=1; elicit_jax_token_8765=abc")]}
+    assert scope_token(scope, cookie) == "abc"
+    assert scope_token(scope, "elicit_jax_token_8766") == ""  # another server's cookie
+    assert scope_token({"query_string": b"", "headers": [(b"cookie", b"\x00bad")]}, cookie) == ""
     same = {"headers": [(b"host", b"box:8765"), (b"origin", b"http://box:8765")]}
     other = {"headers": [(b"host", b"box:8765"), (b"origin", b"http://evil.example")]}
-    assert same_origin(same) and not same_origin(other)
+    port = {"headers": [(b"host", b"box:8765"), (b"origin", b"http://box:9999")]}
+    assert same_origin(same) and not same_origin(other) and not same_origin(port)
     assert same_origin({"headers": [(b"host", b"box:8765")]})  # no Origin: not a browser page
+    post = {"type": "http", "method": "POST"}
+    assert from_own_page({**post, **same}) and not from_own_page({**post, **port})
+    assert from_own_page({"type": "http", "method": "GET", **port})  # same_origin refuses it
+    site = {"headers": [(b"host", b"box:8765"), (b"sec-fetch-site", b"same-site")]}
+    assert not from_own_page({**post, **site})
+    assert from_own_page({**post, "headers": [(b"host", b"box:8765")]})  # not a browser
 
 
 def test_three_js_is_shipped_unchanged_with_its_licence():

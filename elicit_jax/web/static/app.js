@@ -22,15 +22,17 @@ const GOALS = {
 
 // The operator's secret key: issued by the server at the first visit (a 'key' message) or in
 // the experimenter's link (#op=NAME&key=KEY, read once and removed from the address bar).
+// A link pasted into an open tab changes only the hash: it is taken then too (see 'hashchange').
 const keyKey = (name) => `elicit-jax-key:${name}`;
-{
+function takeLink() {
   const h = new URLSearchParams(location.hash.slice(1));
-  if (NAME_RE.test(h.get('op') || '') && KEY_RE.test(h.get('key') || '')) {
-    localStorage.setItem(NAME_KEY, h.get('op'));
-    localStorage.setItem(keyKey(h.get('op')), h.get('key'));
-    history.replaceState(null, '', location.pathname + location.search);
-  }
+  if (!NAME_RE.test(h.get('op') || '') || !KEY_RE.test(h.get('key') || '')) return null;
+  localStorage.setItem(NAME_KEY, h.get('op'));
+  localStorage.setItem(keyKey(h.get('op')), h.get('key'));
+  history.replaceState(null, '', location.pathname + location.search);
+  return h.get('op');
 }
+takeLink();
 
 const S = {
   name: localStorage.getItem(NAME_KEY),
@@ -632,6 +634,15 @@ $('change-name').addEventListener('click', (e) => {
   if (ws) ws.close();
   setConn('idle', 'not connected');
   render();
+});
+window.addEventListener('hashchange', () => {
+  const name = takeLink();
+  if (!name) return;
+  if (name !== S.name) { S.state = null; S.welcome = null; }
+  S.name = name;
+  S.acked = Number(sessionStorage.getItem(ackKey()) ?? -1);
+  showLink();
+  reconnect();
 });
 $('prompt-done').onclick = () => dismissPrompt();
 $('prompt-again').onclick = () => { if (S.prompt) { S.promptDismissed = false; S.promptRequested = true; render(); } };

@@ -8,14 +8,39 @@ const state = { rows: [], sortKey: 'episode', sortDir: 'asc', current: null, m: 
 let view = null;
 let player = null;
 
+// Every call's failure becomes one plain sentence (never a JSON parse error): the server's
+// own message when it sent one, else what the status means here.
 async function api(path, body) {
   const opts = body === undefined ? {} : {
     method: 'POST', headers: { 'content-type': 'application/json' }, body: JSON.stringify(body),
   };
-  const res = await fetch(path, { credentials: 'same-origin', ...opts });
-  const data = await res.json();
-  if (!res.ok) throw new Error(data.error || res.statusText);
-  return data;
+  let res;
+  try {
+    res = await fetch(path, { credentials: 'same-origin', cache: 'no-store', ...opts });
+  } catch (e) {
+    throw failure(0, 'the review server cannot be reached: is `elicit-jax review` still running?');
+  }
+  const text = await res.text();
+  let data = null;
+  try { data = JSON.parse(text); } catch (e) { data = null; }
+  if (res.ok && data !== null) return data;
+  const said = (data && data.error) || text.trim().split('\n')[0] || res.statusText;
+  if (res.status === 403) {
+    throw failure(403, `the review server refused this page (${said}): open the URL \`elicit-jax review\` printed again`);
+  }
+  throw failure(res.status, res.ok ? `the review server sent an answer this page cannot read (${res.status})` : said);
+}
+
+function failure(status, message) {
+  const e = new Error(message);
+  e.status = status;
+  return e;
+}
+
+// A page-level message: what failed and what to do, until the next call succeeds.
+function pageError(message) {
+  $('page-error').textContent = message;
+  $('page-error').hidden = !message;
 }
 
 function fmt(v, digits = 2) {
@@ -74,6 +99,16 @@ async function refresh() {
   renderTable();
 }
 
+async function refreshOrSay() {
+  try {
+    await refresh();
+    return true;
+  } catch (e) {
+    pageError(`Could not update the episode list: ${e.message}`);
+    return false;
+  }
+}
+
 function drawStrip() {
   const c = $('m-strip');
   const ctx = c.getContext('2d');
@@ -104,15 +139,36 @@ function onPlayer(p) {
   drawStrip();
 }
 
+// The replay shown is always the titled episode's: a new pick clears the old one first,
+// and an answer for an episode no longer picked (clicked past, or failed) is dropped.
+let picks = 0;
 async function select(episode) {
+  const pick = ++picks;
   state.current = episode;
+  state.m = null;
   renderTable();
   const row = state.rows.find((r) => r.episode === episode);
-  $('detail-title').textContent = `Episode ${episode} · ${row.operator} · ${row.steps} steps`;
+  if (player) player.load([], 20);
+  $('view').classList.add('stale');
+  delete document.body.dataset.episode;
+  $('detail-title').textContent = `Episode ${episode} · ${row.operator} · ${row.steps} steps (loading…)`;
   $('quality-reason').textContent = row.quality_reason ? `quality: ${row.quality_reason}` : '';
   $('flag-reason').value = row.reason || '';
   $('flag-error').textContent = '';
-  const data = await api(`/api/episode/${episode}`);
+  drawStrip();
+  let data;
+  try {
+    data = await api(`/api/episode/${episode}`);
+  } catch (e) {
+    if (pick !== picks) return;
+    $('detail-title').textContent = `Episode ${episode} could not be loaded`;
+    document.body.dataset.episodeError = String(episode);
+    pageError(`Could not load episode ${episode}: ${e.message}`);
+    return;
+  }
+  if (pick !== picks) return;
+  pageError('');
+  $('detail-title').textContent = `Episode ${episode} · ${row.operator} · ${row.steps} steps`;
   state.m = data.m;
   if (view && data.poses) {
     const raw = Uint8Array.from(atob(data.poses), (ch) => ch.charCodeAt(0));
@@ -120,10 +176,12 @@ async function select(episode) {
     const size = data.nbody * 7;
     const clip = [];
     for (let t = 0; t < all.length / size; t++) clip.push(all.subarray(t * size, (t + 1) * size));
+    $('view').classList.remove('stale');
     player.load([clip], 20);
   } else {
     drawStrip();
   }
+  delete document.body.dataset.episodeError;
   document.body.dataset.episode = String(episode);
 }
 
@@ -132,14 +190,17 @@ async function setFlag(flagged) {
   $('flag-error').textContent = '';
   try {
     await api('/api/flag', { episode: state.current, flagged, reason: $('flag-reason').value });
-    await refresh();
   } catch (e) {
     $('flag-error').textContent = e.message;
+    if (e.status !== 400) pageError(`Could not change the flag: ${e.message}`);
+    return;
   }
+  if (await refreshOrSay()) pageError('');
 }
 
 async function exportSelection() {
   $('export-result').textContent = 'writing…';
+  $('export-result').dataset.done = 'pending';
   try {
     const r = await api('/api/export', {
       format: $('export-format').value, mask_key: $('mask-key').value,
@@ -147,9 +208,11 @@ async function exportSelection() {
     $('export-result').textContent = `kept ${r.kept}, dropped ${r.dropped}: ${r.demos}`
       + (r.export ? `; exported to ${r.export}` : '');
     $('export-result').dataset.done = 'true';
+    pageError('');
   } catch (e) {
-    $('export-result').textContent = `export failed: ${e.message}`;
+    $('export-result').textContent = 'nothing was written';
     $('export-result').dataset.done = 'error';
+    pageError(`Export refused: ${e.message}`);
   }
 }
 
@@ -181,5 +244,6 @@ async function main() {
 }
 
 main().catch((e) => {
-  $('export-result').textContent = `error: ${e.message}`;
+  pageError(`The review could not start: ${e.message}`);
+  document.body.dataset.ready = 'error';
 });
