@@ -7,14 +7,20 @@ whether their page is here, the screen the server has them on, episode and step,
 rejected / failed counts and the last verdict. Actions are POSTs:
 
 =====================================  ===========================================================
-``/admin/api/operators/NAME/link``     a new key for NAME (new or existing operator): returns their
-                                       personal link; their old key stops working
+``/admin/api/operators/NAME/link``     a new key for NAME: returns their personal link; their old
+                                       key stops working. A name that is not an operator yet
+                                       needs ``?create=1`` (the page asks first; 409 otherwise),
+                                       and at most ``MAX_NEW_PER_MINUTE`` are created a minute
 ``/admin/api/operators/NAME/pause``    close their page and keep them out until resumed
 ``/admin/api/operators/NAME/resume``   let them in again (paused or ended)
 ``/admin/api/operators/NAME/end``      end their session: no more episodes (kept and counted)
 ``/admin/api/operators/NAME/remove``   take them out of the study: session moved to
                                        ``SESSIONS/.removed/`` (nothing deleted, not merged)
 =====================================  ===========================================================
+
+Names are case-insensitive (``ALICE`` is the existing ``alice``,
+:meth:`~elicit_jax.web.hub.OperatorHub.canonical`). The links issued since the server started
+are kept in memory (never on disk) and listed by ``/admin/api/state``, each operator's newest.
 
 Downloads: ``/admin/download/NAME.parquet`` (one operator's accepted demonstrations, their
 session's ``demos.parquet``) and ``/admin/download/merged.parquet`` (every operator's, one
@@ -25,6 +31,9 @@ demos format ``elicit-jax info`` / ``import`` / ``train`` read.
 from __future__ import annotations
 
 import tempfile
+import threading
+import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +43,28 @@ from elicit_jax.web.protocol import valid_name
 
 STATIC = Path(__file__).parent / "static"
 ACTIONS = {"pause": PAUSED, "resume": ACTIVE, "end": ENDED}
+MAX_NEW_PER_MINUTE = 10
+"""New operator names the dashboard creates in any minute (a runaway script, a stuck key)."""
+
+
+class NewNames:
+    """When the dashboard created its latest new names (the per-minute limit)."""
+
+    def __init__(self, limit: int = MAX_NEW_PER_MINUTE, window_s: float = 60.0) -> None:
+        self.limit, self.window_s = limit, window_s
+        self.times: deque[float] = deque()
+        self.lock = threading.Lock()
+
+    def take(self) -> bool:
+        """Count one more new name now; False (not counted) when the limit is reached."""
+        now = time.monotonic()
+        with self.lock:
+            while self.times and now - self.times[0] > self.window_s:
+                self.times.popleft()
+            if len(self.times) >= self.limit:
+                return False
+            self.times.append(now)
+            return True
 
 
 def screen_of(status: dict[str, Any]) -> str:
@@ -79,15 +110,17 @@ def operator_row(hub: Any, name: str) -> dict[str, Any]:
     return row | {"counts": _counts(s["counts"]), "last_verdict": s["last_verdict"]}
 
 
-def state(hub: Any) -> dict[str, Any]:
-    """Everything the dashboard shows."""
+def state(hub: Any, links: dict[str, str] | None = None) -> dict[str, Any]:
+    """Everything the dashboard shows (``links``: the issued links, by operator)."""
     c = hub.template
+    names = hub.names()
     return {
         "task": c.task,
         "mode": c.mode + (" + HG-DAgger" if c.dagger else ""),
         "wanted": c.demos,
         "sessions": str(hub.root),
-        "operators": [operator_row(hub, n) for n in hub.names()],
+        "operators": [operator_row(hub, n) for n in names],
+        "links": [{"name": n, "link": (links or {})[n]} for n in names if n in (links or {})],
     }
 
 
@@ -109,26 +142,40 @@ def _page(request: Any) -> Any:
     return response
 
 
+def _links(request: Any) -> dict[str, str]:
+    return request.app.state.links
+
+
 def _state(request: Any) -> Any:
-    return _json(state(request.app.state.hub))
+    return _json(state(request.app.state.hub, _links(request)))
 
 
 def _name(request: Any) -> str:
+    """The operator the path names, in their existing spelling (names ignore case)."""
     name = request.path_params["name"]
     if not valid_name(name):
         raise ElicitError(f"not an operator name: {name[:40]!r}")
-    return name
+    return request.app.state.hub.canonical(name)
 
 
 def _link(request: Any) -> Any:
+    app = request.app.state
     try:
         name = _name(request)
     except ElicitError as e:
         return _json({"error": str(e)}, 400)
-    key = request.app.state.hub.issue_key(name)
-    access = request.app.state.access
-    query = f"?token={access.token}" if access.token else ""
-    return _json({"name": name, "link": f"{request.app.state.base_url}{query}#op={name}&key={key}"})
+    if name not in app.hub.names():
+        if request.query_params.get("create") != "1":
+            why = f"{name!r} is not an operator yet: confirm creating a new operator"
+            return _json({"error": why, "new": True}, 409)
+        if not app.new_names.take():
+            why = f"more than {MAX_NEW_PER_MINUTE} new operators in a minute: wait a little"
+            return _json({"error": why}, 429)
+    key = app.hub.issue_key(name)
+    query = f"?token={app.access.token}" if app.access.token else ""
+    link = f"{app.base_url}{query}#op={name}&key={key}"
+    _links(request)[name] = link
+    return _json({"name": name, "link": link})
 
 
 def _act(request: Any) -> Any:
@@ -144,6 +191,7 @@ def _act(request: Any) -> Any:
             dest = hub.remove(name)
         except ElicitError as e:
             return _json({"error": str(e)}, 409)
+        _links(request).pop(name, None)
         return _json({"name": name, "moved_to": None if dest is None else str(dest)})
     if action not in ACTIONS:
         return _json({"error": f"unknown action {action[:20]!r}"}, 404)

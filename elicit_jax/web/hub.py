@@ -8,6 +8,10 @@ failed to open is replaced on the next contact (the operator may retry); when th
 full, the driver of the operator who left longest ago is released (resumed from disk if
 they come back).
 
+Names are one operator whatever their case: "ALICE" is the existing "alice"
+(:meth:`OperatorHub.canonical`), never a second session (nor a clash on a case-insensitive
+file system).
+
 Who may attach is :meth:`OperatorHub.admit`'s decision: a new name is given a key, an
 existing one needs it (:mod:`elicit_jax.web.keys`), and the experimenter's pause, end and
 remove (:mod:`elicit_jax.web.admin`) are enforced here.
@@ -118,6 +122,7 @@ class OperatorHub:
           HubFull: ``max_operators`` drivers run already.
         """
         with self._lock:
+            name = self.canonical(name)
             rec = self.keys.read(name)
             if rec is None and key:
                 raise Refused(
@@ -153,6 +158,7 @@ class OperatorHub:
         if not valid_name(name):
             raise ValueError(f"not an operator name: {name!r}")
         with self._lock:
+            name = self.canonical(name)
             key = self.keys.issue(name, "experimenter")
             d = self.drivers.get(name)
         if d is not None:
@@ -204,6 +210,15 @@ class OperatorHub:
             dest.parent.mkdir(parents=True, exist_ok=True)
             shutil.move(str(src), dest)
             return dest
+
+    def canonical(self, name: str) -> str:
+        """The spelling of the operator whose name is ``name`` ignoring case, else ``name``."""
+        with self._lock:
+            names = self.names()
+        if name in names:
+            return name
+        folded = name.casefold()
+        return next((n for n in names if n.casefold() == folded), name)
 
     def names(self) -> list[str]:
         """Every operator of the sessions directory: running, on disk, or with a key."""

@@ -116,7 +116,7 @@ async def operator_socket(websocket: Any) -> None:
         except Refused as e:
             raise ProtocolError(e.code, e.reason) from None
         if key is not None:
-            conn.send(dump("key", name=msg.name, key=key))
+            conn.send(dump("key", name=driver.name, key=key))
         old = driver.attach(conn)
         if old is not None:
             old.close(CLOSE_REPLACED, "this session was opened in another window")
@@ -165,7 +165,7 @@ def create_app(hub: OperatorHub, access: AccessPolicy, base_url: str | None = No
     from starlette.staticfiles import StaticFiles
 
     from elicit_jax.web.access import AccessGuard
-    from elicit_jax.web.admin import admin_routes
+    from elicit_jax.web.admin import NewNames, admin_routes
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Any) -> Any:
@@ -184,5 +184,7 @@ def create_app(hub: OperatorHub, access: AccessPolicy, base_url: str | None = No
     )
     app.state.hub = hub
     app.state.access = access
+    app.state.links = {}  # the dashboard's issued links, by operator (in memory only)
+    app.state.new_names = NewNames()
     app.state.base_url = base_url or f"http://127.0.0.1:{access.port}/"
     return app

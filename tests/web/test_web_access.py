@@ -199,7 +199,7 @@ def test_the_dashboard_needs_its_own_token_even_on_loopback(served):
         foreign = {"origin": origin}
         assert client.post("/admin/api/operators/ana/link", headers=foreign).status_code == 403
     own = {"origin": "http://127.0.0.1:8765"}
-    assert client.post("/admin/api/operators/ana/link", headers=own).status_code == 200
+    assert client.post("/admin/api/operators/ana/link?create=1", headers=own).status_code == 200
     client.cookies.clear()
     assert client.get("/admin/api/state").status_code == 403
     loopback, _ = served()
@@ -209,7 +209,7 @@ def test_the_dashboard_needs_its_own_token_even_on_loopback(served):
 def test_dashboard_links_pause_end_and_remove(served, tmp_path):
     client, _ = served()
     client.get(f"/admin?token={ADMIN}")
-    link = client.post("/admin/api/operators/cy/link").json()["link"]
+    link = client.post("/admin/api/operators/cy/link?create=1").json()["link"]
     assert link.startswith("http://127.0.0.1:8765/#op=cy&key=")
     key = link.split("key=")[1]
     cy = hello(client, "cy", key)
@@ -273,3 +273,38 @@ def test_websocket_refused_without_the_token_off_loopback(served):
     ):
         pass
     assert e.value.code == 1008 and not isinstance(e.value, WebSocketDenialResponse)
+
+
+def test_dashboard_names_ignore_case_new_ones_are_confirmed_and_limited(served, tmp_path):
+    from elicit_jax.web.admin import MAX_NEW_PER_MINUTE
+
+    client, hub = served()
+    client.get(f"/admin?token={ADMIN}")
+    r = client.post("/admin/api/operators/alice/link")
+    assert r.status_code == 409 and r.json()["new"] and "confirm" in r.json()["error"]
+    assert hub.names() == []  # nothing was created
+    link = client.post("/admin/api/operators/alice/link?create=1").json()["link"]
+    again = client.post("/admin/api/operators/ALICE/link")  # alice herself: no confirmation
+    assert again.status_code == 200 and again.json()["name"] == "alice"
+    assert "#op=alice&key=" in again.json()["link"] and again.json()["link"] != link
+    key = again.json()["link"].split("key=")[1]
+    assert refused(client, "Alice")["code"] == CLOSE_KEY  # her name, typed in capitals
+    page = hello(client, "ALICE", key)  # her key opens her session whatever the case
+    assert page.state["state"] == "ready"
+    assert hub.names() == ["alice"] and not (tmp_path / "sessions" / "ALICE").exists()
+    assert client.post("/admin/api/operators/Alice/pause").json()["status"] == "paused"
+    assert closed(page)["code"] == CLOSE_PAUSED
+
+    st = client.get("/admin/api/state").json()
+    assert [r["name"] for r in st["operators"]] == ["alice"]
+    assert st["links"] == [{"name": "alice", "link": again.json()["link"]}]  # the newest
+    made = [
+        client.post(f"/admin/api/operators/op{i}/link?create=1").status_code
+        for i in range(MAX_NEW_PER_MINUTE + 1)
+    ]
+    assert made == [200] * (MAX_NEW_PER_MINUTE - 1) + [429, 429]  # alice was the first
+    assert client.post("/admin/api/operators/op0/link").status_code == 200  # not new
+    assert len(client.get("/admin/api/state").json()["links"]) == MAX_NEW_PER_MINUTE
+    client.post("/admin/api/operators/op0/remove")
+    names = [x["name"] for x in client.get("/admin/api/state").json()["links"]]
+    assert "op0" not in names and len(names) == MAX_NEW_PER_MINUTE - 1

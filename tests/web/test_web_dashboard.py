@@ -60,6 +60,7 @@ def test_the_dashboard_follows_two_operators_and_downloads_their_demos(browser, 
         dash.wait_for_selector(row("ana", status="active", screen="demonstrate"))
 
         dash.fill("#link-name", "ben")
+        dash.once("dialog", lambda d: d.accept())  # ben is not an operator yet: confirmed
         dash.click("#link-form button")
         dash.wait_for_function(
             "() => /#op=ben&key=/.test(document.getElementById('link-out').textContent)"
@@ -94,7 +95,7 @@ def test_the_dashboard_follows_two_operators_and_downloads_their_demos(browser, 
             ana.keyboard.press("Enter")
             screen(ana, "demonstrate", "ready")
         dash.wait_for_selector(row("ana", screen="done") + " td[data-accepted='1']")
-        assert dash.inner_text(row("ben") + " td:nth-child(6)") == "0 of 1"
+        assert dash.inner_text(row("ben") + " td:nth-child(7)") == "0 of 1"
         if SHOTS:
             Path(SHOTS).mkdir(parents=True, exist_ok=True)
             dash.screenshot(path=str(Path(SHOTS) / "serve-admin.png"))
