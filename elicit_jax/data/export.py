@@ -160,8 +160,7 @@ def _source(
 
 
 def mask_source(selection: str, instead: str) -> str:
-    """The robomimic file a ``--mask-key`` export of ``selection`` marks (its source as
-    recorded at import); ``instead`` ends the error when there is none."""
+    """The robomimic file a mask of ``selection`` marks; ``instead`` ends the error if none."""
     cfg = ExportConfig(selection=selection, format="robomimic", out=selection)
     return _source(cfg, read_selection(selection), "robomimic", instead)[1]
 
@@ -270,8 +269,7 @@ def _mask(
 
     instead = advice or "drop --mask-key to write them as a new robomimic file"
     prov, source, sel = _source(cfg, sel, "robomimic", instead)
-    kept = advice or instead + " with only the kept steps"
-    check_selection(sel, prov, source, "robomimic", kept)
+    check_selection(sel, prov, source, "robomimic", advice or instead + " with only the kept steps")
     names = add_mask(
         source,
         None if cfg.in_place else cfg.out,
