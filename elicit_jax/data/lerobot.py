@@ -32,7 +32,12 @@ from elicit_jax.data.demos import (
     make_provenance,
     validate,
 )
-from elicit_jax.data.lerobot_record import read_record, restore_names, restored_provenance
+from elicit_jax.data.lerobot_record import (
+    read_record,
+    restore_columns,
+    restore_names,
+    restored_provenance,
+)
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -286,18 +291,27 @@ def import_lerobot(
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
     info = read_info(root)
     _check_features(root, info, obs_keys)
-    rows = select_rows(root, read_episodes(root, info), episodes)
+    all_rows = read_episodes(root, info)
+    rows = select_rows(root, all_rows, episodes)
     if not rows:
         raise ElicitError("dataset lists no episodes", root)
-    labels = read_record(root, rows, obs_keys)
+    tasks = read_tasks(root, info)
+    eps, successes, sizes, has_success = _read_frames(root, info, rows, obs_keys, tasks)
+    own = _digests(rows, eps)
+
+    def digests(keys: Sequence[str]) -> dict[int, str]:
+        if tuple(keys) == obs_keys:
+            return own
+        return _digests(rows, _read_frames(root, info, rows, keys, tasks)[0])
+
+    labels = read_record(root, info, rows, all_rows, obs_keys, digests)
     names = restore_names(rows, labels)
-    eps, successes, sizes, has_success = _read_frames(
-        root, info, rows, obs_keys, read_tasks(root, info), names
-    )
-    digests = {
-        names[int(r["episode_index"])]: episode_digest(ep["obs"], ep["action"], ep.get("reward"))
-        for r, ep in zip(rows, eps, strict=True)
-    }
+    columns = restore_columns(labels, rows)
+    for r, ep in zip(rows, eps, strict=True):
+        e = int(r["episode_index"])
+        ep[SOURCE_EPISODE] = np.full(len(ep["obs"]), names[e], dtype=object)
+        ep.update(columns[e])
+    digests_by_name = {names[e]: d for e, d in own.items()}
     fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
     bounds_from = "data min/max" if action_bounds is None else "given"
     restored: dict[str, Any] = {}
@@ -306,7 +320,7 @@ def import_lerobot(
             operator = [labels["operators"][int(r["episode_index"])] for r in rows]
         if action_bounds is None and "action_low" in labels:
             action_bounds = (labels["action_low"], labels["action_high"])
-            bounds_from = "artifact.json (elicit-jax export)"
+            bounds_from = labels["from"]
         if "obs_fields" in labels and labels["obs_fields"][-1].stop == fields[-1].stop:
             fields = labels["obs_fields"]
         restored = restored_provenance(labels, names)
@@ -328,12 +342,20 @@ def import_lerobot(
             obs_keys=list(obs_keys),
             action_bounds_from=bounds_from,
             success_from="next.success" if has_success else "assumed (no next.success)",
-            labels_from="artifact.json (elicit-jax export)" if labels is not None else None,
-            episode_sha256=digests,
+            labels_from=labels["from"] if labels is not None else None,
+            episode_sha256=digests_by_name,
             **restored,
         ),
     )
     return validate(demos, str(root), bounds=None, finite=finite)
+
+
+def _digests(rows: list[dict[str, Any]], eps: list[dict[str, np.ndarray]]) -> dict[int, str]:
+    """Episode index -> content hash of its frames as read."""
+    return {
+        int(r["episode_index"]): episode_digest(ep["obs"], ep["action"], ep.get("reward"))
+        for r, ep in zip(rows, eps, strict=True)
+    }
 
 
 def _bounds(eps: list[dict[str, np.ndarray]], given: Any) -> tuple[Any, Any]:
@@ -362,10 +384,9 @@ def _read_frames(
     rows: list[dict[str, Any]],
     obs_keys: Sequence[str],
     tasks: dict[int, str],
-    names: dict[int, str],
 ) -> tuple[list[dict[str, np.ndarray]], list[bool], list[int], bool]:
-    """Episodes (obs, action, reward, source name, frame tasks), outcomes, obs key widths and
-    whether the outcomes were recorded (``next.success``)."""
+    """Episodes (obs, action, reward, frame tasks), outcomes, obs key widths and whether the
+    outcomes were recorded (``next.success``)."""
     columns = (*obs_keys, "action", "episode_index", "frame_index")
     optional = ("next.reward", "next.success", "task_index")
     by_episode = split_episodes(load_frames(root, info, rows, columns, optional), rows)
@@ -379,7 +400,6 @@ def _read_frames(
         ep = {
             "obs": np.concatenate(mats, axis=1),
             "action": _to_matrix(part.column("action"), "action", path),
-            SOURCE_EPISODE: np.full(part.num_rows, names[e], dtype=object),
             TASK_COLUMN: frame_tasks(part, r, tasks),
         }
         if "next.reward" in part.column_names:
