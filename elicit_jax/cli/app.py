@@ -95,15 +95,29 @@ def unwrap_help(text: str) -> str:
     return "\n\n".join(paragraphs)
 
 
+def _literal_help(command: Any) -> None:
+    """Unwrap the command's help and escape what Rich would take for markup in it and in its
+    options' help: ``[runs/<name>-<profile>]`` (a default in brackets) was swallowed as a
+    tag, leaving "Run directory ."."""
+    from rich.markup import escape
+
+    if command.help:
+        command.help = escape(unwrap_help(command.help))
+    for param in getattr(command, "params", ()):
+        if getattr(param, "help", None):
+            param.help = escape(param.help)
+    command._help_ready = True
+
+
 class OrderedGroup(TyperGroup):
     """A command group that lists commands in workflow order, shows each command's help
-    unwrapped (:func:`unwrap_help`), and refuses an option given twice (e.g. ``--scores a
+    unwrapped (:func:`unwrap_help`) and literally (no Rich markup), and refuses an option given twice (e.g. ``--scores a
     --scores b``) instead of silently keeping the last one."""
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         command = super().get_command(ctx, cmd_name)
-        if command is not None and command.help:
-            command.help = unwrap_help(command.help)
+        if command is not None and not getattr(command, "_help_ready", False):
+            _literal_help(command)
         return command
 
     def list_commands(self, ctx: Any) -> list[str]:
