@@ -2,6 +2,7 @@
 
 import os
 
+import numpy as np
 import pytest
 
 from elicit_jax import runtime
@@ -84,3 +85,44 @@ def test_cli_sizes_the_pool_for_a_definition_that_evaluates_with_mjx(tmp_path):
     assert _steps_mjx(["pipeline", "run", str(tmp_path / "missing.toml")]) is False
     assert _steps_mjx(["pipeline", "status", str(mjx)]) is False
     assert _steps_mjx(["pipeline", "run", "quickstart"]) is False
+
+
+def test_tables_are_not_cut_at_80_columns_in_a_file_or_pipe(tmp_path):
+    """`demos list x | cat` cut a wide table at 80 columns ("axis_operat…"); the CLI widens
+    the console when stdout is not a terminal, unless COLUMNS says otherwise."""
+    import subprocess
+    import sys
+
+    from elicit_jax.data.demos import from_episodes, write_demos
+
+    rng = np.random.default_rng(0)
+    eps = [{"obs": rng.normal(size=(3, 2)), "action": rng.uniform(-1, 1, (3, 2))} for _ in range(2)]
+    name = "a_proficient_operator_with_a_rather_long_name_from_a_real_lab"
+    write_demos(tmp_path / "d.parquet", from_episodes(eps, operators=name))
+    env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+    code = "from elicit_jax.cli import main; main()"
+
+    def listing(**extra):
+        args = [sys.executable, "-c", code, "demos", "list", str(tmp_path / "d.parquet")]
+        run = subprocess.run(args, capture_output=True, text=True, env={**env, **extra})
+        assert run.returncode == 0, run.stderr
+        return run.stdout
+
+    assert name in listing()
+    assert name not in listing(COLUMNS="80")  # the user's own width is kept
+
+
+def test_configure_console_leaves_a_terminal_and_a_user_width_alone(monkeypatch):
+    import io
+    import sys
+
+    for name in ("COLUMNS", runtime.WIDE_OWNER_ENV):  # recorded, so that both are restored
+        monkeypatch.setenv(name, "")
+        monkeypatch.delenv(name)
+    monkeypatch.setattr(sys, "stdout", io.StringIO())
+    runtime.configure_console()
+    assert os.environ["COLUMNS"] == str(runtime.WIDE_CONSOLE)
+    monkeypatch.setenv("COLUMNS", "100")
+    runtime.configure_console()
+    assert os.environ["COLUMNS"] == "100"
+    assert runtime.stderr_width() is None or runtime.stderr_width() > 0
