@@ -126,3 +126,49 @@ def test_configure_console_leaves_a_terminal_and_a_user_width_alone(monkeypatch)
     runtime.configure_console()
     assert os.environ["COLUMNS"] == "100"
     assert runtime.stderr_width() is None or runtime.stderr_width() > 0
+
+
+def test_mjx_imports_without_the_stray_warp_line():
+    """mujoco.mjx prints "Failed to import warp: ..." on stdout when Warp is absent (it is
+    never used); the one import elicit-jax makes keeps it off the user's screen."""
+    import subprocess
+    import sys
+
+    code = "from elicit_jax.sim.env import import_mjx; print(import_mjx().__name__)"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "mujoco.mjx"
+    assert "warp" not in (run.stdout + run.stderr).lower()
+
+
+def test_mjx_progress_bar_says_it_is_compiling(monkeypatch):
+    """The MJX bar sat at 0% through a cold compile with nothing said; it now says
+    "compiling…" until the first policy is done, then what it counts."""
+    import rich.progress
+
+    from elicit_jax.cli import sim_cmds
+    from elicit_jax.sim import evaluate
+    from elicit_jax.sim.evaluate import EvalConfig
+
+    seen = []
+
+    def add_task(self, description, **kw):
+        seen.append(description)
+        return rich.progress.TaskID(0)
+
+    def update(self, task_id, **kw):
+        seen.append(kw.get("description"))
+
+    def fake_eval(policy, config, out, progress, trajectories):
+        progress("run", 1.0)
+        return None, "summary"
+
+    monkeypatch.setattr(rich.progress.Progress, "add_task", add_task)
+    monkeypatch.setattr(rich.progress.Progress, "update", update)
+    monkeypatch.setattr(evaluate, "expand_policies", lambda p, c: ["run"])
+    monkeypatch.setattr(evaluate, "resolve_backend", lambda *a: "mjx")
+    monkeypatch.setattr(evaluate, "evaluate_policies", fake_eval)
+    config = EvalConfig(task="reach-pillar", rollouts=2, backend="mjx")
+    n, _ = sim_cmds._evaluate_with_bar(["run"], config, None, None, "reach-pillar")
+    assert n == 1
+    assert "compiling…" in seen[0] and seen[1] == "reach-pillar: 1 policies x 2 rollouts"
