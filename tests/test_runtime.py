@@ -172,3 +172,23 @@ def test_mjx_progress_bar_says_it_is_compiling(monkeypatch):
     n, _ = sim_cmds._evaluate_with_bar(["run"], config, None, None, "reach-pillar")
     assert n == 1
     assert "compiling…" in seen[0] and seen[1] == "reach-pillar: 1 policies x 2 rollouts"
+
+
+def test_the_robosuite_extra_resolves_once_and_needs_no_compiler():
+    """`pip install -e '.[robosuite]'` downloaded robosuite 1.5.2, backtracked to 1.5.1 (1.5.2's
+    mink pin needs numpy<2), and compiled evdev from source (pynput >= 1.7 needs it on
+    Linux; it has no wheels): the extra pins the version pip ends on, and a pynput without
+    evdev (robosuite uses it only for its keyboard device)."""
+    import tomllib
+    from pathlib import Path
+
+    from packaging.requirements import Requirement
+
+    project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    extra = {
+        r.name: r
+        for r in map(Requirement, project["project"]["optional-dependencies"]["robosuite"])
+    }
+    assert str(extra["robosuite"].specifier) == "==1.5.1"
+    pynput = extra["pynput"].specifier
+    assert "1.6.8" in pynput and "1.7.0" not in pynput and "1.8.2" not in pynput
