@@ -192,3 +192,19 @@ def test_the_robosuite_extra_resolves_once_and_needs_no_compiler():
     assert str(extra["robosuite"].specifier) == "==1.5.1"
     pynput = extra["pynput"].specifier
     assert "1.6.8" in pynput and "1.7.0" not in pynput and "1.8.2" not in pynput
+
+
+def test_headers_name_what_makes_numbers_machine_specific():
+    """Results are bit-identical only on the same CPU model with the same XLA thread count
+    (docs/outputs.md, "Across machines"): every header records both, so a user comparing with
+    a committed report can tell whether the digits should match."""
+    from pathlib import Path
+
+    from elicit_jax.artifact import make_header
+    from elicit_jax.provenance import ISA_LEVELS
+
+    settings = make_header("demos", 1)["runtime"]
+    assert {"cpu", "cpu_isa", "cpus", "PJRT_NPROC", "XLA_FLAGS"} <= set(settings)
+    assert settings["cpu"] and settings["cpu_isa"] in (*ISA_LEVELS, "unknown")
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "outputs.md").read_text()
+    assert "## Across machines" in doc and "`cpu_isa`" in doc and "PJRT_NPROC" in doc
