@@ -84,7 +84,7 @@ def test_a_negative_seed_and_a_port_out_of_range_are_one_line_errors(tmp_path):
 
 
 def test_brackets_in_help_are_shown_not_taken_for_markup():
-    """"Run directory [runs/<name>-<profile>]." was shown as "Run directory ." (Rich took the
+    """ "Run directory [runs/<name>-<profile>]." was shown as "Run directory ." (Rich took the
     default in brackets for a style tag); every bracketed text of an option's help shows."""
     checked = 0
     for path, cmd in _commands(app):

@@ -23,21 +23,14 @@ import numpy as np
 
 from elicit_jax.artifact import read_json
 from elicit_jax.data.demos import (
-    SOURCE_EPISODE,
     TASK_COLUMN,
     Demos,
-    episode_digest,
     fields_from_sizes,
     from_episodes,
     make_provenance,
     validate,
 )
-from elicit_jax.data.lerobot_record import (
-    read_record,
-    restore_columns,
-    restore_names,
-    restored_provenance,
-)
+from elicit_jax.data.lerobot_record import label_episodes, restored_provenance
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -297,21 +290,15 @@ def import_lerobot(
         raise ElicitError("dataset lists no episodes", root)
     tasks = read_tasks(root, info)
     eps, successes, sizes, has_success = _read_frames(root, info, rows, obs_keys, tasks)
-    own = _digests(rows, eps)
-
-    def digests(keys: Sequence[str]) -> dict[int, str]:
-        if tuple(keys) == obs_keys:
-            return own
-        return _digests(rows, _read_frames(root, info, rows, keys, tasks)[0])
-
-    labels = read_record(root, info, rows, all_rows, obs_keys, digests)
-    names = restore_names(rows, labels)
-    columns = restore_columns(labels, rows)
-    for r, ep in zip(rows, eps, strict=True):
-        e = int(r["episode_index"])
-        ep[SOURCE_EPISODE] = np.full(len(ep["obs"]), names[e], dtype=object)
-        ep.update(columns[e])
-    digests_by_name = {names[e]: d for e, d in own.items()}
+    labels, names, digests = label_episodes(
+        root,
+        info,
+        rows,
+        all_rows,
+        obs_keys,
+        eps,
+        lambda k: _read_frames(root, info, rows, k, tasks)[0],
+    )
     fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
     bounds_from = "data min/max" if action_bounds is None else "given"
     restored: dict[str, Any] = {}
@@ -343,19 +330,11 @@ def import_lerobot(
             action_bounds_from=bounds_from,
             success_from="next.success" if has_success else "assumed (no next.success)",
             labels_from=labels["from"] if labels is not None else None,
-            episode_sha256=digests_by_name,
+            episode_sha256=digests,
             **restored,
         ),
     )
     return validate(demos, str(root), bounds=None, finite=finite)
-
-
-def _digests(rows: list[dict[str, Any]], eps: list[dict[str, np.ndarray]]) -> dict[int, str]:
-    """Episode index -> content hash of its frames as read."""
-    return {
-        int(r["episode_index"]): episode_digest(ep["obs"], ep["action"], ep.get("reward"))
-        for r, ep in zip(rows, eps, strict=True)
-    }
 
 
 def _bounds(eps: list[dict[str, np.ndarray]], given: Any) -> tuple[Any, Any]:

@@ -24,7 +24,7 @@ says so.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -263,6 +263,53 @@ def _parse_record(
         )
         out["action_low"], out["action_high"] = demos["action_low"], demos["action_high"]
     return out
+
+
+def episode_digests(
+    rows: Sequence[dict[str, Any]], eps: Sequence[dict[str, np.ndarray]]
+) -> dict[int, str]:
+    """Episode index -> content hash of its frames as read."""
+    return {
+        int(r["episode_index"]): episode_digest(ep["obs"], ep["action"], ep.get("reward"))
+        for r, ep in zip(rows, eps, strict=True)
+    }
+
+
+def label_episodes(
+    root: Path,
+    info: dict[str, Any],
+    rows: Sequence[dict[str, Any]],
+    all_rows: Sequence[dict[str, Any]],
+    obs_keys: Sequence[str],
+    eps: Sequence[dict[str, np.ndarray]],
+    reread: Callable[[Sequence[str]], Sequence[dict[str, np.ndarray]]],
+) -> tuple[dict[str, Any] | None, dict[int, str], dict[str, str]]:
+    """Give the episodes just read (``eps``, for ``rows``) what the folder's record says of
+    them: each its ``source_episode`` name and own columns, matched by content.
+
+    Args:
+      root, info, rows, all_rows, obs_keys: as for :func:`read_record`.
+      eps: the episodes' frames (``obs``, ``action``, ``reward``), completed in place.
+      reread: obs features -> the episodes read with those as ``obs`` (for a record whose
+        hashes cover other features than ``obs_keys``).
+
+    Returns:
+      ``(labels, names, digests)``: :func:`read_record`'s answer, each episode's name by its
+      index and its content hash by its name.
+    """
+    own = episode_digests(rows, eps)
+
+    def digests(keys: Sequence[str]) -> Mapping[int, str]:
+        return own if tuple(keys) == tuple(obs_keys) else episode_digests(rows, reread(keys))
+
+    labels = read_record(root, info, rows, all_rows, obs_keys, digests)
+    names = restore_names(rows, labels)
+    columns = restore_columns(labels, rows)
+    for r, ep in zip(rows, eps, strict=True):
+        e = int(r["episode_index"])
+        ep[SOURCE_EPISODE] = np.full(len(ep["obs"]), names[e], dtype=object)
+        ep.update(columns[e])
+    return labels, names, {names[e]: d for e, d in own.items()}
 
 
 def restore_columns(
