@@ -195,10 +195,40 @@ def shown_paths_in(text: str, root: str | Path | None = None) -> str:
 
 def runtime_settings() -> dict[str, Any]:
     """Settings outside the config that can change numerics: XLA flags, the XLA CPU thread
-    count (results are bit-identical only for the same machine and thread count), CPUs."""
+    count, CPUs and the CPU model (results are bit-identical only for the same CPU model and
+    thread count: docs/outputs.md, "Across machines")."""
     return {
         "XLA_FLAGS": os.environ.get("XLA_FLAGS", ""),
         "PJRT_NPROC": os.environ.get("PJRT_NPROC", ""),
         "cpus": available_cpus(),
         "machine": platform.machine(),
+        "cpu": cpu_model(),
+        "cpu_isa": cpu_isa(),
     }
+
+
+@functools.cache
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; elsewhere what :mod:`platform` says)."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith(("model name", "hardware", "cpu model")):
+                return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine() or "unknown"
+
+
+ISA_LEVELS = ("amx_tile", "avx512f", "avx2", "avx", "sse4_2", "sve", "asimd")
+"""Vector instruction sets, widest first: the matmul kernels XLA's CPU backend runs are
+chosen from them at run time."""
+
+
+@functools.cache
+def cpu_isa() -> str:
+    """The widest of :data:`ISA_LEVELS` the CPU has (``/proc/cpuinfo`` flags), else
+    ``unknown``."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith(("flags", "features")):
+                have = set(line.split(":", 1)[1].split())
+                return next((isa for isa in ISA_LEVELS if isa in have), "unknown")
+    return "unknown"

@@ -1,7 +1,8 @@
 """Process-level set-up, applied at the CLI entry point and in the test configuration.
 
 Nothing here runs at import time: callers invoke :func:`configure` before importing JAX, and
-the CLI calls :func:`configure_logging` to decide where the library's log records go.
+the CLI calls :func:`configure_logging` to decide where the library's log records go and
+:func:`configure_console` to keep Rich's tables whole in a file or a pipe.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import logging
 import logging.handlers
 import os
+import sys
 from pathlib import Path
 
 MJX_CPU_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
@@ -19,6 +21,43 @@ THREADS_OWNER_ENV = "ELICIT_JAX_PJRT_NPROC_DEFAULT"
 """Set (to ``1``) when :func:`configure` chose ``PJRT_NPROC``, so that a child process (a Ray
 worker inherits its driver's environment) may size it anew for its own CPUs; a user's
 ``PJRT_NPROC`` never carries it and is left alone."""
+
+
+WIDE_CONSOLE = 200
+WIDE_OWNER_ENV = "ELICIT_JAX_WIDE_COLUMNS"
+"""Set (to ``1``) when :func:`configure_console` chose ``COLUMNS``."""
+
+
+def configure_console() -> None:
+    """Widen Rich's consoles when stdout is not a terminal (a file, a pipe).
+
+    Rich sizes a console from the terminal on stdin/stdout/stderr, else 80 columns, and
+    squeezes a table into that width, cutting its cells (``axis_operat…``) in a file where
+    nothing limits the width. With stdout redirected and no ``COLUMNS`` set by the user,
+    ``COLUMNS`` is set to :data:`WIDE_CONSOLE`; a console on a terminal stderr (progress
+    bars) takes :func:`stderr_width` instead.
+    """
+    if "COLUMNS" not in os.environ and not _is_terminal(sys.stdout):
+        os.environ["COLUMNS"] = str(WIDE_CONSOLE)
+        os.environ[WIDE_OWNER_ENV] = "1"
+
+
+def stderr_width() -> int | None:
+    """The width a console on stderr should take: the terminal's when stderr is one and
+    :func:`configure_console` widened ``COLUMNS`` for stdout, else ``None`` (Rich decides)."""
+    if os.environ.get(WIDE_OWNER_ENV) != "1" or not _is_terminal(sys.stderr):
+        return None
+    try:
+        return os.get_terminal_size(sys.stderr.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _is_terminal(stream: object) -> bool:
+    try:
+        return bool(stream.isatty())  # type: ignore[attr-defined]
+    except (AttributeError, ValueError):
+        return False
 
 
 def default_cache_dir() -> Path:

@@ -81,3 +81,24 @@ def test_a_negative_seed_and_a_port_out_of_range_are_one_line_errors(tmp_path):
         assert isinstance(r.exception, ElicitError), (args, r.output, r.exception)
         assert "-1" in str(r.exception) or "70000" in str(r.exception)
     assert not list(tmp_path.iterdir())
+
+
+def test_brackets_in_help_are_shown_not_taken_for_markup():
+    """ "Run directory [runs/<name>-<profile>]." was shown as "Run directory ." (Rich took the
+    default in brackets for a style tag); every bracketed text of an option's help shows."""
+    checked = 0
+    for path, cmd in _commands(app):
+        wanted = [
+            m
+            for p in cmd.params
+            for m in re.findall(r"\[[^\]]*\]", getattr(p, "help", None) or "")
+            if not m.startswith("\\")
+        ]
+        if not wanted:
+            continue
+        out = CliRunner().invoke(app, [*path, "--help"], env={"COLUMNS": "250"}).output
+        text = re.sub(r"[ \u2502]+", " ", out)
+        for m in wanted:
+            assert re.sub(r"\s+", " ", m) in text, (" ".join(path), m)
+        checked += 1
+    assert checked >= 3

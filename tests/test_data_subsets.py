@@ -108,3 +108,38 @@ def test_episode_scores_name_the_source_demo():
     }
     out = summarise_episodes(pairs, 0.05)
     assert out["source_episode"].tolist() == ["demo_3", "demo_9"]
+
+
+def test_concat_keeps_each_episodes_task_into_a_lerobot_export(tmp_path):
+    """Two imports of different tasks: each episode keeps its own (the LeRobot export lists
+    it), not the first file's; `filter --base` concatenates with the same function."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from elicit_jax.data.demos import concat_demos
+
+    rng = np.random.default_rng(1)
+    files = []
+    for task, n in (("lift the cube", 2), ("open the drawer", 3)):
+        eps = [
+            {"obs": rng.normal(size=(4, 3)), "action": rng.uniform(-1, 1, size=(4, 2))}
+            for _ in range(n)
+        ]
+        files.append(tmp_path / f"{n}.parquet")
+        write_demos(files[-1], from_episodes(eps, operators="ann", task=task))
+    r = invoke("demos", "concat", *files, "-o", tmp_path / "ab.parquet")
+    assert r.exit_code == 0, r.output
+    ab = read_demos(tmp_path / "ab.parquet")
+    want = ["lift the cube"] * 2 + ["open the drawer"] * 3
+    assert [ab.extra["task"][s] for _, s, _ in ab.episode_bounds()] == want
+    assert ab.task == "lift the cube | open the drawer"
+    r = invoke("export", tmp_path / "ab.parquet", "-f", "lerobot", "--fps", "10",
+               "-o", tmp_path / "lr")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = pq.read_table(tmp_path / "lr/meta/episodes/chunk-000/file-000.parquet").to_pylist()
+    assert [r["tasks"] for r in rows] == [[t] for t in want]
+    assert json.loads((tmp_path / "lr/meta/info.json").read_text())["total_tasks"] == 2
+    # one task everywhere: no task column, the task as it was
+    same = concat_demos([read_demos(files[0]), read_demos(files[0])])
+    assert "task" not in same.extra and same.task == "lift the cube"

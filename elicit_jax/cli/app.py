@@ -95,15 +95,29 @@ def unwrap_help(text: str) -> str:
     return "\n\n".join(paragraphs)
 
 
+def _literal_help(command: Any) -> None:
+    """Unwrap the command's help and escape what Rich would take for markup in it and in its
+    options' help: ``[runs/<name>-<profile>]`` (a default in brackets) was swallowed as a
+    tag, leaving "Run directory ."."""
+    from rich.markup import escape
+
+    if command.help:
+        command.help = escape(unwrap_help(command.help))
+    for param in getattr(command, "params", ()):
+        if getattr(param, "help", None):
+            param.help = escape(param.help)
+    command._help_ready = True
+
+
 class OrderedGroup(TyperGroup):
     """A command group that lists commands in workflow order, shows each command's help
-    unwrapped (:func:`unwrap_help`), and refuses an option given twice (e.g. ``--scores a
-    --scores b``) instead of silently keeping the last one."""
+    unwrapped (:func:`unwrap_help`) and literally (no Rich markup), and refuses an option
+    given twice (e.g. ``--scores a --scores b``) instead of silently keeping the last one."""
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         command = super().get_command(ctx, cmd_name)
-        if command is not None and command.help:
-            command.help = unwrap_help(command.help)
+        if command is not None and not getattr(command, "_help_ready", False):
+            _literal_help(command)
         return command
 
     def list_commands(self, ctx: Any) -> list[str]:
@@ -205,9 +219,10 @@ def _evaluates_with_mjx(table: object) -> bool:
 def main() -> None:
     """Console-script entry point: set up JAX, run the app, print errors as one line."""
     from elicit_jax import cli as _commands  # noqa: F401  (registers the commands)
-    from elicit_jax.runtime import configure, configure_logging
+    from elicit_jax.runtime import configure, configure_console, configure_logging
 
     configure(mjx=_steps_mjx(sys.argv[1:]))
+    configure_console()
     debug = "--debug" in sys.argv[1:]
     _state["log"] = configure_logging(echo=debug)
     try:

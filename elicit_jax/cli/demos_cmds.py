@@ -67,23 +67,37 @@ def select_cmd(
     source_episodes: str | None = typer.Option(
         None, "--source-episodes", help="Keep these source names, e.g. demo_3,demo_7."
     ),
+    first: int | None = typer.Option(
+        None, "--first", min=1, help="Keep only the first N of the episodes selected (id order)."
+    ),
+    drop_first: int | None = typer.Option(
+        None, "--drop-first", min=0, help="Keep all but the first N of the episodes selected."
+    ),
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Write a subset of episodes; ids stay those of the input, source names are kept.
 
     A split is two selections: --episodes for one part, --exclude with the same ids for the
-    other.
+    other; or, whatever the order of the operators' demos, --first N and --drop-first N with
+    the same --operator.
 
     Example: elicit-jax demos select demos.parquet --episodes 0-4 -o heldout.parquet
 
     Example: elicit-jax demos select demos.parquet --exclude 0-4 -o train.parquet
+
+    Example: elicit-jax demos select demos.parquet --operator alice --first 3 -o heldout.parquet
     """
     from elicit_jax.artifact import check_outputs
     from elicit_jax.data.subsets import SubsetSpec, select_file
 
     check_outputs([out], [demos], overwrite=overwrite)
     spec = SubsetSpec(
-        episodes=episodes, exclude=exclude, operators=operator, source_episodes=source_episodes
+        episodes=episodes,
+        exclude=exclude,
+        operators=operator,
+        source_episodes=source_episodes,
+        first=first,
+        drop_first=drop_first,
     )
     d = select_file(demos, out, spec)
     _print_episodes(d, f"wrote {out}: {d.n_episodes} episodes, {d.n_steps} steps")

@@ -98,22 +98,28 @@ def report(
         help="RUN_DIR is a report folder: recompute every table, interval and figure from the "
         "raw results kept in it (rollouts.parquet, report-data.json), without the run.",
     ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace an existing report (never another directory)."
+    ),
 ) -> None:
     """Write the Markdown and self-contained HTML report of a pipeline run or a session.
 
+    An existing report (a pipeline run writes RUN_DIR/report) is replaced only with
+    --overwrite; any other directory never. --rebuild without -o rewrites the report folder
+    it is given, which is what it is for.
+
     Examples:
-      elicit-jax report runs/filtering-cpu
       elicit-jax report sessions/op4
+      elicit-jax report runs/filtering-cpu --overwrite
       elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
       elicit-jax report --rebuild docs/results/f
     """
     from elicit_jax.artifact import check_outputs, holds_artifact, read_json
 
-    # a report is re-rendered in place; any other directory at -o is never replaced (a
-    # rebuild in place needs no check here: rebuild_report refuses a folder without raw results)
+    # a rebuild in place needs no check here: rebuild_report refuses a folder without raw results
     check_outputs(
         [out or (None if rebuild else run_dir / "report")],
-        overwrite=True,
+        overwrite=overwrite,
         replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
     )
     if rebuild:

@@ -165,14 +165,20 @@ def _evaluate_with_bar(
     """Run the evaluation under a progress bar; the number of policies and the summary."""
     from rich.progress import Progress
 
-    from elicit_jax.sim.evaluate import evaluate_policies, expand_policies
+    from elicit_jax.sim.evaluate import evaluate_policies, expand_policies, resolve_backend
 
     n = len(expand_policies(policy, config.checkpoints))
+    what = f"{label}: {n} policies x {config.rollouts} rollouts"
+    first = what
+    if resolve_backend(config.backend, config.task, config.env_from) == "mjx":
+        first = f"{what} — compiling… (MJX: minutes when not cached)"
+
+    def done(_ref: object, _rate: object) -> None:
+        bar.update(tid, advance=1, description=what)
+
     with Progress(transient=True) as bar:
-        tid = bar.add_task(f"{label}: {n} policies x {config.rollouts} rollouts", total=n)
-        _, summary = evaluate_policies(
-            policy, config, out, progress=lambda _ref, _rate: bar.advance(tid), trajectories=traj
-        )
+        tid = bar.add_task(first, total=n)
+        _, summary = evaluate_policies(policy, config, out, progress=done, trajectories=traj)
     return n, summary
 
 

@@ -73,9 +73,14 @@ def make_provenance(source: str | Path, importer: str, **fields: Any) -> dict[st
 
 
 def concat_demos(parts: Sequence[Demos], renumber: bool = True) -> Demos:
-    """Concatenate demo sets of equal dims; episode ids renumbered 0..E-1 when ``renumber``."""
+    """Concatenate demo sets of equal dims; episode ids renumbered 0..E-1 when ``renumber``.
+
+    Sets of different tasks (or with a per-step ``task`` column) keep each step's task in
+    the ``task`` column; the result's task then names them all, joined by `` | ``.
+    """
     if not parts:
         raise ElicitError("nothing to concatenate: no demonstration sets given")
+    parts = _with_task_column(parts)
     first = parts[0]
     for p in parts[1:]:
         if (p.obs_dim, p.action_dim) != (first.obs_dim, first.action_dim):
@@ -97,7 +102,24 @@ def concat_demos(parts: Sequence[Demos], renumber: bool = True) -> Demos:
     provenance = dict(first.provenance)
     if any(dict(p.provenance) != provenance for p in parts[1:]):
         provenance = {"parts": [dict(p.provenance) for p in parts]}
-    return dataclasses.replace(first, **arrays, extra=extra, provenance=provenance)
+    task = first.task
+    if TASK_COLUMN in extra:
+        task = " | ".join(dict.fromkeys(str(t) for t in extra[TASK_COLUMN]))
+    return dataclasses.replace(first, **arrays, extra=extra, provenance=provenance, task=task)
+
+
+def _with_task_column(parts: Sequence[Demos]) -> Sequence[Demos]:
+    """The parts, each with a per-step ``task`` column if they differ in task."""
+    if len({p.task for p in parts}) == 1 and not any(TASK_COLUMN in p.extra for p in parts):
+        return parts
+    return [
+        p
+        if TASK_COLUMN in p.extra
+        else dataclasses.replace(
+            p, extra={**p.extra, TASK_COLUMN: np.full(p.n_steps, p.task, dtype=object)}
+        )
+        for p in parts
+    ]
 
 
 def _first_seen_rank(ids: np.ndarray) -> np.ndarray:

@@ -386,10 +386,19 @@ def _lerobot(cfg: ExportConfig, sel: Selection, header: dict) -> dict[str, Any]:
     )
     indices = lerobot_indices(sel.source_episodes, prov, source)
     chosen = sorted(zip(indices, sel.source_episodes, lengths, sel.operators, strict=True))
+    hashes = prov.get("episode_sha256") or {}
     header["episodes"] = [
-        {"episode_index": i, "length": n, "operator": op, "source_episode": name}
+        {
+            "episode_index": i,
+            "length": n,
+            **({"sha256": hashes[name]} if name in hashes else {}),
+            "operator": op,
+            "source_episode": name,
+        }
         for i, (_, name, n, op) in enumerate(chosen)
     ]
+    if hashes:  # the frames are copied as they are: the import's hashes hold for them
+        header["sha256_of"] = {"obs": list(prov.get("obs_keys") or ["observation.state"])}
     # what the source's own record says of its features, and where the names come from
     header.update(carried_record(Path(source)))
     if "origin" in prov:

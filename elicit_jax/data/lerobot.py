@@ -23,16 +23,14 @@ import numpy as np
 
 from elicit_jax.artifact import read_json
 from elicit_jax.data.demos import (
-    SOURCE_EPISODE,
     TASK_COLUMN,
     Demos,
-    episode_digest,
     fields_from_sizes,
     from_episodes,
     make_provenance,
     validate,
 )
-from elicit_jax.data.lerobot_record import read_record, restore_names, restored_provenance
+from elicit_jax.data.lerobot_record import label_episodes, restored_provenance
 from elicit_jax.errors import ElicitError
 
 SUPPORTED_VERSIONS = ("v2.0", "v2.1", "v3.0")
@@ -286,18 +284,21 @@ def import_lerobot(
     obs_keys = tuple(obs_keys or DEFAULT_OBS_KEYS)
     info = read_info(root)
     _check_features(root, info, obs_keys)
-    rows = select_rows(root, read_episodes(root, info), episodes)
+    all_rows = read_episodes(root, info)
+    rows = select_rows(root, all_rows, episodes)
     if not rows:
         raise ElicitError("dataset lists no episodes", root)
-    labels = read_record(root, rows, obs_keys)
-    names = restore_names(rows, labels)
-    eps, successes, sizes, has_success = _read_frames(
-        root, info, rows, obs_keys, read_tasks(root, info), names
+    tasks = read_tasks(root, info)
+    eps, successes, sizes, has_success = _read_frames(root, info, rows, obs_keys, tasks)
+    labels, names, digests = label_episodes(
+        root,
+        info,
+        rows,
+        all_rows,
+        obs_keys,
+        eps,
+        lambda k: _read_frames(root, info, rows, k, tasks)[0],
     )
-    digests = {
-        names[int(r["episode_index"])]: episode_digest(ep["obs"], ep["action"], ep.get("reward"))
-        for r, ep in zip(rows, eps, strict=True)
-    }
     fields = fields_from_sizes(list(zip(obs_keys, sizes, strict=True)))
     bounds_from = "data min/max" if action_bounds is None else "given"
     restored: dict[str, Any] = {}
@@ -306,7 +307,7 @@ def import_lerobot(
             operator = [labels["operators"][int(r["episode_index"])] for r in rows]
         if action_bounds is None and "action_low" in labels:
             action_bounds = (labels["action_low"], labels["action_high"])
-            bounds_from = "artifact.json (elicit-jax export)"
+            bounds_from = labels["from"]
         if "obs_fields" in labels and labels["obs_fields"][-1].stop == fields[-1].stop:
             fields = labels["obs_fields"]
         restored = restored_provenance(labels, names)
@@ -328,7 +329,7 @@ def import_lerobot(
             obs_keys=list(obs_keys),
             action_bounds_from=bounds_from,
             success_from="next.success" if has_success else "assumed (no next.success)",
-            labels_from="artifact.json (elicit-jax export)" if labels is not None else None,
+            labels_from=labels["from"] if labels is not None else None,
             episode_sha256=digests,
             **restored,
         ),
@@ -362,10 +363,9 @@ def _read_frames(
     rows: list[dict[str, Any]],
     obs_keys: Sequence[str],
     tasks: dict[int, str],
-    names: dict[int, str],
 ) -> tuple[list[dict[str, np.ndarray]], list[bool], list[int], bool]:
-    """Episodes (obs, action, reward, source name, frame tasks), outcomes, obs key widths and
-    whether the outcomes were recorded (``next.success``)."""
+    """Episodes (obs, action, reward, frame tasks), outcomes, obs key widths and whether the
+    outcomes were recorded (``next.success``)."""
     columns = (*obs_keys, "action", "episode_index", "frame_index")
     optional = ("next.reward", "next.success", "task_index")
     by_episode = split_episodes(load_frames(root, info, rows, columns, optional), rows)
@@ -379,7 +379,6 @@ def _read_frames(
         ep = {
             "obs": np.concatenate(mats, axis=1),
             "action": _to_matrix(part.column("action"), "action", path),
-            SOURCE_EPISODE: np.full(part.num_rows, names[e], dtype=object),
             TASK_COLUMN: frame_tasks(part, r, tasks),
         }
         if "next.reward" in part.column_names:

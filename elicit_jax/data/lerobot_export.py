@@ -41,6 +41,7 @@ from elicit_jax.data.lerobot_layout import (
     video_keys,
     write_folder,
 )
+from elicit_jax.data.lerobot_record import INFO_KEY, info_record
 from elicit_jax.data.lerobot_stats import QUANTILE_KEYS, Stats, from_json
 from elicit_jax.errors import ElicitError
 
@@ -206,7 +207,8 @@ def export_lerobot(
       episodes: source ``episode_index`` values to keep.
       version: codebase version of the new folder, ``v3.0`` (the default, whatever the
         source's) or ``v2.1``; the returned notes say what either means for LeRobot.
-      header: elicit-jax artifact header, stored as ``artifact.json`` at the folder's root.
+      header: elicit-jax artifact header, stored as ``artifact.json`` at the folder's root;
+        its export record (``episodes``...), if any, is also kept in ``meta/info.json``.
 
     Returns:
       ``version`` written, ``source_episodes`` (in order; new index = position),
@@ -226,6 +228,8 @@ def export_lerobot(
     cam_stats = _camera_stats(source, info, rows, cameras)
     table, meta = _gather(source, info, episodes)
     new_info = finish_info(info, version, len(meta), table.num_rows, len(tasks))
+    if header is not None and "episodes" in header:
+        new_info[INFO_KEY] = info_record(header)
     with atomic_path(out) as tmp:
         tmp.mkdir()
         n_videos = _copy_videos(source, info, new_info, rows, meta, tmp)

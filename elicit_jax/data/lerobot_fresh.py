@@ -11,9 +11,11 @@ float32 lists, as LeRobot's own writer stores them.
 Each step's task text (the demos' ``task`` column, from a multi-task LeRobot import; else
 their one task) becomes its ``task_index``, each episode's metadata lists its own tasks.
 LeRobot has no place for operators, observation-field slices, declared action bounds,
-robomimic ``env_args`` or the demos' names in their source dataset: they go to the folder's
-``artifact.json`` (:mod:`elicit_jax.data.lerobot_record`), from which ``elicit-jax import``
-restores them. Everything not written is listed in the notes.
+robomimic ``env_args``, the demos' names in their source dataset or elicit-jax's own
+columns (``pre_filter_*``, ``part``, ``subset``: not features, so LeRobot's ``add_frame``
+after ``resume()`` does not ask for them): they go to the folder's record
+(:mod:`elicit_jax.data.lerobot_record`: ``artifact.json`` and a copy in ``meta/info.json``),
+from which ``elicit-jax import`` restores them. Everything not written is listed in the notes.
 """
 
 from __future__ import annotations
@@ -33,7 +35,13 @@ from elicit_jax.data.lerobot_layout import (
     version_notes,
     write_folder,
 )
-from elicit_jax.data.lerobot_record import OBS_FEATURE, export_record
+from elicit_jax.data.lerobot_record import (
+    INFO_KEY,
+    OBS_FEATURE,
+    OWN_COLUMNS,
+    export_record,
+    info_record,
+)
 from elicit_jax.errors import ElicitError
 
 BOOKKEEPING = ("timestamp", "frame_index", "episode_index", "index", "task_index")
@@ -90,8 +98,8 @@ def frames(demos: Demos, fps: int) -> tuple[Any, list[dict[str, Any]], dict[str,
     skipped = []
     for k, v in sorted(demos.extra.items()):
         v = np.asarray(v)
-        if k in (TASK_COLUMN, SOURCE_EPISODE):
-            continue  # written as task_index (below); names kept in artifact.json
+        if k in (TASK_COLUMN, SOURCE_EPISODE, *OWN_COLUMNS):
+            continue  # written as task_index (below); names and own columns: in the record
         if v.dtype.kind not in "biuf" or k in cols or k in BOOKKEEPING:
             skipped.append(k)
             continue
@@ -166,15 +174,18 @@ def write_fresh(
     fields = ", ".join(f"{f.name} [{f.start}:{f.stop}]" for f in demos.obs_fields)
     notes = [
         f"{OBS_FEATURE} holds the demos' observation" + (f" ({fields})" if fields else ""),
-        "operators, obs fields, action bounds, env_args and source demo names have no place "
-        "in LeRobot's format: kept in artifact.json, from which elicit-jax import restores them",
+        "operators, obs fields, action bounds, env_args, source demo names and elicit-jax's own "
+        "columns have no place in LeRobot's format: kept in artifact.json and under "
+        f"'{INFO_KEY}' in meta/info.json (which LeRobot's v2.1 -> v3.0 converter carries), "
+        "from which elicit-jax import restores them, matching episodes by content",
     ]
     if skipped:
         notes.append(f"non-numeric columns not written: {', '.join(skipped)}")
     notes += version_notes(CURRENT_VERSION, version, out)
+    record = {**dict(header or {}), **export_record(demos), "notes": notes}
+    info[INFO_KEY] = info_record(record)
     with atomic_path(out) as tmp:
         tmp.mkdir()
         write_folder(tmp, table, episodes, tasks, info)
-        record = {**dict(header or {}), **export_record(demos), "notes": notes}
         (tmp / "artifact.json").write_text(dumps(record) + "\n")
     return {"version": version, "features": list(features), "notes": notes}

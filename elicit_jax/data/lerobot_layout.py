@@ -86,7 +86,13 @@ def finish_info(
         k: v
         for k, v in base.items()
         if k
-        not in ("total_chunks", "total_videos", "data_files_size_in_mb", "video_files_size_in_mb")
+        not in (
+            "total_chunks",
+            "total_videos",
+            "data_files_size_in_mb",
+            "video_files_size_in_mb",
+            "elicit_jax",  # the source's record: the exporter writes the new folder's
+        )
     }
     chunks = int(base.get("chunks_size") or 1000)
     has_video = bool(video_keys(info))

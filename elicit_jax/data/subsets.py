@@ -40,12 +40,18 @@ class SubsetSpec:
       exclude: episode ids and ranges to drop.
       operators: operator names to keep, comma-separated.
       source_episodes: names in the source dataset to keep, e.g. ``"demo_3,demo_7"``.
+      first: of the episodes the other criteria keep, only the first ``first`` (in id
+        order); fewer than that is an error.
+      drop_first: of the episodes the other criteria keep, all but the first ``drop_first``
+        (with the same criteria, ``first=N`` and ``drop_first=N`` split them in two).
     """
 
     episodes: str | None = None
     exclude: str | None = None
     operators: str | None = None
     source_episodes: str | None = None
+    first: int | None = None
+    drop_first: int | None = None
 
 
 def _names(text: str) -> list[str]:
@@ -104,9 +110,19 @@ def select(demos: Demos, spec: SubsetSpec, source: str = "<demos>") -> Demos:
         if unknown:
             raise ElicitError(f"has no source episode '{unknown[0]}'", source)
         keep &= np.isin(names, wanted_names)
-    if not keep.any():
+    chosen = np.sort(ids[keep])
+    if spec.first is not None:
+        if len(chosen) < spec.first:
+            raise ElicitError(
+                f"--first {spec.first}: the other criteria keep only {len(chosen)} episodes",
+                source,
+            )
+        chosen = chosen[: spec.first]
+    if spec.drop_first is not None:
+        chosen = chosen[spec.drop_first :]
+    if not len(chosen):
         raise ElicitError("the selection keeps no episode", source)
-    return demos.select_episodes(ids[keep])
+    return demos.select_episodes(chosen)
 
 
 def select_file(path: str | Path, out: str | Path, spec: SubsetSpec) -> Demos:

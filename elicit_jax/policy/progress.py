@@ -33,7 +33,9 @@ class TrainProgress:
         self.config = config
         self.n_train = n_train
         self.quiet = quiet
-        self.console = Console(stderr=True, quiet=quiet)
+        from elicit_jax.runtime import stderr_width
+
+        self.console = Console(stderr=True, quiet=quiet, width=stderr_width())
         self._bar = Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),

@@ -33,6 +33,29 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.sim import mjcf
 from elicit_jax.sim.registry import TASKS, task_entry
 
+WARP_LINES = ("Failed to import warp", "Failed to import mujoco_warp")
+
+
+def import_mjx() -> Any:
+    """``mujoco.mjx``, imported without the lines its optional Warp backend prints on stdout
+    when Warp is not installed ("Failed to import warp: No module named 'warp'"): elicit-jax
+    never uses Warp, and the stray line read as an error before a long compile. Anything
+    else printed on import goes to the log."""
+    import contextlib
+    import io
+    import logging
+    import sys
+
+    if "mujoco.mjx" in sys.modules:
+        return sys.modules["mujoco.mjx"]
+    with contextlib.redirect_stdout(io.StringIO()) as said:
+        from mujoco import mjx
+    for line in said.getvalue().splitlines():
+        if line.strip() and not line.startswith(WARP_LINES):
+            logging.getLogger(__name__).info("mujoco.mjx on import: %s", line)
+    return mjx
+
+
 OBS_FIELDS: tuple[ObsField, ...] = fields_from_sizes(
     [("robot0_eef_pos", 3), ("robot0_eef_quat", 4), ("robot0_gripper_qpos", 2), ("object", 14)]
 )
@@ -120,7 +143,8 @@ class Task:
     def mjx_model(self) -> Any:
         """The model on the JAX device (built on first use, outside any trace)."""
         import jax
-        from mujoco import mjx
+
+        mjx = import_mjx()
 
         with jax.ensure_compile_time_eval():
             return mjx.put_model(self.mj_model)
@@ -211,7 +235,8 @@ class Task:
     def reset_to(self, qpos: Any, mocap_pos: Any) -> EnvState:
         """State at ``qpos (nq,)`` and ``mocap_pos (nmocap, 3)`` at rest, sensors computed."""
         import jax.numpy as jnp
-        from mujoco import mjx
+
+        mjx = import_mjx()
 
         m = self.mjx_model
         data = mjx.make_data(m)
@@ -235,7 +260,8 @@ class Task:
         """One control step: set targets from ``action (7,)``, run the physics substeps."""
         import jax
         import jax.numpy as jnp
-        from mujoco import mjx
+
+        mjx = import_mjx()
 
         m = self.mjx_model
         ctrl = self.ctrl_from_action(state.data.qpos[:N_GRIPPER_Q], action, jnp)
