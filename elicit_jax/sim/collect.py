@@ -33,6 +33,10 @@ class CollectConfig:
       max_attempts: give up after this many attempts (default: 4 x episodes).
       batch: environments stepped together.
       threads: C MuJoCo threads (0: one per CPU).
+      require: keep only successful episodes whose measured traits say they ``conflicts``
+        with the base operator's way, or show ``no-conflict`` ("" keeps every success); only
+        for tasks whose operators module measures traits (see
+        :func:`elicit_jax.sim.operators.episode_traits`).
     """
 
     task: str = "square-nut"
@@ -42,6 +46,11 @@ class CollectConfig:
     max_attempts: int = 0
     batch: int = 50
     threads: int = 0
+    require: str = ""
+
+
+REQUIRE = ("", "conflicts", "no-conflict")
+"""Values of :attr:`CollectConfig.require`."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,12 +63,18 @@ class CollectResult:
       attempts: episodes attempted.
       successes: successful attempts (>= len(episodes); extra successes are dropped).
       lengths: control steps of each kept episode.
+      unverified: successful attempts left out because their measured traits did not meet
+        :attr:`CollectConfig.require`.
+      conflicting: kept episodes whose measured traits say they conflict (None: the task
+        measures no traits).
     """
 
     episodes: list[dict[str, np.ndarray]]
     attempts: int
     successes: int
     lengths: list[int]
+    unverified: int = 0
+    conflicting: int | None = None
 
     @property
     def success_rate(self) -> float:
@@ -108,7 +123,7 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
       ElicitError: unknown task/operator, or too few successes within ``max_attempts``.
     """
     from elicit_jax.sim.env import make_task
-    from elicit_jax.sim.operators import make_operator
+    from elicit_jax.sim.operators import episode_traits, make_operator
 
     if config.episodes < 1:
         raise ElicitError(f"--episodes must be at least 1, got {config.episodes}")
@@ -117,12 +132,14 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
             raise ElicitError(f"{flag} must be >= 0 (0: the default), got {value}")
     task = make_task(config.task)
     operator = make_operator(task, config.operator)
+    measure = episode_traits(config.task)
+    _check_require(config, measure)
     rng = operator_rng(config.seed, config.operator)
     max_attempts = config.max_attempts or 4 * config.episodes
     batch = max(1, min(config.batch, config.episodes))
     kept: list[dict[str, np.ndarray]] = []
     lengths: list[int] = []
-    attempts = successes = 0
+    attempts = successes = unverified = 0
     with batch_sim(task, batch, config.threads) as sim:
         batch = sim.batch
         while len(kept) < config.episodes and attempts < max_attempts:
@@ -137,26 +154,72 @@ def collect_episodes(config: CollectConfig, progress: Any = None) -> CollectResu
                 successes += 1
                 if len(kept) < config.episodes:
                     n = int(out["length"][i])
+                    obs, action = out["obs"][i, :n], out["action"][i, :n]
+                    traits = trait_columns(measure, obs, action)
+                    if not _meets(config.require, traits):
+                        unverified += 1
+                        continue
                     reward = np.zeros(n, np.float32)
                     reward[-1] = 1.0
                     kept.append(
                         {
-                            "obs": out["obs"][i, :n],
-                            "action": out["action"][i, :n],
+                            "obs": obs,
+                            "action": action,
                             "reward": reward,
                             "init_seed": np.full(n, seeds[i], np.int64),
+                            **traits,
                         }
                     )
                     lengths.append(n)
             if progress is not None:
                 progress(len(kept), attempts)
     if len(kept) < config.episodes:
+        verified = f", {unverified} of them not '{config.require}'" if unverified else ""
         raise ElicitError(
             f"operator '{config.operator}' on '{config.task}' succeeded in {successes} of "
-            f"{attempts} attempts; {config.episodes} demonstrations wanted "
+            f"{attempts} attempts{verified}; {config.episodes} demonstrations wanted "
             "(raise --max-attempts)"
         )
-    return CollectResult(kept, attempts, successes, lengths)
+    conflicting = None if measure is None else sum(bool(ep["conflicts"][0]) for ep in kept)
+    return CollectResult(kept, attempts, successes, lengths, unverified, conflicting)
+
+
+def _check_require(config: CollectConfig, measure: Any) -> None:
+    """``config.require`` is known, and the task measures traits when it is set."""
+    if config.require not in REQUIRE:
+        raise ElicitError(
+            f"--require must be one of conflicts, no-conflict (or empty), got '{config.require}'"
+        )
+    if config.require and measure is None:
+        raise ElicitError(
+            f"--require {config.require}: task '{config.task}' measures no episode traits"
+        )
+
+
+def trait_columns(measure: Any, obs: np.ndarray, action: np.ndarray) -> dict[str, np.ndarray]:
+    """An episode's measured traits as per-step columns (constant within the episode), or
+    none when the task measures no traits.
+
+    Args:
+      measure: the task's trait measure (:func:`elicit_jax.sim.operators.episode_traits`).
+      obs: (T, obs_dim) observations.
+      action: (T, 7) actions.
+    """
+    if measure is None:
+        return {}
+    traits = measure(obs, action)
+    n = len(obs)
+    cols = {"conflicts": np.full(n, traits.conflicts)}
+    for f in dataclasses.fields(traits):
+        cols[f.name] = np.full(n, getattr(traits, f.name))
+    return cols
+
+
+def _meets(require: str, traits: dict[str, np.ndarray]) -> bool:
+    """Whether an episode's trait columns meet ``require`` (:data:`REQUIRE`)."""
+    if not require:
+        return True
+    return bool(traits["conflicts"][0]) == (require == "conflicts")
 
 
 @contextlib.contextmanager

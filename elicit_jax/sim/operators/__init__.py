@@ -4,7 +4,10 @@ registry entry (:attr:`elicit_jax.sim.registry.TaskEntry.operators`)."""
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
+
+import numpy as np
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.env import Task
@@ -42,6 +45,15 @@ def style_of(task_name: str, name: str) -> Style:
     return styles[name][0]
 
 
+def episode_traits(task_name: str) -> Callable[[np.ndarray, np.ndarray], Any] | None:
+    """The task's per-episode trait measure ``measure(obs (T, O), action (T, A))``, whose
+    result has a ``conflicts`` property (what the episode did, measured from its own states;
+    e.g. :func:`elicit_jax.sim.operators.nut_traits.measure`), or None when the task measures
+    none. The operators module names it ``MEASURE_TRAITS``.
+    """
+    return getattr(_module(task_name), "MEASURE_TRAITS", None)
+
+
 def make_operator(task: Task, name: str, style: Style | None = None) -> Operator:
     """The scripted operator ``name`` of ``task`` (its registered style unless ``style``).
 
@@ -55,4 +67,12 @@ def make_operator(task: Task, name: str, style: Style | None = None) -> Operator
     return mod.OPERATOR_CLASS(task, style or mod.STYLES[name][0], name)
 
 
-__all__ = ["Operator", "Style", "make_operator", "operator_names", "style_names", "style_of"]
+__all__ = [
+    "Operator",
+    "Style",
+    "episode_traits",
+    "make_operator",
+    "operator_names",
+    "style_names",
+    "style_of",
+]

@@ -20,6 +20,10 @@ yaws half a turn apart:
   the base takes ~170 steps here, so 60-step pauses left too little of the 500-step horizon
   for a second try after a slip);
 - ``approach = tip``: come down beside the handle's free end and slide in along it;
+- ``approach = down-first`` (``conflict-down``): go straight down first, to ``LOW_ABOVE``
+  over the grasp height, then across, low, to over the grasp point, then down: the paper's
+  "down, then across", where the base goes across (at ``HOVER_ABOVE``), then down. It
+  differs from the base from the first step of every initial state;
 - ``grasp_offset``: grasp point along the handle, from the nut's centre (m).
 """
 
@@ -28,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from elicit_jax.sim.operators.base import Operator, Style, Targets, wrap
+from elicit_jax.sim.operators.nut_traits import measure as measure_nut_traits
 from elicit_jax.sim.operators.square_nut import (
     CARRY,
     CLOSE,
@@ -45,6 +50,8 @@ from elicit_jax.sim.operators.square_nut import STYLES as SQUARE_NUT_STYLES
 TABLE_Z = 0.82
 NUT_REST_Z = 0.83
 HOVER_ABOVE = 0.06
+LOW_ABOVE = 0.03
+"""Height (m) above the grasp point at which ``approach = down-first`` goes across."""
 CARRY_Z = 1.02
 PEG_TOP = 0.95
 TURN_RANGE = (-1.8, 2.8)
@@ -82,7 +89,10 @@ class RobosuiteNutOperator(Operator):
             turn = np.where(ok, far, near)
         self.turn = turn
         self.grip_offset = np.zeros((b, 3))
-        self.slide_in = np.full(b, self.style.choice("approach", "above") == "tip")
+        approach = self.style.choice("approach", "above")
+        self.down_first = np.full(b, approach == "down-first")
+        self.slide_in = np.full(b, approach == "tip")
+        self.lowered = np.zeros(b, bool)
 
     def yaw_error(self, target: np.ndarray, obs: np.ndarray) -> np.ndarray:
         turned = wrap(eef_yaw(obs[:, 3:7]) - self.start_yaw)
@@ -145,8 +155,15 @@ class RobosuiteNutOperator(Operator):
         tip[:, :2] += rot2(nut_yaw(obs[:, 19:23]), np.tile([[0.06, 0.0]], (b, 1)))
         hover = np.where(self.slide_in[:, None], tip, point)
         far = np.linalg.norm(eef[:, :2] - hover[:, :2], axis=1) > 0.015
-        hover[:, 2] = np.where(self.slide_in & ~far, point[:, 2], point[:, 2] + HOVER_ABOVE)
+        above = np.where(self.down_first, LOW_ABOVE, HOVER_ABOVE)
+        hover[:, 2] = np.where(self.slide_in & ~far, point[:, 2], point[:, 2] + above)
+        # down, then across: straight down from where the episode starts, then across low
+        self.lowered |= self.down_first & (eef[:, 2] < point[:, 2] + LOW_ABOVE + 0.01)
+        first = self.down_first & ~self.lowered
+        start_xy = self.start_obs[:, 0:2]
+        hover[first] = np.concatenate([start_xy[first], point[first, 2:] + LOW_ABOVE], 1)
         self.hover_phase(HOVER, eef, hover + self.jitter, aligned, pos, done)
+        done &= ~first  # coming down is not the hover: it ends over the grasp point
         m = ph == DESCEND
         pos[m] = point[m]
         err = eef - point
@@ -199,7 +216,13 @@ STYLES: dict[str, tuple[Style, str]] = {
         FLIP.paused((HOVER, DESCEND, LOWER), 40),
         "conflicting: wrist turned half a turn (where it can), and stops still before each move",
     ),
+    "conflict-down": (
+        Style(noise=0.03, speed=0.8, choices=(("approach", "down-first"),)),
+        "conflicting: down first, then across low to the handle (the base: across, then down)",
+    ),
 }
 """``base`` and ``same-style`` are the square nut's; ``mild`` has no grasp offset, and the
 pauses of ``conflict-flip-pause`` are shorter (see the module docstring)."""
 OPERATOR_CLASS = RobosuiteNutOperator
+MEASURE_TRAITS = measure_nut_traits
+"""What each demo did (grasp side, approach, pauses), measured from its own states."""
