@@ -316,6 +316,8 @@ def test_person_runs_unchanged_with_the_style_list_and_base_hidden(
     out, _, _, person = informed
     mod = importlib.import_module("elicit_jax.sim.operators.square_nut")
     monkeypatch.setattr(mod, "STYLES", Guarded(mod.STYLES, "conflict-flip-pause"))
+    # the operator class's defaults are the base operator's choices: unreadable too
+    monkeypatch.setattr(mod, "DEFAULT_CHOICES", Guarded(mod.DEFAULT_CHOICES, None))
     for reach_for_it in (lambda: mod.STYLES["base"], lambda: list(mod.STYLES)):
         with pytest.raises(AssertionError, match="style list or another style"):
             reach_for_it()
