@@ -8,7 +8,7 @@ from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.env import Task
-from elicit_jax.sim.operators.base import Operator, Style
+from elicit_jax.sim.operators.base import NO_PAUSE, Operator, Style
 from elicit_jax.sim.registry import TASKS
 
 
@@ -42,6 +42,19 @@ def style_of(task_name: str, name: str) -> Style:
     return styles[name][0]
 
 
+def full_choices(task_name: str, name: str) -> dict[str, Any]:
+    """Every choice the style ``name`` acts with: its own, and the operator class's
+    ``DEFAULT_CHOICES`` (the base operator's) for those it does not set. For measuring a
+    simulated person's distance from a style; a person never reads it.
+
+    Raises:
+      ElicitError: unknown style for this task.
+    """
+    style = style_of(task_name, name)
+    defaults = getattr(_module(task_name), "DEFAULT_CHOICES", {})
+    return {**NO_PAUSE, **defaults, **dict(style.choices)}
+
+
 def make_operator(task: Task, name: str, style: Style | None = None) -> Operator:
     """The scripted operator ``name`` of ``task`` (its registered style unless ``style``).
 
@@ -55,4 +68,7 @@ def make_operator(task: Task, name: str, style: Style | None = None) -> Operator
     return mod.OPERATOR_CLASS(task, style or mod.STYLES[name][0], name)
 
 
-__all__ = ["Operator", "Style", "make_operator", "operator_names", "style_names", "style_of"]
+__all__ = [
+    "Operator", "Style", "full_choices", "make_operator", "operator_names", "style_names",
+    "style_of",
+]  # fmt: skip
