@@ -28,7 +28,7 @@ from elicit_jax.elicit.people.learn import Shown, watching
 from elicit_jax.pipeline.elicitation.spec import load_study
 from elicit_jax.sim.collect import CollectConfig, collect_episodes
 from elicit_jax.sim.env import make_task
-from elicit_jax.sim.operators import style_of
+from elicit_jax.sim.operators import full_choices, style_of
 
 
 def task_rows(name: str, episodes: int, seed: int) -> list[str]:
@@ -46,7 +46,7 @@ def task_rows(name: str, episodes: int, seed: int) -> list[str]:
     for i, spec in enumerate(study_task.people):
         traits = dataclasses.replace(parse_person(spec.partition(":")[2]), imitation=1.0)
         person = SimulatedPerson(task, traits, None)
-        target = person.space.theta(base.choices)
+        target = person.space.theta(full_choices(name, "base"))
         lo, hi = person.bounds
         reach = bool(np.all((target >= lo - 1e-9) & (target <= hi + 1e-9)))
 

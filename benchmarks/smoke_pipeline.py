@@ -105,6 +105,8 @@ def main() -> None:
     from elicit_jax.runtime import configure
 
     configure()
+    from rich.console import Console
+
     from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
     from elicit_jax.pipeline.spec import resolve_path
 
@@ -122,7 +124,8 @@ def main() -> None:
             out=str(out / "run"),
             progress=False,
             tasks=tasks,
-        )
+        ),
+        console=Console(),
     )
     print(
         f"smoke run of {source.name} ({args.profile or 'its own'} profile): "

@@ -181,12 +181,14 @@ def _loo_gap_scores(path):
 
 
 def test_the_in_sample_accuracy_quoted_is_the_one_the_report_shows(tmp_path, capsys):
+    from rich.console import Console
+
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
 
     s = _loo_gap_scores(tmp_path / "s.parquet")
     job = FitJob("operator:good", "operator:bad", force=True)
-    h = fit_scores_file(s, tmp_path / "t.json", job, show=print_report)
+    h = fit_scores_file(s, tmp_path / "t.json", job, show=lambda h: print_report(h, Console()))
     rep = h["report"]
     right = sum(c["rejected"] != c["compatible"] for c in rep["contrast"])
     assert (right, len(rep["contrast"]), rep["n_loo"]) == (8, 9, 9)

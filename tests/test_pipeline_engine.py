@@ -146,6 +146,7 @@ _KILL_SCRIPT = textwrap.dedent(
     from elicit_jax.artifact import atomic_path, write_json
     from elicit_jax.pipeline.graph import Graph, Stage
     from elicit_jax.pipeline.runner import run_graph
+    from rich.console import Console
 
     def slow(ctx):
         if ctx.stage.id == "b":
@@ -160,7 +161,7 @@ _KILL_SCRIPT = textwrap.dedent(
         Stage("b", "slow", "b.json", inputs={"x": "a"}),
         Stage("c", "slow", "c.json", inputs={"x": "b"}),
     ])
-    run_graph(graph, sys.argv[1], {"slow": slow}, show_progress=False)
+    run_graph(graph, sys.argv[1], {"slow": slow}, console=Console(), show_progress=False)
     """
 )
 

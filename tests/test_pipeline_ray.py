@@ -161,6 +161,7 @@ _LOCAL_SCRIPT = textwrap.dedent(
     from elicit_jax.artifact import make_header, read_json, write_json
     from elicit_jax.pipeline.graph import Graph, Stage
     from elicit_jax.pipeline.ray_runner import run_graph_ray
+    from rich.console import Console
 
     def add(ctx):
         import elicit_jax
@@ -170,7 +171,7 @@ _LOCAL_SCRIPT = textwrap.dedent(
 
     graph = Graph([Stage("a", "add", "a.json", {"value": 1}),
                    Stage("b", "add", "b.json", {"value": 2}, inputs={"x": "a"})])
-    result = run_graph_ray(graph, sys.argv[1], {"add": add}, address="local",
+    result = run_graph_ray(graph, sys.argv[1], {"add": add}, address="local", console=Console(),
                            show_progress=False)
     import ray
     print("ran", ",".join(result.ran), "connected-after", ray.is_initialized())

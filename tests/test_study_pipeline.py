@@ -20,7 +20,12 @@ from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
 from elicit_jax.pipeline.elicitation.plan import build_study_graph, session_seed
 from elicit_jax.pipeline.elicitation.spec import load_study, parse_study
 from elicit_jax.pipeline.elicitation.success import compare, success_cells
-from elicit_jax.pipeline.elicitation.tables import ablation_table, length_table, table2
+from elicit_jax.pipeline.elicitation.tables import (
+    ablation_table,
+    length_table,
+    person_table,
+    table2,
+)
 from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 from elicit_jax.pipeline.tables import ResultRow
 
@@ -265,6 +270,16 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
     )
     dagger = by["informed-dagger"]
     assert any(r["intervention_rate"] for r in dagger.rows if r["episode_kind"] != "practice")
+    # every session records how far the person's θ starts (and ends) from the base's; the
+    # start is the person's, the same in every condition, and the per-person table shows it
+    distances = {c: s.person_record["distance_from_base"] for c, s in by.items()}
+    assert len({d["start"] for d in distances.values()}) == 1
+    assert distances["informed"]["end"] < distances["informed"]["start"]
+    header, rows = person_table(data, "reach-pillar", "mlp")
+    start, end = distances["informed"]["start"], distances["informed"]["end"]
+    assert dict(zip(header, rows[0], strict=True))["θ from base: start → informed end"] == (
+        f"{start:.2f} → {end:.2f}"
+    )
     md = first.report_md.read_text()
     for words in (
         "Base / Naive / Naive + M-filtered / Informed",

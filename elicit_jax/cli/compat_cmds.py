@@ -73,6 +73,8 @@ def fit_thresholds_cmd(
     Example (hand-set): elicit-jax fit-thresholds --scores scores.parquet --lambda 0.4 --eta
     0.05 -o thresholds.json
     """
+    from rich.console import Console
+
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
@@ -88,7 +90,8 @@ def fit_thresholds_cmd(
         force=force,
         base=() if base is None else (str(base),),
     )
-    fit_scores_file(scores, out, job, show=print_report)
+    console = Console()
+    fit_scores_file(scores, out, job, show=lambda header: print_report(header, console))
 
 
 @app.command("filter", rich_help_panel=COMPAT)

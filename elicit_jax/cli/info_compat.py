@@ -70,6 +70,8 @@ def describe_episode_scores(path: Path, header: dict[str, Any] | None) -> None:
 
 def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
     """The thresholds, how they were obtained, and their report."""
+    from rich.console import Console
+
     from elicit_jax.compat.show import print_report
 
     _kv(
@@ -83,7 +85,7 @@ def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
         ],
     )
     if "report" in header and "per_operator" in header["report"]:
-        print_report(header)
+        print_report(header, Console())
 
 
 def describe_filter_log(path: Path, header: dict[str, Any]) -> None:

@@ -46,6 +46,8 @@ def pipeline_run(
       elicit-jax pipeline run pipelines/filtering.toml --profile cpu --tasks square-nut
       elicit-jax pipeline run filtering --out runs/filtering --ray auto
     """
+    from rich.console import Console
+
     from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 
     config = PipelineRunConfig(
@@ -56,7 +58,7 @@ def pipeline_run(
         ray=ray,
         tasks=_tasks(tasks),
     )
-    run_pipeline(config)
+    run_pipeline(config, console=Console())
 
 
 @pipeline_app.command("status")
@@ -70,6 +72,8 @@ def pipeline_status(
 
     Example: elicit-jax pipeline status pipelines/filtering.toml --profile cpu
     """
+    from rich.console import Console
+
     from elicit_jax.pipeline.run import PipelineRunConfig, pipeline_status
 
     pipeline_status(
@@ -78,7 +82,8 @@ def pipeline_status(
             profile=profile,
             out=None if out is None else str(out),
             tasks=_tasks(tasks),
-        )
+        ),
+        Console(),
     )
 
 
@@ -159,6 +164,9 @@ def quickstart(
 
     Example: elicit-jax quickstart
     """
+    from rich.console import Console
+
     from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 
-    run_pipeline(PipelineRunConfig(pipeline="quickstart", out=None if out is None else str(out)))
+    config = PipelineRunConfig(pipeline="quickstart", out=None if out is None else str(out))
+    run_pipeline(config, console=Console())

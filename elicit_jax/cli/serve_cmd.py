@@ -119,7 +119,9 @@ def _demo_inputs(
     Raises:
       ElicitError: an input flag or another task given with ``--demo``.
     """
-    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+    from rich.console import Console
+
+    from elicit_jax.pipeline.serve_demo import DemoRecipe, demo_inputs
 
     clash = [
         flag
@@ -130,7 +132,7 @@ def _demo_inputs(
         raise ElicitError(f"--demo brings its own inputs; drop {', '.join(clash)}")
     if given.get("task", DEMO_TASK) != DEMO_TASK:
         raise ElicitError(f"--demo serves {DEMO_TASK}; drop --task or choose {DEMO_TASK}")
-    inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
+    inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo, console=Console())
     given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
     given["base_demos"] = str(inputs.base_demos)
     return inputs.thresholds, thresholds_from_flags(inputs.thresholds, None, None)

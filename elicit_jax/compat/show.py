@@ -2,7 +2,8 @@
 (the thresholds and their quality, rejections per operator, the contrast decisions and the
 trust verdict) and the scoring progress bar.
 
-A rendering module: the CLI and the pipeline's stages pass :func:`print_report` to
+A rendering module on the console its caller passes: the CLI and the pipeline's stages pass
+:func:`print_report` (bound to their console) to
 :func:`~elicit_jax.compat.fit.fit_scores_file` and :func:`scoring_bar` to
 :func:`~elicit_jax.compat.score_file.score_file`, which never print themselves.
 """
@@ -16,13 +17,12 @@ from typing import Any
 from elicit_jax.compat.trust import Verdict
 
 
-def print_report(header: dict[str, Any]) -> None:
-    """Rich tables: the thresholds and their quality, then rejections per operator."""
-    from rich.console import Console
+def print_report(header: dict[str, Any], console: Any) -> None:
+    """Rich tables on ``console``: the thresholds and their quality, then rejections per
+    operator."""
     from rich.table import Table
 
     rep = header["report"]
-    console = Console()
     t = Table(title=f"thresholds ({header['method']})")
     t.add_column("quantity")
     t.add_column("value", justify="right")

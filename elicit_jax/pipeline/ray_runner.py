@@ -198,7 +198,7 @@ def run_graph_ray(
     registry: Mapping[str, StageFn],
     *,
     address: str = "local",
-    console: Any = None,
+    console: Any,
     show_progress: bool = True,
     lock: bool = True,
 ) -> RunResult:
@@ -221,13 +221,10 @@ def run_graph_ray(
       ElicitError: Ray is missing or unreachable, a kind is unregistered, or a stage failed
         (the message names it).
     """
-    from rich.console import Console
-
     run_dir = Path(run_dir).resolve()
     missing = sorted({s.kind for s in graph} - set(registry))
     if missing:
         raise ElicitError(f"no stage function registered for kind(s): {', '.join(missing)}")
-    console = console or Console()
     run_dir.mkdir(parents=True, exist_ok=True)
     state = _Dispatch(graph, {s.id: StageResult(s, "pending") for s in graph})
     with (

@@ -102,19 +102,16 @@ def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
 def run_pipeline(
     config: PipelineRunConfig,
     *,
-    console: Any = None,
+    console: Any,
     registry: Mapping[str, StageFn] | None = None,
 ) -> PipelineOutcome:
     """Plan, run (skipping up-to-date stages), report and print the summary tables.
 
     Args:
       config: what to run.
-      console: a ``rich`` console (default: a new one).
+      console: the ``rich`` console to show it on (the CLI's).
       registry: stage functions (default: the real ones, :func:`stages.real_registry`).
     """
-    from rich.console import Console
-
-    console = console or Console()
     spec, graph, default_registry = plan_run(config)
     run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     note = " — CPU profile: shrunk networks/epochs, not the paper's sizes" * (spec.profile == "cpu")
@@ -148,19 +145,17 @@ def run_pipeline(
     return PipelineOutcome(run_dir, result, report / "report.md", report / "report.html")
 
 
-def pipeline_status(config: PipelineRunConfig, console: Any = None) -> dict[str, list[str]]:
+def pipeline_status(config: PipelineRunConfig, console: Any) -> dict[str, list[str]]:
     """Which stages of a run are up to date and which the next run would run (a stage whose
     upstream will run counts as to run); prints a table per kind.
 
     Returns:
       ``{"up to date": [ids], "to run": [ids]}``.
     """
-    from rich.console import Console
     from rich.table import Table
 
     from elicit_jax.pipeline.runner import stage_up_to_date
 
-    console = console or Console()
     spec, graph, _ = plan_run(config)
     run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
     out: dict[str, list[str]] = {"up to date": [], "to run": []}

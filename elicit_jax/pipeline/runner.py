@@ -229,7 +229,7 @@ def run_graph(
     run_dir: str | Path,
     registry: Mapping[str, StageFn],
     *,
-    console: Any = None,
+    console: Any,
     show_progress: bool = True,
     lock: bool = True,
 ) -> RunResult:
@@ -243,20 +243,17 @@ def run_graph(
       graph: the stages.
       run_dir: the run directory (created if missing).
       registry: stage kind -> function doing the work.
-      console: a ``rich.console.Console`` (default: a new one).
+      console: the ``rich.console.Console`` to show the run on (the caller's).
       show_progress: draw the overall progress bar.
       lock: take the run directory's lock (pass False when the caller already holds it).
 
     Returns:
       which stages ran and which were skipped, with timings.
     """
-    from rich.console import Console
-
     run_dir = Path(run_dir)
     missing = sorted({s.kind for s in graph} - set(registry))
     if missing:
         raise ElicitError(f"no stage function registered for kind(s): {', '.join(missing)}")
-    console = console or Console()
     results: dict[str, StageResult] = {s.id: StageResult(s, "pending") for s in graph}
     progress = stage_progress("pipeline", console, show_progress)
     with run_lock(run_dir) if lock else contextlib.nullcontext(), progress:

@@ -90,7 +90,8 @@ def fit_stage(ctx: StageContext) -> None:
         eta=cfg.get("eta"),
         force=bool(cfg.get("force", False)),
     )
-    fit_scores_file(ctx.inputs["scores"] / SCORES_FILE, ctx.output, job, show=print_report)
+    scores = ctx.inputs["scores"] / SCORES_FILE
+    fit_scores_file(scores, ctx.output, job, show=lambda header: print_report(header, ctx.console))
 
 
 def filter_stage(ctx: StageContext) -> None:

@@ -58,7 +58,7 @@ class OperatorDriver:
       name: the operator's name.
       config: the session config (its operator is ``browser:NAME``).
       out: the session directory (created or resumed).
-      log: where console lines go.
+      log: where console lines go (the caller's: the CLI passes its echo).
 
     Attributes:
       state: ``opening``, ``ready`` (waiting for the page's start), ``running``, ``busy``
@@ -69,7 +69,7 @@ class OperatorDriver:
     """
 
     def __init__(
-        self, name: str, config: SessionConfig, out: Path, log: Callable[[str], None] = print
+        self, name: str, config: SessionConfig, out: Path, *, log: Callable[[str], None]
     ) -> None:
         self.name, self.config, self.out, self.log = name, config, Path(out), log
         self.state, self.message = OPENING, ""

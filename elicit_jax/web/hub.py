@@ -69,7 +69,7 @@ class OperatorHub:
       root: the sessions directory.
       max_operators: most operators held at once; when full, the operator whose page left
         longest ago is released to make room (their session stays on disk).
-      log: where console lines go.
+      log: where console lines go (the caller's: the CLI passes its echo).
     """
 
     def __init__(
@@ -77,7 +77,8 @@ class OperatorHub:
         template: SessionConfig,
         root: Path,
         max_operators: int = 16,
-        log: Callable[[str], None] = print,
+        *,
+        log: Callable[[str], None],
     ) -> None:
         self.template, self.root = template, Path(root)
         self.max_operators, self.log = max_operators, log

@@ -36,9 +36,15 @@ def browser():
 def demo(tmp_path_factory):
     """The built-in reach-pillar inputs of `serve --demo` (the recipe users get), in a
     temporary cache directory: 20 base demos, a 5 x 128-128 policy, fitted thresholds."""
-    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+    import io
 
-    return demo_inputs(DemoRecipe(), tmp_path_factory.mktemp("serve-demo"), echo=lambda _: None)
+    from rich.console import Console
+
+    from elicit_jax.pipeline.serve_demo import DemoRecipe, demo_inputs
+
+    root = tmp_path_factory.mktemp("serve-demo")
+    quiet = Console(file=io.StringIO())
+    return demo_inputs(DemoRecipe(), root, echo=lambda _: None, console=quiet)
 
 
 @pytest.fixture(scope="session")

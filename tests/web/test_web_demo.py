@@ -5,13 +5,17 @@ looks finished before `recipe.json` is written."""
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 
 import pytest
+from rich.console import Console
 
 from elicit_jax.artifact import dumps
 from elicit_jax.errors import ElicitError
-from elicit_jax.web import demo
+from elicit_jax.pipeline import serve_demo as demo
+
+QUIET = Console(file=io.StringIO())
 
 
 def test_demo_graph_is_the_quickstart_stages_up_to_the_thresholds():
@@ -85,15 +89,15 @@ def test_a_build_cut_short_looks_unfinished_and_resumes(tmp_path, monkeypatch):
     fail = {"fit-thresholds/reach-pillar/mlp"}
     monkeypatch.setattr(stages, "real_registry", lambda: _fake_registry(calls, fail))
     with pytest.raises(ElicitError, match="cut short"):
-        demo.demo_inputs(recipe, tmp_path, echo=lambda _: None)
+        demo.demo_inputs(recipe, tmp_path, echo=lambda _: None, console=QUIET)
     out = tmp_path / demo.recipe_hash(recipe)[:16]
     assert not (out / demo.RECIPE_FILE).exists() and len(calls) == 6
-    inputs = demo.demo_inputs(recipe, tmp_path, echo=lambda _: None)
+    inputs = demo.demo_inputs(recipe, tmp_path, echo=lambda _: None, console=QUIET)
     assert calls[6:] == ["fit-thresholds/reach-pillar/mlp"]  # the finished stages are kept
     assert (out / demo.RECIPE_FILE).is_file()
     assert inputs.base_demos == out / "data/reach-pillar/base.parquet"
     assert inputs.policy == out / "policies/reach-pillar/mlp/base"
     assert inputs.thresholds == out / "thresholds/reach-pillar/mlp.json"
     assert inputs.thresholds.read_text() == "fit-thresholds/reach-pillar/mlp"
-    assert demo.demo_inputs(recipe, tmp_path, echo=lambda _: None) == inputs
+    assert demo.demo_inputs(recipe, tmp_path, echo=lambda _: None, console=QUIET) == inputs
     assert len(calls) == 7  # reused: nothing ran

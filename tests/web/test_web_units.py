@@ -198,7 +198,7 @@ def test_the_demo_cache_key_covers_the_version_and_the_training_config(monkeypat
     import dataclasses
 
     import elicit_jax
-    from elicit_jax.web import demo
+    from elicit_jax.pipeline import serve_demo as demo
 
     recipe = demo.DemoRecipe()
     key = demo.recipe_hash(recipe)

@@ -16,8 +16,9 @@ written down in ``docs/people.md``).
   random perturbation of θ; the next episode keeps it if it succeeded (and was clearly less
   red), else the person goes back.
 
-It reads its starting style's choices only, never the base operator's style nor the task's
-list of styles.
+It starts from θ drawn from its task's prior, restricted to what its starting style's choices
+pin down (:func:`start_theta`); it reads its starting style's choices only, never the base
+operator's style nor the task's list of styles.
 """
 
 from __future__ import annotations
@@ -58,8 +59,9 @@ FOCUS = 4.0
 """Weight of the action dimensions a window's explanation names (others weigh 1)."""
 FOCUS_TOP = 2
 """How many of the explanation's action dimensions (largest difference first) it heeds."""
-START_SPREAD = 0.03
-"""Std of the person's starting perturbation of θ, as a fraction of each range."""
+COMPATIBLE_STYLE = "same-style"
+"""The compatible person's starting style: it starts at its space's stated ``compatible`` θ
+(:attr:`~elicit_jax.elicit.people.space.ParamSpace.compatible`), read from no operator."""
 TRIAL_STEP = 0.15
 """Std of a practice trial's perturbation of θ, as a fraction of each range."""
 
@@ -107,20 +109,11 @@ class SimulatedPerson:
     """
 
     def __init__(self, task: Any, traits: PersonTraits, base: Any) -> None:
-        from elicit_jax.sim.operators import style_of
-
-        if traits.style == BASE_STYLE:
-            raise ElicitError(
-                "a simulated person cannot start from the base operator's style "
-                "(start from same-style for a compatible person)"
-            )
         self.task, self.traits, self.base = task, traits, base
         self.name = traits.spec().partition(":")[2]
         self.space = space_of(task.name)
         width = self.space.width
-        rng = np.random.default_rng([traits.seed, 31])
-        own = self.space.theta(style_of(task.name, traits.style).choices)
-        self.theta = self.space.clip(own + rng.normal(0.0, START_SPREAD * width))
+        self.theta = start_theta(task.name, traits)
         self.start_theta = self.theta.copy()
         self.bounds = (
             np.maximum(np.asarray(self.space.low), self.theta - traits.reach * width),
@@ -320,6 +313,29 @@ class SimulatedPerson:
                 "changes": self.log,
             }
         )
+
+
+def start_theta(task_name: str, traits: PersonTraits) -> np.ndarray:
+    """A person's starting θ: its space's prior restricted to what its starting style's
+    choices pin down (:meth:`~elicit_jax.elicit.people.space.ParamSpace.start`, seeded by the
+    person), or the space's stated compatible θ for :data:`COMPATIBLE_STYLE`. It reads the
+    starting style's entry only: never the base operator's, nor the list of styles.
+
+    Raises:
+      ElicitError: the base operator's style, or a style the task does not have.
+    """
+    from elicit_jax.sim.operators import style_of
+
+    if traits.style == BASE_STYLE:
+        raise ElicitError(
+            "a simulated person cannot start from the base operator's style "
+            f"(start from {COMPATIBLE_STYLE} for a compatible person)"
+        )
+    space = space_of(task_name)
+    if traits.style == COMPATIBLE_STYLE:
+        return space.clip(np.array(space.compatible, np.float64))
+    rng = np.random.default_rng([traits.seed, 31])
+    return space.start(style_of(task_name, traits.style).choices, rng)
 
 
 def seen_from_record(rec: Any, config: Any, rule: Any) -> Seen:

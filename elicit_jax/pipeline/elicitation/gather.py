@@ -22,6 +22,9 @@ from elicit_jax.pipeline.report_rows import RunReport
 
 PERSON_FILE = "person.json"
 """Beside a study's session: the person's traits, starting and final choices, every change."""
+DISTANCE_KEY = "distance_from_base"
+"""In a person record: ``{"start": d, "end": d}``, its starting and final θ's distance from
+the base operator's (sessions recorded before this key have none)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,8 +13,10 @@ Layout (see ``pipelines/elicitation.toml``)::
     [collect] [train] [score] [thresholds] [filter] [evaluate]   # library config overrides
     [profiles.cpu.*]  [task.profiles.cpu]                         # profile overrides
 
-A task's ``incompatible_operator`` may not be a person's starting style (the thresholds would
-be fitted on that person's own way of doing the task). Each task's population is drawn by
+A task's ``incompatible_operator`` may not be a person's starting style, by name nor by
+what it does: no person may start within the region of θ its choices pin down
+(:func:`starts_from`; the thresholds would be fitted on that person's own way of doing the
+task). Each task's population is drawn by
 :func:`~elicit_jax.elicit.people.traits.make_population` from ``[people]`` (the task's
 ``styles`` replace ``[people] styles``): person ``i`` starts from the ``i``-th style
 (cycling), with traits drawn from the ranges (a task's ``people_ranges`` replace
@@ -148,6 +150,39 @@ def parse_study(
     )
 
 
+CONTRAST_TOL = 0.05
+"""How near (a fraction of the largest difference) a person's starting value may come to a
+value the contrast set's style sets before the person counts as starting from that style."""
+
+
+def starts_from(task: str, style: str, theta: Any) -> bool:
+    """A person starting at ``theta`` starts from ``style``'s own way: on every coordinate
+    the style's choices pin down, θ lies on the style's side of a threshold or within
+    :data:`CONTRAST_TOL` of its value."""
+    from elicit_jax.elicit.people.space import space_of
+    from elicit_jax.sim.operators import style_of
+
+    space = space_of(task)
+    return space.within(theta, space.regions(style_of(task, style).choices), CONTRAST_TOL)
+
+
+def _check_contrast_is_no_start(task: str, incompatible: str, population: Any, source: str) -> None:
+    """No person starts from the contrast set's style (by its choices, not only its name)."""
+    from elicit_jax.elicit.people.person import start_theta
+    from elicit_jax.elicit.people.space import SPACES
+
+    if task not in SPACES:
+        return
+    for i, person in enumerate(population):
+        if starts_from(task, incompatible, start_theta(task, person)):
+            raise ElicitError(
+                f"[[task]] {task}: person p{i} ({person.style}) starts from the way of "
+                f"incompatible_operator '{incompatible}' (the thresholds would be fitted on "
+                "that person's own way)",
+                source,
+            )
+
+
 def _task(raw: Mapping[str, Any], people: Mapping[str, Any], source: str) -> StudyTask:
     from elicit_jax.elicit.people.traits import make_population
     from elicit_jax.sim.operators import style_names
@@ -184,6 +219,7 @@ def _task(raw: Mapping[str, Any], people: Mapping[str, Any], source: str) -> Stu
         population = make_population(styles, size, int(people.get("seed", 0)), ranges)
     except ElicitError as e:
         raise ElicitError(f"[[task]] {name}: {e}", source) from None
+    _check_contrast_is_no_start(name, incompatible, population, source)
     return StudyTask(
         people=tuple(p.spec() for p in population),
         dagger=bool(raw.get("dagger", False)),

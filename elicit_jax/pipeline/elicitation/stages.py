@@ -14,7 +14,7 @@ from typing import Any
 
 from elicit_jax.artifact import atomic_path, write_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.elicitation.gather import PERSON_FILE
+from elicit_jax.pipeline.elicitation.gather import DISTANCE_KEY, PERSON_FILE
 from elicit_jax.pipeline.runner import StageContext, StageFn
 
 # Session fields only known when the stage runs: stand-ins while the settings are validated,
@@ -102,7 +102,12 @@ def session_stage(ctx: StageContext) -> None:
     person = person_of(operator)
     if person is None:
         raise ElicitError(f"operator {config.operator!r} is not a simulated person")
-    write_json(ctx.output / PERSON_FILE, person.summary())
+    record = person.summary()
+    record[DISTANCE_KEY] = {
+        "start": distance_from_base(ctx.config["task"], record["start_theta"]),
+        "end": distance_from_base(ctx.config["task"], record["theta"]),
+    }
+    write_json(ctx.output / PERSON_FILE, record)
     c = session.progress.counts
     changes = ", ".join(f"{x['source']} (e{x['episode']})" for x in person.log) or "none"
     theta = " ".join(f"{k}={v:.3g}" for k, v in person.space.named(person.theta).items())
@@ -110,6 +115,21 @@ def session_stage(ctx: StageContext) -> None:
         f"{label}: {c.accepted}/{c.wanted} accepted, {c.rejected} rejected, {c.failed} failed, "
         f"{c.episodes} episodes; changes: {changes}; θ now {theta}"
     )
+
+
+def distance_from_base(task: str, theta: dict[str, float]) -> float:
+    """How far a person's θ (``{name: value}``) lies from the base operator's, in the
+    space's :meth:`~elicit_jax.elicit.people.space.ParamSpace.distance` (the study measures
+    it from the base operator's choices; the person never reads them)."""
+    import numpy as np
+
+    from elicit_jax.elicit.people.person import BASE_STYLE
+    from elicit_jax.elicit.people.space import space_of
+    from elicit_jax.sim.operators import full_choices
+
+    space = space_of(task)
+    base = space.theta(full_choices(task, BASE_STYLE))
+    return round(space.distance(np.array([theta[n] for n in space.names]), base), 4)
 
 
 def filter_session_stage(ctx: StageContext) -> None:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
+from elicit_jax.pipeline.elicitation.gather import DISTANCE_KEY, SessionData, StudyData
 from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
     DIFFERENCES,
@@ -59,6 +59,15 @@ def _traits(record: Mapping[str, Any]) -> str:
     keys += (("practice", "pr"), ("speed", "sp"), ("gain", "gain"), ("delay", "delay"))
     keys += (("memory", "mem"), ("reach", "reach"))
     return " ".join(f"{short} {t[k]:g}" for k, short in keys if k in t)
+
+
+def _distances(any_session: SessionData | None, informed: SessionData | None) -> str:
+    """``start → end`` of the person's θ's distance from the base operator's (the start is
+    the same in every session of a person; the end is the informed session's)."""
+    start = (any_session.person_record.get(DISTANCE_KEY) or {}) if any_session else {}
+    end = (informed.person_record.get(DISTANCE_KEY) or {}) if informed else {}
+    first = f"{start['start']:.2f}" if "start" in start else "–"
+    return f"{first} → {end['end']:.2f}" if "end" in end else first
 
 
 def _changes(record: Mapping[str, Any]) -> str:
@@ -116,14 +125,19 @@ def person_table(data: StudyData, task: str, model: str) -> Table:
     conds = [
         c for c in CONDITION_LABELS if c != "base" and any(k[:3] == (task, model, c) for k in cells)
     ]
-    header = ["person", "starts as", "traits", *[CONDITION_LABELS[c] for c in conds]]
-    header += ["informed: accepted / episodes", "informed: choices changed", "ends as base"]
     by = {(s.condition, s.person): s for s in data.sessions if (s.task, s.model) == (task, model)}
+    measured = any(DISTANCE_KEY in s.person_record for s in by.values())
+    header = ["person", "starts as", "traits"]
+    header += ["θ from base: start → informed end"] if measured else []
+    header += [CONDITION_LABELS[c] for c in conds]
+    header += ["informed: accepted / episodes", "informed: choices changed", "ends as base"]
     rows = []
     for p in people_of(data, task, model):
         any_session = next((s for (c, q), s in by.items() if q == p), None)
         row = [p, any_session.style if any_session else "?"]
         row.append(_traits(any_session.person_record) if any_session else "")
+        if measured:
+            row.append(_distances(any_session, by.get(("informed", p))))
         for cond in conds:
             row.append(mean_std(list(cells.get((task, model, cond, p), {}).values())))
         informed = by.get(("informed", p))

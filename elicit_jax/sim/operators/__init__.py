@@ -11,7 +11,7 @@ import numpy as np
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.env import Task
-from elicit_jax.sim.operators.base import Operator, Style
+from elicit_jax.sim.operators.base import NO_PAUSE, Operator, Style
 from elicit_jax.sim.registry import TASKS
 
 
@@ -54,6 +54,19 @@ def episode_traits(task_name: str) -> Callable[[np.ndarray, np.ndarray], Any] | 
     return getattr(_module(task_name), "MEASURE_TRAITS", None)
 
 
+def full_choices(task_name: str, name: str) -> dict[str, Any]:
+    """Every choice the style ``name`` acts with: its own, and the operator class's
+    ``DEFAULT_CHOICES`` (the base operator's) for those it does not set. For measuring a
+    simulated person's distance from a style; a person never reads it.
+
+    Raises:
+      ElicitError: unknown style for this task.
+    """
+    style = style_of(task_name, name)
+    defaults = getattr(_module(task_name), "DEFAULT_CHOICES", {})
+    return {**NO_PAUSE, **defaults, **dict(style.choices)}
+
+
 def make_operator(task: Task, name: str, style: Style | None = None) -> Operator:
     """The scripted operator ``name`` of ``task`` (its registered style unless ``style``).
 
@@ -68,11 +81,6 @@ def make_operator(task: Task, name: str, style: Style | None = None) -> Operator
 
 
 __all__ = [
-    "Operator",
-    "Style",
-    "episode_traits",
-    "make_operator",
-    "operator_names",
-    "style_names",
-    "style_of",
-]
+    "Operator", "Style", "episode_traits", "full_choices", "make_operator", "operator_names",
+    "style_names", "style_of",
+]  # fmt: skip

@@ -105,11 +105,11 @@ class Operator(abc.ABC):
     def pause_at_phase_starts(self) -> None:
         """Hold still for ``pause_steps`` control steps on entering a phase listed in the
         style's ``pause_at`` choice (the gripper command is kept; see :meth:`act`)."""
-        phases = self.style.choice("pause_at", ())
+        phases = self.style.choice("pause_at", NO_PAUSE["pause_at"])
         if not phases:
             return
         start = np.isin(self.phase, phases) & (self.phase_steps == 0)
-        self.pause[start] = self.style.choice("pause_steps", 0)
+        self.pause[start] = self.style.choice("pause_steps", NO_PAUSE["pause_steps"])
 
     def hover_phase(
         self, phase: int, eef: np.ndarray, hover: np.ndarray, aligned: np.ndarray,
@@ -180,6 +180,8 @@ class Operator(abc.ABC):
 
 
 _NOISY = [0, 1, 2, 5]
+NO_PAUSE: dict[str, Any] = {"pause_at": (), "pause_steps": 0}
+"""The pause choices of a style that sets none (it never holds still)."""
 ALIGN_TOL = 0.08
 """Wrist yaw error (rad) at which a grasp or placing yaw counts as reached (a style may set
 the ``align_tol`` choice; simulated people imagine others' demonstrations with a looser one)."""

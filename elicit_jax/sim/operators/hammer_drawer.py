@@ -35,12 +35,27 @@ from the base only once the drawer is open, at states both have just passed thro
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from elicit_jax.sim.env import quat_yaw
 from elicit_jax.sim.operators.base import ALIGN_TOL, YAW_LIMIT, Operator, Style, Targets, wrap
 from elicit_jax.sim.operators.square_nut import rot2
 from elicit_jax.sim.tasks.hammer_drawer import BAR_RADIUS, BAR_X, FLOOR_Z, HAMMER_Z, INTERIOR_X
+
+DEFAULT_CHOICES = {
+    "yaw_offset": 0.0, "grasp_offset": 0.005, "place_yaw": np.pi / 2, "carry": "lift-first"
+}  # fmt: skip
+"""What a style that sets no choice does: the base operator's choices (a study measures a
+person's distance from them; people never read them)."""
+
+
+def _choice(style: Style, key: str) -> Any:
+    """The style's choice ``key``, or the default (read only when the style has none)."""
+    own = dict(style.choices)
+    return own[key] if key in own else DEFAULT_CHOICES[key]
+
 
 HIGH_Z = 0.11
 PUSH_HOVER_Z = 0.085
@@ -71,10 +86,10 @@ class HammerDrawerOperator(Operator):
         """Grasp point ``(B, 3)`` on the hammer's handle and gripper yaw ``(B,)``."""
         hammer, yaw = obs[:, 9:12], quat_yaw(obs[:, 12:16])
         b = len(obs)
-        local = np.stack([np.full(b, self.style.choice("grasp_offset", 0.005)), np.zeros(b)], 1)
+        local = np.stack([np.full(b, _choice(self.style, "grasp_offset")), np.zeros(b)], 1)
         z = np.maximum(hammer[:, 2:3], 0.012)
         point = np.concatenate([hammer[:, :2] + rot2(yaw, local), z], 1)
-        return point, wrap(yaw + self.style.choice("yaw_offset", 0.0))
+        return point, wrap(yaw + _choice(self.style, "yaw_offset"))
 
     def targets(self, obs: np.ndarray) -> Targets:
         eef, ph, b = obs[:, 0:3], self.phase, len(obs)
@@ -152,16 +167,16 @@ class HammerDrawerOperator(Operator):
         """LIFT, CARRY, LOWER, RELEASE, RISE: fill ``pos``, ``yaw`` and ``done`` in place."""
         eef, hammer, ph, b = obs[:, 0:3], obs[:, 9:12], self.phase, len(obs)
         eef_yaw, opening = quat_yaw(obs[:, 3:7]), obs[:, 22]
-        place_yaw = self.style.choice("place_yaw", np.pi / 2)
+        place_yaw = _choice(self.style, "place_yaw")
         if place_yaw == "nearest":
             g_yaw = np.where(eef_yaw >= 0.0, np.pi / 2, -np.pi / 2)
         else:
-            g_yaw = wrap(np.full(b, place_yaw + self.style.choice("yaw_offset", 0.0)))
+            g_yaw = wrap(np.full(b, place_yaw + _choice(self.style, "yaw_offset")))
         g_yaw = np.clip(g_yaw, -YAW_LIMIT, YAW_LIMIT)
         drop = np.stack([INTERIOR_X - opening, np.zeros(b)], 1)
         rel = rot2(g_yaw, obs[:, 16:18])
         over = np.concatenate([drop - rel, np.full((b, 1), CARRY_Z)], 1)
-        low_first = self.style.choice("carry", "lift-first") == "low-first"
+        low_first = _choice(self.style, "carry") == "low-first"
         m = ph == LIFT
         lift = eef.copy()
         lift[:, 2] = CARRY_Z

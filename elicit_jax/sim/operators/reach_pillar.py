@@ -13,10 +13,22 @@ its demos creeps from the start and often runs out of the 100-step horizon
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from elicit_jax.sim.operators.base import Operator, Style, Targets, reached
 from elicit_jax.sim.tasks.reach_pillar import PILLAR_HEIGHT
+
+DEFAULT_CHOICES = {"route": "left", "clearance": 0.09}
+"""What a style that sets no choice does: the base operator's choices (a study measures a
+person's distance from them; people never read them)."""
+
+
+def _choice(style: Style, key: str) -> Any:
+    """The style's choice ``key``, or the default (read only when the style has none)."""
+    own = dict(style.choices)
+    return own[key] if key in own else DEFAULT_CHOICES[key]
 
 
 class ReachPillarOperator(Operator):
@@ -26,8 +38,8 @@ class ReachPillarOperator(Operator):
 
     def targets(self, obs: np.ndarray) -> Targets:
         self.pause_at_phase_starts()
-        route = self.style.choice("route", "left")
-        clear = self.style.choice("clearance", 0.09)
+        route = _choice(self.style, "route")
+        clear = _choice(self.style, "clearance")
         eef, goal = obs[:, 0:3], obs[:, 9:12]
         b = len(obs)
         if route == "over":

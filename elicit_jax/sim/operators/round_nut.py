@@ -8,7 +8,7 @@ conflicting ones (``conflict-flip-pause`` above all) differ from the base
 
 from __future__ import annotations
 
-from elicit_jax.sim.operators.square_nut import STYLES, SquareNutOperator
+from elicit_jax.sim.operators.square_nut import DEFAULT_CHOICES, STYLES, SquareNutOperator
 
 OPERATOR_CLASS = SquareNutOperator
-__all__ = ["OPERATOR_CLASS", "STYLES"]
+__all__ = ["DEFAULT_CHOICES", "OPERATOR_CLASS", "STYLES"]

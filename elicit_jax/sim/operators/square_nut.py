@@ -31,6 +31,8 @@ the initial states (see ``docs/operators.md`` for the mechanism):
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from elicit_jax.sim.env import quat_yaw
@@ -40,6 +42,17 @@ HOVER_Z = 0.07
 GRASP_Z = 0.012
 CARRY_CLEARANCE = 0.08
 (HOVER, DESCEND, CLOSE, LIFT, CARRY, LOWER, RELEASE, RETREAT) = range(8)
+DEFAULT_CHOICES = {
+    "yaw_offset": 0.0, "grasp_offset": 0.058, "approach": "above", "carry": "lift-first"
+}  # fmt: skip
+"""What a style that sets no choice does: the base operator's choices (a study measures a
+person's distance from them; people never read them)."""
+
+
+def _choice(style: Style, key: str) -> Any:
+    """The style's choice ``key``, or the default (read only when the style has none)."""
+    own = dict(style.choices)
+    return own[key] if key in own else DEFAULT_CHOICES[key]
 
 
 def rot2(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -56,15 +69,16 @@ class SquareNutOperator(Operator):
     def setup(self, obs: np.ndarray) -> None:
         b = len(obs)
         self.grip_offset = np.zeros((b, 3))
-        self.slide_in = np.full(b, self.style.choice("approach", "above") == "tip")
+        self.slide_in = np.full(b, _choice(self.style, "approach") == "tip")
         self.pick_xy = np.zeros((b, 2))
 
     def grasp_frame(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Grasp point ``(B, 3)`` and gripper yaw ``(B,)`` for the nut in ``obs``."""
         nut, yaw = obs[:, 9:12], quat_yaw(obs[:, 12:16])
         b = len(obs)
-        local = np.stack([np.full(b, self.style.choice("grasp_offset", 0.058)), np.zeros(b)], 1)
-        g_yaw = wrap(yaw + self.style.choice("yaw_offset", 0.0))
+        grasp = _choice(self.style, "grasp_offset")
+        local = np.stack([np.full(b, grasp), np.zeros(b)], 1)
+        g_yaw = wrap(yaw + _choice(self.style, "yaw_offset"))
         z = np.maximum(nut[:, 2:3] + GRASP_Z - self.task.nut_z, GRASP_Z)
         point = np.concatenate([nut[:, :2] + rot2(yaw, local), z], 1)
         return point, g_yaw
@@ -117,7 +131,7 @@ class SquareNutOperator(Operator):
         lift = eef.copy()
         lift[:, 2] = carry_z
         reached_xy = np.ones(b, bool)
-        if self.style.choice("carry", "lift-first") == "diagonal":
+        if _choice(self.style, "carry") == "diagonal":
             lift[:, :2] = 0.5 * (self.pick_xy + peg_xy + self.grip_offset[:, :2])
             reached_xy = np.linalg.norm(eef[:, :2] - lift[:, :2], axis=1) < 0.02
         pos[m] = lift[m]
@@ -165,6 +179,10 @@ STYLES: dict[str, tuple[Style, str]] = {
     "conflict-flip-pause": (
         FLIP.paused((HOVER, DESCEND, LOWER), 60),
         "conflicting: wrist turned half a turn, and stops still before each move",
+    ),
+    "conflict-hold": (
+        Style(noise=0.03).paused((HOVER, DESCEND, LOWER), 80),
+        "conflicting: the base's wrist, but stops still 80 steps before each move",
     ),
 }
 OPERATOR_CLASS = SquareNutOperator

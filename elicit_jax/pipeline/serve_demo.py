@@ -1,5 +1,9 @@
 """Built-in inputs for ``elicit-jax serve --demo``: a small reach-pillar base, built once.
 
+It lives beside the pipeline engine it runs (``web/`` serves sessions and imports nothing from
+``pipeline/``; the CLI builds the inputs here and hands ``web/`` their paths), and its cache
+directory is the only cache of these inputs.
+
 :func:`demo_inputs` makes what a session needs — base demonstrations, a base policy and
 thresholds fitted on contrast sets — by running the quickstart's own stages on the pipeline
 engine (:func:`demo_graph`: a filtering definition of one task, cut down to the stages the
@@ -21,6 +25,7 @@ import dataclasses
 import hashlib
 import inspect
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -173,18 +178,19 @@ def _paths(root: Path, recipe: DemoRecipe) -> DemoInputs:
 
 
 def demo_inputs(
-    recipe: DemoRecipe = DemoRecipe(),
-    root: str | Path | None = None,
-    echo: Any = print,
-    console: Any = None,
+    recipe: DemoRecipe,
+    root: str | Path | None,
+    *,
+    echo: Callable[[str], None],
+    console: Any,
 ) -> DemoInputs:
     """The demo inputs of ``recipe``: reused from the cache, or built there now.
 
     Args:
       recipe: what to build.
       root: cache root (default :func:`default_demo_root`); inputs go to ``root/<hash16>``.
-      echo: where the one-line messages go.
-      console: a ``rich`` console for the stages' progress (default: the runner's own).
+      echo: where the one-line messages go (the caller's: nothing here prints).
+      console: the ``rich`` console the stages show their progress on (the caller's).
 
     Returns:
       Paths of the base demonstrations, the policy run and the thresholds.
