@@ -112,8 +112,10 @@ def test_per_task_profile_overrides_and_task_filter():
     assert len(load_spec("filtering", "paper").tasks) == 3
     # robosuite's cpu study keeps the conflicting D_new only; the paper profile all three
     rs_cpu, rs_paper = load_spec("robosuite", "cpu"), load_spec("robosuite", "paper")
-    assert {t.operators for t in rs_cpu.tasks} == {("conflict-flip-pause",)}
-    assert {t.operators for t in rs_paper.tasks} == {("same-style", "mild", "conflict-flip-pause")}
+    assert {t.operators for t in rs_cpu.tasks} == {("conflict-down",)}
+    assert {t.operators for t in rs_paper.tasks} == {("same-style", "mild", "conflict-down")}
+    # collections are fixed in the definition before any run (3 under the cpu profile)
+    assert rs_cpu.collections is not None and len(rs_cpu.collections.seeds) == 3
     with pytest.raises(ElicitError, match="no task nowhere in this definition"):
         load_spec("filtering", "cpu", tasks=("nowhere",))
 

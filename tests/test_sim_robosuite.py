@@ -255,3 +255,24 @@ def test_session_environment_matches_workers_and_leaves_numpy_alone(pool):
     workers = PoolBatch(pool).reset_seeds(np.array([11, 12]))
     assert np.allclose(mine, workers[0], atol=1e-6) and not np.allclose(mine, workers[1])
     assert control_period(task) == 0.05
+
+
+def test_conflict_down_demos_conflict_by_their_own_states(work, tmp_path):
+    """The conflicting operator's demos are measured to conflict, each one (column
+    ``conflicts``), and the base demos measured not to; ``--require`` keeps only verified
+    demos and says how many it left out."""
+    from elicit_jax.data.demos import read_demos
+
+    base = work["demos"]
+    assert not base.extra["conflicts"].any() and not base.extra["down_first"].any()
+    out = _ok(["collect", "--task", "robosuite-square", "--operator", "conflict-down",
+               "--episodes", "2", "--seed", "3", "--threads", "2", "--require", "conflicts",
+               "-o", str(tmp_path / "down.parquet")])  # fmt: skip
+    assert "2 of 2 conflict" in " ".join(out.output.split())
+    down = read_demos(tmp_path / "down.parquet")
+    assert down.extra["conflicts"].all() and down.extra["down_first"].all()
+    refused = _run(["collect", "--task", "robosuite-square", "--operator", "base",
+                    "--episodes", "2", "--seed", "0", "--max-attempts", "2", "--threads", "2",
+                    "--require", "conflicts", "-o", str(tmp_path / "no.parquet")])  # fmt: skip
+    assert refused.exit_code != 0 and "not 'conflicts'" in refused.output
+    assert not (tmp_path / "no.parquet").exists()

@@ -54,6 +54,12 @@ def collect(
     threads: int = typer.Option(
         0, "--threads", help="C MuJoCo threads or robosuite processes (0: one per CPU)."
     ),
+    require: str = typer.Option(
+        "",
+        "--require",
+        help="Keep only demos whose measured traits say they conflict ('conflicts') or not "
+        "('no-conflict'); robosuite nut tasks.",
+    ),
     out: Path = typer.Option(..., "-o", "--out", help="Demos artifact to write (.parquet)."),
     overwrite: bool = OVERWRITE,
 ) -> None:
@@ -83,6 +89,13 @@ def collect(
         f"{result.successes}/{result.attempts} ({100 * result.success_rate:.0f}%), mean length "
         f"{sum(result.lengths) / len(result.lengths):.0f} steps, {time.perf_counter() - t0:.1f} s"
     )
+    if result.conflicting is not None:
+        left_out = f"; {result.unverified} successful demos not '{require}' left out"
+        Console().print(
+            f"measured per demo: {result.conflicting} of {len(result.episodes)} conflict with "
+            "the base operator's way (column 'conflicts'; docs/operators.md)"
+            + (left_out if result.unverified else "")
+        )
 
 
 @app.command(rich_help_panel=HAND_BACK)

@@ -36,6 +36,7 @@ from elicit_jax.pipeline.plan_cell import (
     sensitivity_stages,
 )
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
+from elicit_jax.sim.operators import episode_traits
 
 FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
 M_FILTER_METHODS = tuple(m for m in FILTER_METHODS if m not in CURATION_METHODS)
@@ -228,9 +229,17 @@ def in_collection(stage: Stage, number: int) -> Stage:
     )
 
 
+VERIFIED_ROLES = {"holdout": "no-conflict", "incompatible": "conflicts"}
+"""What a contrast set's demos must show, measured per demo, on tasks that measure traits
+(:func:`elicit_jax.sim.operators.episode_traits`): held-out base demos that do not conflict,
+known-incompatible demos that do."""
+
+
 def contrast_sets(task: Any, names: tuple[str, str]) -> list[tuple[str, str, int, str]]:
     """The two contrast sets of a task (held-out base demos, the incompatible operator's) as
-    ``(role, operator, episodes, file name)``, their files named ``names``."""
+    ``(role, operator, episodes, file name)``, their files named ``names``; on tasks that
+    measure episode traits their collect stages keep only verified demos
+    (:data:`VERIFIED_ROLES`)."""
     return [
         ("holdout", task.base_operator, task.holdout_episodes, names[0]),
         ("incompatible", task.incompatible_operator, task.incompatible_episodes, names[1]),
@@ -249,6 +258,8 @@ def collect_stages(
         kept = role if role in COLLECT_SEED_OFFSETS else "new"
         raw = {**spec.section("collect"), "task": task.name, "operator": operator}
         raw |= {"episodes": episodes, "seed": seed, "role": kept}
+        if role in VERIFIED_ROLES and episode_traits(task.name) is not None:
+            raw["require"] = VERIFIED_ROLES[role]
         out.append(
             Stage(
                 id=f"collect/{task.name}/{role if kept == role else 'new/' + role}",

@@ -43,8 +43,10 @@ def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
             f"task '{over['task']}' has no operator '{over['operator']}' "
             f"(known: {', '.join(known)})"
         )
-    cfg = CollectConfig(**section_fields(CollectConfig, over, "collect"))
-    return {**meta, "collect": dataclasses.asdict(cfg)}
+    cfg = dataclasses.asdict(CollectConfig(**section_fields(CollectConfig, over, "collect")))
+    if not cfg["require"]:  # only contrast sets verify traits: other stages keep their hash
+        del cfg["require"]
+    return {**meta, "collect": cfg}
 
 
 def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:

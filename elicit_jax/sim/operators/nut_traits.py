@@ -5,22 +5,25 @@ conflicts with the base operator's. That is measured here per episode from the r
 observations and actions alone: no operator, style or seed is consulted, so the same
 measurement applies to imported human demonstrations.
 
-Three traits (robosuite's low-dimensional observation: end effector at ``obs[0:3]``, its
-x-y-z-w quaternion at ``obs[3:7]``, the nut at ``obs[16:19]``, its quaternion at ``obs[19:23]``):
+Robosuite's low-dimensional observation: end effector at ``obs[0:3]``, its x-y-z-w quaternion
+at ``obs[3:7]``, the nut at ``obs[16:19]``, its quaternion at ``obs[19:23]``. Positions are read
+in the nut's frame (end effector minus nut in the table plane), heights above the nut's resting
+height (its median height until the jaw closes), so a nut nudged on the way, or tipped where
+the jaw closes, does not change what is measured. The grasp position is where the jaw first
+closes. Four traits:
 
 - **grasp side**: the jaw is symmetric, so the handle can be taken at two wrist yaws half a
   turn apart. The *near* side is the one reachable with at most a quarter turn from the start
   pose; a demo grasps on the **far** side when the wrist turn it made by the moment the jaw
   closes differs from the near turn by more than a quarter turn.
-- **approach**: the height of the end effector above its grasp position when it first came
-  within ``APPROACH_RADIUS`` of it in the table plane. Coming across, then down (the base's
-  way) arrives ~6 cm above it; sliding in along the handle after going down beside it (the
-  paper's "down, then across") arrives less than ``SLIDE_HEIGHT`` above it.
-- **down first**: half way across (the first step at half of its starting table-plane
-  distance from its grasp position, when that distance is over ``DOWN_FIRST_MIN``), the end
-  effector was already less than ``LOW_HEIGHT`` above its grasp position: down, then across.
-  The base (and ``mild``) go across at ~6 cm above it and come down only at the handle: across,
-  then down.
+- **approach height**: the end effector's height above the nut when it first came within
+  ``APPROACH_RADIUS`` of its grasp position; under ``SLIDE_HEIGHT`` it slid in along the handle
+  (``slide_in``: ``mild`` comes down beside the handle's tip and slides the last 6 cm).
+- **down first**: the share of its table-plane path to the grasp that the end effector
+  travelled less than ``LOW_HEIGHT`` above the nut (``low_share``); over ``LOW_SHARE`` it came
+  down first, then went across. The base goes across about 6 cm above the nut and comes down
+  over the handle: across, then down (the shares measured for each operator are in
+  docs/operators.md).
 - **still start**: control steps at the start with no motion command (a pause where every
   other operator moves at once).
 
@@ -42,10 +45,10 @@ APPROACH_RADIUS = 0.02
 """Table-plane distance (m) from the grasp position at which the approach height is read."""
 SLIDE_HEIGHT = 0.025
 """Approach height (m) below which a demo slid in along the handle (the base arrives ~0.06)."""
-DOWN_FIRST_MIN = 0.04
-"""Smallest starting table-plane distance (m) from the grasp position that has a half way."""
-LOW_HEIGHT = 0.048
+LOW_HEIGHT = 0.045
 """Height (m) above the grasp position under which the way across counts as low."""
+LOW_SHARE = 0.5
+"""Share of the table-plane path to the grasp travelled low above which a demo came down first."""
 STILL_EPS = 1e-6
 """Largest motion command (any of the 6 arm dims) that counts as no motion."""
 
@@ -62,7 +65,9 @@ class NutTraits:
       approach_height: end effector height (m) above its grasp position on first coming within
         ``APPROACH_RADIUS`` of it in the table plane (NaN when the jaw never closes).
       slide_in: the approach height is below ``SLIDE_HEIGHT``.
-      down_first: the end effector came down before going across (module docstring).
+      low_share: share of the table-plane path to the grasp travelled low (NaN when the jaw
+        never closes).
+      down_first: ``low_share`` is over ``LOW_SHARE`` (module docstring).
       still_start: leading control steps with no motion command.
     """
 
@@ -72,6 +77,7 @@ class NutTraits:
     far_grasp: bool
     approach_height: float
     slide_in: bool
+    low_share: float
     down_first: bool
     still_start: int
 
@@ -106,16 +112,22 @@ def measure(obs: np.ndarray, action: np.ndarray) -> NutTraits:
     near = float(wrap(np.array(2.0 * (_yaw(obs[:1, 19:23])[0] - start))) / 2.0)
     closing = np.flatnonzero(action[:, 6] > 0)
     if len(closing) == 0:
-        return NutTraits(-1, float("nan"), near, False, float("nan"), False, False, still)
+        nan = float("nan")
+        return NutTraits(-1, nan, near, False, nan, False, nan, False, still)
     g = int(closing[0])
     turn = float(yaw[g] - start)
     far = abs(turn - near) > np.pi / 2
-    at_grasp = obs[g, 0:3]
-    dist = np.linalg.norm(obs[: g + 1, 0:2] - at_grasp[:2], axis=1)
+    # in the nut's frame: a nut nudged on the way does not move the path; heights above the
+    # nut's resting height (the jaw may close a little above it, on a nut it tipped)
+    rel = obs[: g + 1, 0:2] - obs[: g + 1, 16:18]
+    above = obs[: g + 1, 2] - float(np.median(obs[: g + 1, 18]))
+    dist = np.linalg.norm(rel - rel[-1], axis=1)
     first = int(np.argmax(dist < APPROACH_RADIUS))
-    height = float(obs[first, 2] - at_grasp[2])
-    half = int(np.argmax(dist <= dist[0] / 2))
-    low = obs[half, 2] - at_grasp[2] < LOW_HEIGHT
-    down_first = bool(dist[0] > DOWN_FIRST_MIN and low)
-    return NutTraits(g, turn, near, bool(far), height, height < SLIDE_HEIGHT, down_first, still)
+    height = float(above[first])
+    steps = np.linalg.norm(np.diff(rel, axis=0), axis=1)
+    low = above[1:] < LOW_HEIGHT
+    share = float((steps * low).sum() / steps.sum()) if steps.sum() > 0 else 0.0
+    return NutTraits(
+        g, turn, near, bool(far), height, height < SLIDE_HEIGHT, share, share > LOW_SHARE, still
+    )
 
