@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from real_human import PAPER_THRESHOLDS, fmt_ops, human_profile, per_operator, run_walk
+from real_human import PAPER_THRESHOLDS, cli, fmt_ops, human_profile, per_operator, run_walk
 from thriftydagger_source import (
     HOLD_TICKS,
     N_EPISODES,
@@ -111,6 +111,34 @@ def prepare(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     info["spans"], info["file"] = spans, human
     info["steps"], info["act"] = len(obs), act
     return info
+
+
+def per_demo(path: Path, lam: float, eta: float) -> list[float]:
+    """The human's fraction of incompatible pairs in each demo, in recorded order."""
+    from elicit_jax.compat.score_file import read_scores
+
+    _, s = read_scores(path, ["episode", "operator", "likelihood", "novelty"])
+    sel = s["operator"].astype(str) == "human"
+    ep = s["episode"][sel]
+    inc = (s["likelihood"][sel] > lam) & (s["novelty"][sel] < eta)
+    return [float(inc[ep == e].mean()) for e in np.unique(ep)]
+
+
+def outside(work: Path) -> list[str]:
+    """Per observation field: share of steps with a value outside the range the base
+    policy's training demos span (held-out base demos as the reference for "normal")."""
+    from elicit_jax.data.demos import read_demos
+
+    base = read_demos(work / "base.parquet")
+    lo, hi = base.obs.min(axis=0), base.obs.max(axis=0)
+    rows = ["| field | held-out base demos | human (Panda view) |", "|---|---|---|"]
+    sets = {n: read_demos(work / f"{n}.parquet").obs for n in ("heldout", "human")}
+    for f in base.obs_fields:
+        cells = [100 * ((o[:, f.start : f.stop] < lo[f.start : f.stop])
+                        | (o[:, f.start : f.stop] > hi[f.start : f.stop])).any(axis=1).mean()
+                 for o in sets.values()]  # fmt: skip
+        rows.append(f"| `{f.name}` | {cells[0]:.0f}% | {cells[1]:.0f}% |")
+    return rows
 
 
 def sha(path: Path) -> str:
@@ -220,7 +248,12 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
         "Fraction incompatible over five equal stretches of the stacked demos: "
         + ", ".join(f"{100 * p:.0f}%" for p in prof) + f". {100 * novel:.0f}% of the "
         "human's pairs lie in states the base policy finds unfamiliar (ν ≥ η): the method "
-        "never flags those, whatever the action.",
+        "never flags those, whatever the action; of the pairs in familiar states, "
+        f"{100 * h['frac_inc'] / max(1e-12, 1 - novel):.1f}% are incompatible.",
+        "",
+        "Per human demo, in recorded order, % of pairs incompatible (fitted thresholds): "
+        + ", ".join(f"{100 * x:.0f}" for x in per_demo(work / "human_scores.parquet", lam, eta))
+        + ".",
         "",
         "Under the fitted thresholds:",
         "",
@@ -230,7 +263,18 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
         "",
         *fmt_ops(paper),
         "",
-        "Map (ℓ vs ν per operator, threshold box): `map.html` in the work directory.",
+        "Steps with a value outside the range of the base policy's 40 training demos, per "
+        "observation field:",
+        "",
+        *outside(work),
+        "",
+        "The recording's UR5e starts with its fingers closing along the table's x axis, "
+        "robosuite 1.5's Panda (and UR5e) along y: the hand orientation differs by about 90° "
+        "at the start, and the person's grasps need not pick the base's of the two "
+        "equivalent gripper yaws.",
+        "",
+        f"Map (ℓ vs ν per operator, threshold box): `{info.get('map', 'map.png')}` beside "
+        "this report; interactive `map.html` in the work directory.",
         "",
         "## What this does not show",
         "",
@@ -264,6 +308,12 @@ def main() -> None:
     info = prepare(args, work)
     print("[2/2] the method's walk (collect, train, import, score, fit, map, filter)", flush=True)
     run_walk(args, work, info["file"])
+    if args.out:
+        png = args.out.with_name(args.out.stem + "-map.png")
+        if not png.exists():
+            cli("map", "--scores", str(work / "scores_fitted.parquet"), "--thresholds",
+                str(work / "thresholds.json"), "-o", str(png), log=work / "png.log")  # fmt: skip
+        info["map"] = png.name
     cmd = "python benchmarks/thriftydagger_human.py " + " ".join(sys.argv[1:])
     text = report(args, work, info, cmd)
     print(text)
