@@ -211,7 +211,7 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
     loo = "n/a" if rep.get("loo_accuracy") is None else f"{rep['loo_accuracy']:.2f}"
     problems = "; ".join(trust["problems"] + trust["severe"])
     inputs = ["base.parquet", "heldout.parquet", "conflict.parquet", "human.hdf5",
-              "human-ur5e.hdf5", "thresholds.json"]  # fmt: skip
+              "human-ur5e.hdf5"]  # fmt: skip
     lines = [
         f"# The paper's Round Nut human operator (ThriftyDAgger) on `{TASK}`",
         "",
@@ -289,6 +289,9 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
         "would not test filtering.",
         "",
         "## Inputs",
+        "",
+        "Work files under `--work` (the two `.hdf5` files rebuild byte for byte from the "
+        "source; the scripted demos come from `elicit-jax collect`, seeds 0, 1 and 2):",
         "",
         *[f"- `{n}` SHA-256 `{sha(work / n)}`" for n in inputs],
     ]  # fmt: skip
