@@ -199,3 +199,24 @@ def test_a_recorded_step_is_rebuilt_in_robosuite(ts, tmp_path):
                                    atol=1e-9)  # fmt: skip
     finally:
         env.close()
+
+
+def test_panda_finger_map_matches_the_panda_pads(ts):
+    """The Panda view's finger map, checked against a Panda set by hand (robosuite 1.5)."""
+    from fixtures_data import skip_without_robosuite
+
+    skip_without_robosuite()
+    import thriftydagger_rebuild as rb
+
+    d0, slope, hi = rb.panda_fingers()
+    assert hi == pytest.approx(0.04)
+    env = rb.make(ts.TASK_ENV)
+    try:
+        sim, g = env.sim, env.robots[0].gripper["right"]
+        adr = [sim.model.get_joint_qpos_addr(j) for j in g.joints]
+        sim.data.qpos[adr] = [0.0208, -0.0208]
+        sim.forward()
+        assert rb.pad_distance(env) == pytest.approx(d0 + slope * 0.0208, abs=1e-6)
+        assert rb.pad_distance(env) == pytest.approx(0.0486, abs=5e-4)  # probed by hand
+    finally:
+        env.close()
