@@ -141,6 +141,13 @@ def outside(work: Path) -> list[str]:
     return rows
 
 
+def rows(path: Path) -> int:
+    """Number of state-action pairs in a demos artifact."""
+    import pandas as pd
+
+    return len(pd.read_parquet(path, columns=["episode"]))
+
+
 def sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -210,6 +217,7 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
     h, hp = fitted["human"], paper["human"]
     loo = "n/a" if rep.get("loo_accuracy") is None else f"{rep['loo_accuracy']:.2f}"
     problems = "; ".join(trust["problems"] + trust["severe"])
+    kept = rows(work / "filtered.parquet") - rows(work / "base.parquet")
     inputs = ["base.parquet", "heldout.parquet", "conflict.parquet", "human.hdf5",
               "human-ur5e.hdf5"]  # fmt: skip
     lines = [
@@ -286,7 +294,8 @@ def report(args: argparse.Namespace, work: Path, info: dict[str, Any], cmd: str)
         "apart here.",
         "- No rollouts (naive vs filtered): the observation layouts match only through the "
         "Panda view and the actions do not mean the same motion, so a policy trained on both "
-        "would not test filtering.",
+        f"would not test filtering; and the filter keeps {kept} of {h['pairs']} human pairs, "
+        f"so naive and filtered training sets differ by {h['pairs'] - kept} pairs.",
         "",
         "## Inputs",
         "",
