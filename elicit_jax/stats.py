@@ -261,7 +261,7 @@ def format_diff(
     mark = " *" if significant(diff.excludes_zero, adjusted) else ""
     if diff.no_spread and abs(m) >= 0.05:
         mark = f" (all {diff.n} seeds differ by the same: {NO_SPREAD_NOTE})"
-    elif adjusted is not None:
+    elif adjusted is not None and math.isfinite(diff.p):
         mark = f" (Holm p {format_p(adjusted)}){mark}"
     return f"{m:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}"
 
@@ -385,9 +385,12 @@ def format_collections_diff(
     mark = " *" if significant(diff.excludes_zero, adjusted) else ""
     if diff.no_spread and abs(diff.mean * scale) >= 0.05:
         mark = f" ({NO_SPREAD_NOTE})"
-    elif adjusted is not None:
+    elif adjusted is not None and math.isfinite(diff.p):
         mark = f" (Holm p {format_p(adjusted)}){mark}"
+    signs = f"{diff.agreeing}/{k} collections agree in sign"
+    if math.isfinite(diff.sign_p):
+        signs += f" (sign test p {format_p(diff.sign_p)})"
     return (
         f"{diff.mean * scale:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}; "
-        f"{diff.agreeing}/{k} collections agree in sign (sign test p {format_p(diff.sign_p)})"
+        + signs
     )

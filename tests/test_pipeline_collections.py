@@ -71,8 +71,8 @@ def test_a_pooled_difference_without_spread_is_not_called_beyond_the_noise():
         "(sign test p 0.500)"
     )
     same = collections_interval([[0.0] * 3, [0.0] * 3])  # identical policies
-    assert format_collections_diff(same) == (
-        "+0.0 [+0.0, +0.0]; 2/2 collections agree in sign (sign test p –)"
+    assert format_collections_diff(same, adjusted=math.nan) == (
+        "+0.0 [+0.0, +0.0]; 2/2 collections agree in sign"
     )
 
 
