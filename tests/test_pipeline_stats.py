@@ -156,3 +156,30 @@ def test_a_difference_without_spread_over_seeds_is_not_called_beyond_the_noise()
     )
     same = paired_t_interval([0.4, 0.5], [0.4, 0.5])  # identical policies: exactly no difference
     assert same.no_spread and format_diff(same) == "+0.0 [+0.0, +0.0]"
+
+
+def test_the_study_verdicts_never_call_a_difference_real_that_holm_does_not(tmp_path):
+    """Planted: informed − naive excludes 0 on its own (p ≈ 0.03 over 4 people), but it is one
+    of the study table's 3 tests (Holm: ≈ 0.09); the generated prose must not call it real."""
+    import dataclasses
+
+    from elicit_jax.pipeline.elicitation.report import _verdicts
+    from elicit_jax.pipeline.elicitation.success import study_differences
+    from tests.test_report_rebuild import _study
+
+    naive = {"p0": 0.2, "p1": 0.8, "p2": 0.4, "p3": 0.6}
+    lift = {"p0": 0.05, "p1": 0.15, "p2": 0.10, "p3": 0.20}
+    rows = [ResultRow("t", "mlp", "base", None, s, v, 50.0, 50, "best") for s, v in
+            enumerate((0.5, 0.45, 0.55))]  # fmt: skip
+    for p, v in naive.items():
+        rows.append(ResultRow("t", "mlp", "naive", p, 0, v, 50.0, 50, "best"))
+        rows.append(ResultRow("t", "mlp", "informed", p, 0, v + lift[p], 50.0, 50, "best"))
+    data = dataclasses.replace(_study(tmp_path), results=tuple(rows), sessions=())
+    family = {(a, b): (d, adj) for *_, a, b, d, adj in study_differences(data) if d}
+    d, adjusted = family[("informed", "naive")]
+    assert d.excludes_zero and d.p < 0.05 and adjusted == pytest.approx(3 * d.p)
+    assert adjusted > 0.05 and len(family) == 3
+    (line,) = [v for v in _verdicts(data) if "Informed − Naive" in v]
+    assert "beyond the noise" not in line
+    assert "inside the noise once the table's other differences are counted" in line
+    assert "*" not in line.split(":", 1)[1]

@@ -66,8 +66,8 @@ def _verdicts(data: StudyData) -> list[str]:
             continue
         real = significant(d.excludes_zero, adjusted)
         out.append(
-            f"**{task}** ({model}): {CONDITION_LABELS[a]} − {CONDITION_LABELS[b]} = "
-            f"{diff_text(d, adjusted)} points over {d.n} people — "
+            f"**{task}** ({model}): {CONDITION_LABELS[a]} − {CONDITION_LABELS[b]}, "
+            f"{d.n} people, in points: {diff_text(d, adjusted)} — "
             + (
                 "beyond the noise, after adjusting for the table's other differences."
                 if real
