@@ -117,7 +117,8 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
         if abl[1]:
             blocks.append(
                 (
-                    f"{where}: which part of the interface does the work (vs Naive Holm-adjusted over its column)",
+                    f"{where}: which part of the interface does the work "
+                    "(vs Naive Holm-adjusted over its column)",
                     abl,
                 )
             )
