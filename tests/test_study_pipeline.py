@@ -21,7 +21,12 @@ from elicit_jax.pipeline.elicitation.gather import SessionData, StudyData
 from elicit_jax.pipeline.elicitation.plan import build_study_graph, session_seed
 from elicit_jax.pipeline.elicitation.spec import load_study, parse_study
 from elicit_jax.pipeline.elicitation.success import compare, success_cells
-from elicit_jax.pipeline.elicitation.tables import ablation_table, length_table, table2
+from elicit_jax.pipeline.elicitation.tables import (
+    ablation_table,
+    ablation_tests,
+    length_table,
+    table2,
+)
 from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
 from elicit_jax.pipeline.tables import ResultRow
 
@@ -217,6 +222,9 @@ def test_table2_and_ablation_by_hand():
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"
     assert informed["rule accepts"] == "67%" and informed["demos per accepted"] == "1.5"
+    # the ablation's family is its own column: one test here, so Holm leaves p as it is
+    assert informed["vs Naive"] == "+25.0 [-38.5, +88.5] (Holm p 0.126)"
+    assert ablation_tests(data, "t", "mlp") == 1
     assert informed["ends as base"] == "–"  # no D_base states to compare styles on
     lengths = {r[2]: r for r in length_table(data)[1]}
     # accepted 80, 70 → 75, sample std √50 = 7.1

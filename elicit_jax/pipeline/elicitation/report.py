@@ -19,6 +19,7 @@ from elicit_jax.pipeline.elicitation.success import (
 )
 from elicit_jax.pipeline.elicitation.tables import (
     ablation_table,
+    ablation_tests,
     dagger_table,
     filter_table,
     learning_curves,
@@ -117,8 +118,8 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
         if abl[1]:
             blocks.append(
                 (
-                    f"{where}: which part of the interface does the work "
-                    "(vs Naive Holm-adjusted over its column)",
+                    f"{where}: which part of the interface does the work (vs Naive "
+                    f"Holm-adjusted over the {ablation_tests(data, task, model)} of its column)",
                     abl,
                 )
             )

@@ -235,8 +235,7 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
     header = ["shown", "success %", "vs Naive", "rule accepts", "incompatible"]
     header += ["demos per accepted", "people who changed", "ends as base"]
     rows = []
-    arms = [c for c in ARMS if _sessions(data, task, model, c)]
-    vs_naive = [None if c == "naive" else compare(cells, task, model, c, "naive") for c in arms]
+    arms, vs_naive = _ablation_diffs(data, task, model)
     for cond, diff, adjusted in zip(arms, vs_naive, holm_over(vs_naive), strict=True):
         sessions = _sessions(data, task, model, cond)
         demos = [r for s in sessions for r in s.demonstrations if r["rule_verdict"]]
@@ -259,6 +258,17 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
             ]
         )
     return header, rows
+
+
+def _ablation_diffs(data: StudyData, task: str, model: str) -> tuple[list[str], list]:
+    cells = success_cells(data)
+    arms = [c for c in ARMS if _sessions(data, task, model, c)]
+    return arms, [None if c == "naive" else compare(cells, task, model, c, "naive") for c in arms]
+
+
+def ablation_tests(data: StudyData, task: str, model: str) -> int:
+    """How many of the ablation's differences from Naive are tests (its Holm family's m)."""
+    return tested([d.p for d in _ablation_diffs(data, task, model)[1] if d is not None])
 
 
 def dagger_table(data: StudyData) -> Table:
