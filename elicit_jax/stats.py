@@ -1,6 +1,6 @@
-"""Seed statistics of success rates: paired t intervals and a two-level bootstrap.
+"""Seed statistics of success rates: paired t intervals, collection-level t intervals, Holm.
 
-Two questions, two tools.
+Three questions, three tools.
 
 **One collection, several training seeds** (:func:`paired_t_interval`,
 :func:`welch_t_interval`; a study's report). Two policies of the study are compared
@@ -20,22 +20,27 @@ noise here (a seed-to-seed std of 5-10 points against a rollout standard error o
 per 50 rollouts, which the d_s already contain). The t interval assumes the d_s roughly
 normal, which a mean of 50 outcomes per policy makes reasonable. One seed gives no interval.
 
-**Several collections, several training seeds each** (:func:`paired_difference`; the
-phenomenon benchmark). A comparison of two training conditions (e.g. base-only vs. base + a new
-operator's demos) varies with two kinds of seed: the *collection* seed (which demonstrations
-were collected) and the *training* seed (network initialisation, minibatches, dropout). Both
-conditions of one collection seed share its base demonstrations, so the natural unit is the
-paired difference per collection seed: mean over training seeds of the new condition minus the
-same for the reference. :func:`paired_difference` reports those differences, their mean and a
-percentile bootstrap interval that resamples collection seeds and, within each, the training
-seeds of each condition — so both sources of variation widen the interval.
+**Several collections, several training seeds each** (:func:`collections_interval`; a
+study over ``[collections]``). A difference varies with two kinds of seed: the *collection*
+(which demonstrations were collected) and the *training* seed. The collection is the unit of
+replication: each collection's paired differences are averaged over its training seeds, and
+the interval is Student's t over those C means (df = C − 1; t = 4.303 at 3 collections,
+2.776 at 5). The training-seed and rollout noise are inside each mean, so nothing is counted
+twice. A bootstrap that resamples 3 collections draws from 10 distinct multisets and
+under-covers badly (tests/test_coverage.py shows it).
+
+**Many differences in one table** (:func:`holm`). A report table tests 5-50 differences; at 95%
+each, some exclude 0 by chance. Within a table the p-values of the t tests are adjusted by
+Holm's step-down method, and ``*`` marks only a difference whose adjusted p-value is below
+0.05. How many collections agree in sign is printed with its sign-test p-value
+(:func:`sign_test_p`): with 3 collections unanimity is p = 0.25, never evidence on its own.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -53,12 +58,15 @@ class PairedDiff:
       low: lower end of the interval (NaN with one seed).
       high: upper end.
       n: seeds paired.
+      p: two-sided p-value of the t test of a zero mean (NaN with one seed or no spread):
+        what a multiple-comparison adjustment (:func:`holm`) works on.
     """
 
     mean: float
     low: float
     high: float
     n: int
+    p: float = math.nan
 
     @property
     def no_spread(self) -> bool:
@@ -117,8 +125,9 @@ def paired_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEV
     mean = float(d.mean())
     if n == 1:
         return PairedDiff(mean, math.nan, math.nan, 1)
-    half = t_quantile(n - 1, level) * float(d.std(ddof=1)) / math.sqrt(n)
-    return PairedDiff(mean, mean - half, mean + half, n)
+    se = float(d.std(ddof=1)) / math.sqrt(n)
+    half = t_quantile(n - 1, level) * se
+    return PairedDiff(mean, mean - half, mean + half, n, _p(mean, se, n - 1, half))
 
 
 def welch_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEVEL) -> PairedDiff:
@@ -146,121 +155,242 @@ def welch_t_interval(a: Sequence[float], b: Sequence[float], level: float = LEVE
         return PairedDiff(mean, mean, mean, n)
     df = (va + vb) ** 2 / (va**2 / (n - 1) + (vb**2 / (b.size - 1) if b.size > 1 else 0.0))
     half = t_quantile(df, level) * math.sqrt(va + vb)
-    return PairedDiff(mean, mean - half, mean + half, n)
+    return PairedDiff(mean, mean - half, mean + half, n, _p(mean, math.sqrt(va + vb), df, half))
 
 
-def format_diff(diff: PairedDiff | None, scale: float = 100.0) -> str:
-    """``+10.0 [−5.2, +25.2]`` in points (× ``scale``); ``*`` marks an interval excluding 0; a
-    non-zero difference without spread over seeds says it is not a test."""
+def t_p_value(mean: float, se: float, df: float) -> float:
+    """Two-sided p-value of Student's t test of a zero mean: ``2 · P(T_df > |mean| / se)``.
+
+    NaN when there is nothing to test: no degrees of freedom, or no spread (``se`` 0).
+    """
+    from scipy.stats import t
+
+    if not df > 0 or not se > 0 or not math.isfinite(se):
+        return math.nan
+    return float(min(1.0, 2.0 * t.sf(abs(mean) / se, df)))
+
+
+def _p(mean: float, se: float, df: float, half: float) -> float:
+    """The t test's p-value, NaN for an interval without spread (rounding leaves a spread of
+    ~1e-17 between equal values: not a test, so not a member of a Holm family)."""
+    return math.nan if interval_without_spread(-half, half) else t_p_value(mean, se, df)
+
+
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm's step-down adjustment of a family of p-values (family-wise error ≤ α).
+
+    Sort the m finite p-values ascending; the i-th smallest (i from 1) is multiplied by
+    m − i + 1, capped at 1 and made non-decreasing. A NaN (a difference that was not a test:
+    one seed, no spread) stays NaN and does not count in m.
+
+    Args:
+      pvalues: the family, in any order.
+
+    Returns:
+      The adjusted p-values, in the input order.
+    """
+    p = np.asarray(pvalues, dtype=float)
+    out = np.full(p.shape, math.nan)
+    idx = np.flatnonzero(np.isfinite(p))
+    m = idx.size
+    running = 0.0
+    for rank, k in enumerate(idx[np.argsort(p[idx], kind="stable")]):
+        running = max(running, min(1.0, (m - rank) * float(p[k])))
+        out[k] = running
+    return [float(x) for x in out]
+
+
+def holm_over(diffs: Sequence[PairedDiff | CollectionsDiff | None]) -> list[float | None]:
+    """:func:`holm` over the p-values of one table's differences, aligned with ``diffs``
+    (None where there is no difference)."""
+    adjusted = iter(holm([d.p for d in diffs if d is not None]))
+    return [None if d is None else next(adjusted) for d in diffs]
+
+
+def tested(pvalues: Sequence[float]) -> int:
+    """How many of ``pvalues`` are tests (finite): the m of :func:`holm`."""
+    return int(np.isfinite(np.asarray(pvalues, dtype=float)).sum())
+
+
+def sign_test_p(values: Sequence[float]) -> float:
+    """Two-sided sign test: do the signs of ``values`` (one per collection) lean one way
+    more than fair coins would? Zeros are dropped; NaN when nothing is left.
+
+    3 of 3 in one direction gives 0.25 and 5 of 5 0.0625: agreement among this few
+    collections is never evidence on its own.
+    """
+    from scipy.stats import binomtest
+
+    v = np.asarray(values, dtype=float)
+    pos, neg = int((v > 0).sum()), int((v < 0).sum())
+    if pos + neg == 0:
+        return math.nan
+    return float(binomtest(max(pos, neg), pos + neg, 0.5).pvalue)
+
+
+def format_p(p: float) -> str:
+    """``0.034``, ``<0.001`` or ``–`` (NaN: not a test)."""
+    if not math.isfinite(p):
+        return "–"
+    return "<0.001" if p < 0.001 else f"{p:.3f}"
+
+
+def significant(excludes_zero: bool, adjusted: float | None, alpha: float = 1 - LEVEL) -> bool:
+    """Whether a difference earns its ``*``: its interval excludes 0 and, when it is one of a
+    family, its Holm-adjusted p-value (``adjusted``) is below ``alpha`` too."""
+    if not excludes_zero:
+        return False
+    return adjusted is None or (math.isfinite(adjusted) and adjusted < alpha)
+
+
+def format_diff(
+    diff: PairedDiff | None, scale: float = 100.0, adjusted: float | None = None
+) -> str:
+    """``+10.0 [−5.2, +25.2]`` in points (× ``scale``); a non-zero difference without spread
+    over seeds says it is not a test.
+
+    Without ``adjusted``, ``*`` marks an interval excluding 0 (a lone comparison). With it
+    (the difference's Holm-adjusted p-value in its table, :func:`holm`), the cell adds
+    ``(Holm p 0.034)`` and ``*`` marks only an adjusted p-value below 0.05.
+    """
     if diff is None:
         return "–"
     m = diff.mean * scale
     if diff.n < 2:
         return f"{m:+.1f} (1 seed)"
-    mark = " *" if diff.excludes_zero else ""
+    mark = " *" if significant(diff.excludes_zero, adjusted) else ""
     if diff.no_spread and abs(m) >= 0.05:
         mark = f" (all {diff.n} seeds differ by the same: {NO_SPREAD_NOTE})"
+    elif adjusted is not None and math.isfinite(diff.p):
+        mark = f" (Holm p {format_p(adjusted)}){mark}"
     return f"{m:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}"
 
 
 @dataclasses.dataclass(frozen=True)
-class PairedDifference:
-    """Difference ``new − reference`` of a success measure over collection seeds.
+class CollectionsDiff:
+    """A paired difference pooled over collections, the collection the unit of replication.
 
     Attributes:
-      keys: collection seeds, in the order of ``per_key``.
-      per_key: (C,) mean over training seeds of new minus that of reference, per collection seed.
-      mean: mean of ``per_key``.
-      low, high: percentile bootstrap interval of ``mean`` at ``level``.
-      level: the interval's coverage (e.g. 0.95).
-      n_boot: bootstrap resamples.
+      mean: mean over collections of each collection's mean paired difference.
+      low: lower end of the Student t interval over the collections' means (NaN with one
+        collection).
+      high: its upper end.
+      p: two-sided p-value of that t test (NaN with one collection or no spread).
+      per_collection: mean paired difference within each collection, in input order.
+      n_pairs: (collection, training seed) differences behind the means.
+      level: the interval's coverage.
     """
 
-    keys: tuple[int, ...]
-    per_key: np.ndarray
     mean: float
     low: float
     high: float
-    level: float
-    n_boot: int
+    p: float
+    per_collection: tuple[float, ...]
+    n_pairs: int
+    level: float = LEVEL
+
+    @property
+    def no_spread(self) -> bool:
+        """True when every collection's mean difference is the same: an interval of no width,
+        which says nothing about noise."""
+        return len(self.per_collection) > 1 and interval_without_spread(self.low, self.high)
 
     @property
     def excludes_zero(self) -> bool:
-        """The interval lies entirely above or entirely below 0."""
-        return self.low > 0.0 or self.high < 0.0
+        """True when the whole interval lies on one side of 0; never without spread or with
+        one collection."""
+        return (
+            len(self.per_collection) > 1 and not self.no_spread and (self.low > 0 or self.high < 0)
+        )
 
-    def describe(self, fmt: str = "{:+.1f}") -> str:
-        """``"-9.3 [-14.0, -4.7]"``: the mean and its interval."""
-        return f"{fmt.format(self.mean)} [{fmt.format(self.low)}, {fmt.format(self.high)}]"
+    @property
+    def agreeing(self) -> int:
+        """Collections whose own mean difference has the sign of the pooled mean (0 counts
+        as agreeing with 0 only)."""
+        sign = np.sign(self.mean)
+        return int(sum(np.sign(v) == sign for v in self.per_collection))
+
+    @property
+    def sign_p(self) -> float:
+        """Two-sided sign-test p-value of the collections' signs (:func:`sign_test_p`)."""
+        return sign_test_p(self.per_collection)
 
 
-def _matrix(values: Sequence[float], what: str, key: int) -> np.ndarray:
-    arr = np.asarray(values, dtype=float)
-    if arr.ndim != 1 or arr.size == 0:
-        raise ElicitError(f"collection seed {key}: {what} needs at least one training seed")
-    if not np.all(np.isfinite(arr)):
-        raise ElicitError(f"collection seed {key}: {what} has non-finite values")
-    return arr
+def collections_interval(
+    diffs: Sequence[Sequence[float]], *, level: float = LEVEL
+) -> CollectionsDiff:
+    """Pooled difference and its Student t interval with the collection as the unit.
 
-
-def paired_difference(
-    new: Mapping[int, Sequence[float]],
-    reference: Mapping[int, Sequence[float]],
-    *,
-    n_boot: int = 10_000,
-    level: float = 0.95,
-    seed: int = 0,
-) -> PairedDifference:
-    """Paired difference ``new − reference`` with a two-level percentile bootstrap.
+    Each collection's paired differences (one per training seed) are averaged first; the
+    interval is ``mean ± t(df = C − 1) · sd / √C`` over those C means (sd with ddof 1). The
+    collections are independent draws of the data, and within one the training seeds and
+    rollouts only add noise to its mean, so the means are independent and (each a mean of
+    many rollouts) close to normal: the interval keeps its coverage at any spread between
+    collections (tests/test_coverage.py checks it at 3 and 5 collections).
 
     Args:
-      new: collection seed -> per-training-seed values of the new condition.
-      reference: collection seed -> per-training-seed values of the reference condition
-        (same collection seeds; the number of training seeds may differ).
-      n_boot: bootstrap resamples.
+      diffs: per collection, the paired differences of its training seeds (cell − reference,
+        one per training seed both have, evaluated on the same initial states).
       level: coverage of the interval.
-      seed: seed of the bootstrap's random generator (the result is deterministic).
 
-    Each resample draws C collection seeds with replacement, then, within each drawn seed,
-    the new condition's and the reference's training seeds with replacement (independently:
-    a training seed of one condition is not paired with the same-numbered seed of the other,
-    since their data differ), and averages the per-seed differences.
+    Returns:
+      The mean of the collections' means, the interval, its p-value and each collection's
+      mean. One collection gives no interval (NaN ends: the collection is the unit). Equal
+      means give the interval ``[d, d]``, which :attr:`CollectionsDiff.no_spread` marks as
+      not a test.
 
     Raises:
-      ElicitError: different collection seeds, no collection seed, a condition without
-        training seeds, non-finite values, ``n_boot < 1`` or ``level`` outside (0, 1).
+      ElicitError: no collection, a collection without differences, a non-finite difference
+        or ``level`` outside (0, 1).
     """
-    if set(new) != set(reference):
-        raise ElicitError(
-            f"collection seeds differ: {sorted(new)} (new) vs {sorted(reference)} (reference)"
-        )
-    if not new:
-        raise ElicitError("no collection seeds to compare")
-    if n_boot < 1 or not 0.0 < level < 1.0:
-        raise ElicitError(f"need n_boot >= 1 and 0 < level < 1, got {n_boot}, {level}")
-    keys = tuple(sorted(new))
-    a = [_matrix(new[k], "the new condition", k) for k in keys]
-    b = [_matrix(reference[k], "the reference", k) for k in keys]
-    per_key = np.array([x.mean() - y.mean() for x, y in zip(a, b, strict=True)])
-    rng = np.random.default_rng(seed)
-    c = len(keys)
-    picks = rng.integers(0, c, (n_boot, c))
-    boot = np.zeros(n_boot)
-    for p in range(c):  # each drawn position resamples its training seeds afresh
-        for j in range(c):
-            rows = np.flatnonzero(picks[:, p] == j)
-            ma = a[j][rng.integers(0, a[j].size, (rows.size, a[j].size))].mean(axis=1)
-            mb = b[j][rng.integers(0, b[j].size, (rows.size, b[j].size))].mean(axis=1)
-            boot[rows] += ma - mb
-    boot /= c
-    tail = (1.0 - level) / 2.0
-    low, high = np.quantile(boot, [tail, 1.0 - tail])
-    return PairedDifference(
-        keys=keys,
-        per_key=per_key,
-        mean=float(per_key.mean()),
-        low=float(low),
-        high=float(high),
+    if not diffs:
+        raise ElicitError("no collection to pool")
+    if not 0.0 < level < 1.0:
+        raise ElicitError(f"need 0 < level < 1, got {level}")
+    arrays = [np.asarray(d, dtype=float) for d in diffs]
+    for k, arr in enumerate(arrays):
+        if arr.ndim != 1 or arr.size == 0:
+            raise ElicitError(f"collection {k}: no paired training seed")
+        if not np.all(np.isfinite(arr)):
+            raise ElicitError(f"collection {k}: a paired difference is not finite")
+    means = np.array([a.mean() for a in arrays])
+    c = means.size
+    mean = float(means.mean())
+    low = high = p = math.nan
+    if c > 1:
+        se = float(means.std(ddof=1)) / math.sqrt(c)
+        half = t_quantile(c - 1, level) * se
+        low, high, p = mean - half, mean + half, _p(mean, se, c - 1, half)
+    return CollectionsDiff(
+        mean=mean,
+        low=low,
+        high=high,
+        p=p,
+        per_collection=tuple(float(m) for m in means),
+        n_pairs=int(sum(a.size for a in arrays)),
         level=level,
-        n_boot=n_boot,
+    )
+
+
+def format_collections_diff(
+    diff: CollectionsDiff | None, scale: float = 100.0, adjusted: float | None = None
+) -> str:
+    """``+2.0 [−1.0, +5.0] (Holm p 0.412); 2/3 collections agree in sign (sign test p 1.000)``
+    in points; ``*`` as :func:`format_diff` (only below an adjusted 0.05 when ``adjusted`` is
+    given). The sign count is a description, never evidence on its own: its p-value says how
+    weak it is."""
+    if diff is None:
+        return "–"
+    k = len(diff.per_collection)
+    mark = " *" if significant(diff.excludes_zero, adjusted) else ""
+    if diff.no_spread and abs(diff.mean * scale) >= 0.05:
+        mark = f" ({NO_SPREAD_NOTE})"
+    elif adjusted is not None and math.isfinite(diff.p):
+        mark = f" (Holm p {format_p(adjusted)}){mark}"
+    signs = f"{diff.agreeing}/{k} collections agree in sign"
+    if math.isfinite(diff.sign_p):
+        signs += f" (sign test p {format_p(diff.sign_p)})"
+    return (
+        f"{diff.mean * scale:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}; "
+        + signs
     )

@@ -4,22 +4,18 @@ statistics (hand-computed), and the across-collections table (no training here).
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 
 import pytest
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.across import (
-    across_note,
-    across_tables,
-    collections_interval,
-    format_collections_diff,
-    paired_by_collection,
-)
+from elicit_jax.pipeline.across import across_note, across_tables, paired_by_collection
 from elicit_jax.pipeline.evidence import selection_meta
 from elicit_jax.pipeline.plan import COLLECTION_STRIDE, build_graph
 from elicit_jax.pipeline.spec import load_spec, parse_spec
 from elicit_jax.pipeline.tables import ReportData, ResultRow, results_tables
+from elicit_jax.stats import collections_interval, format_collections_diff
 
 SPEC = """
 [pipeline]
@@ -48,46 +44,58 @@ def _spec(extra: str = "", profile: str | None = None):
 def test_equal_differences_give_a_point_interval():
     d = collections_interval([[0.2, 0.2, 0.2], [0.2, 0.2]])
     assert (d.mean, d.low, d.high) == pytest.approx((0.2, 0.2, 0.2))
-    assert d.n_pairs == 5 and d.n_boot == 10_000 and d.agreeing == 2
+    assert d.n_pairs == 5 and d.agreeing == 2 and d.no_spread and math.isnan(d.p)
 
 
-def test_two_constant_collections_bound_the_interval_by_their_values():
-    # Each collection's seeds are all equal, so a draw's pooled mean is 0.1 (both draws the
-    # first collection, P = 1/4), 0.2 (one of each, 1/2) or 0.3 (1/4): the 2.5% and 97.5%
-    # percentiles are exactly the two collections' values.
+def test_the_interval_is_student_t_over_the_collection_means_by_hand():
+    # means 0.1, 0.3 (seeds averaged first): mean 0.2, sd 0.1414, se 0.1, t(0.975, 1) 12.706
     d = collections_interval([[0.1] * 5, [0.3] * 5])
     assert d.mean == pytest.approx(0.2)
-    assert (d.low, d.high) == pytest.approx((0.1, 0.3))
+    assert (d.low, d.high) == pytest.approx((0.2 - 1.27062, 0.2 + 1.27062), abs=1e-5)
     assert d.per_collection == pytest.approx((0.1, 0.3)) and d.agreeing == 2
-    assert d.excludes_zero
-    assert format_collections_diff(d) == "+20.0 [+10.0, +30.0] *; 2/2 collections agree in sign"
+    assert not d.excludes_zero and d.p == pytest.approx(1 - 2 * math.atan(2) / math.pi)
+    # three collections 0.1, 0.2, 0.3 (uneven seed counts: each collection weighs the same)
+    e = collections_interval([[0.1], [0.2, 0.2, 0.2, 0.2], [0.25, 0.35]])
+    half = 4.302653 * 0.1 / math.sqrt(3)
+    assert (e.mean, e.low, e.high) == pytest.approx((0.2, 0.2 - half, 0.2 + half), abs=1e-6)
+    assert format_collections_diff(e, adjusted=0.5) == (
+        "+20.0 [-4.8, +44.8] (Holm p 0.500); 3/3 collections agree in sign (sign test p 0.250)"
+    )
 
 
 def test_a_pooled_difference_without_spread_is_not_called_beyond_the_noise():
     d = collections_interval([[0.1] * 3, [0.1] * 3])  # every pair differs by exactly 10 points
     assert d.no_spread and not d.excludes_zero
-    assert format_collections_diff(d) == (
-        "+10.0 [+10.0, +10.0] (no spread, not a test); 2/2 collections agree in sign"
+    assert format_collections_diff(d, adjusted=math.nan) == (
+        "+10.0 [+10.0, +10.0] (no spread, not a test); 2/2 collections agree in sign "
+        "(sign test p 0.500)"
     )
     same = collections_interval([[0.0] * 3, [0.0] * 3])  # identical policies
-    assert format_collections_diff(same) == "+0.0 [+0.0, +0.0]; 2/2 collections agree in sign"
+    assert format_collections_diff(same, adjusted=math.nan) == (
+        "+0.0 [+0.0, +0.0]; 2/2 collections agree in sign"
+    )
 
 
-def test_one_collection_resamples_its_training_seeds_only():
-    # seeds 0 and 1: a draw's mean is 0 (P = 1/4), 0.5 (1/2) or 1 (1/4)
-    d = collections_interval([[0.0, 1.0]])
-    assert d.mean == pytest.approx(0.5) and (d.low, d.high) == pytest.approx((0.0, 1.0))
-    assert not d.excludes_zero
+def test_one_collection_gives_no_interval():
+    d = collections_interval([[0.0, 1.0]])  # the collection is the unit: one is no sample
+    assert d.mean == pytest.approx(0.5) and math.isnan(d.low) and math.isnan(d.high)
+    assert not d.excludes_zero and math.isnan(d.p)
+
+
+def test_a_mark_needs_the_adjusted_p_value():
+    d = collections_interval([[0.10, 0.12], [0.2, 0.22], [0.15, 0.17]])
+    assert d.excludes_zero and d.p < 0.05
+    assert format_collections_diff(d).split(";")[0].endswith(" *")  # a lone comparison
+    assert "*" not in format_collections_diff(d, adjusted=0.2)
+    assert format_collections_diff(d, adjusted=0.01).split(";")[0].endswith(") *")
 
 
 def test_sign_disagreement_and_determinism():
     d = collections_interval([[-0.1, -0.1], [0.3, 0.3], [0.1, 0.2]])
-    assert d.mean == pytest.approx((-0.2 + 0.6 + 0.3) / 6)
+    assert d.mean == pytest.approx((-0.1 + 0.3 + 0.15) / 3)
     assert d.agreeing == 2  # the first collection is below 0, the pooled mean above
     assert d == collections_interval([[-0.1, -0.1], [0.3, 0.3], [0.1, 0.2]])
-    assert d.low < d.mean < d.high
-    single = collections_interval([[0.5]])  # one pair: no spread, no interval claim
-    assert (single.low, single.high) == pytest.approx((0.5, 0.5)) and not single.excludes_zero
+    assert d.low < d.mean < d.high and d.sign_p == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize(
@@ -227,18 +235,45 @@ def test_across_table_pools_collections_and_pairs_by_seed():
             rows += [_row(c, "base", None, s, base), _row(c, "naive", "op", s, naive)]
     data = _data(rows)
     ((title, (header, table)),) = across_tables(data)
-    assert "across 2 collections [0, 1]" in title and "10000 draws" in title
+    assert "across 2 collections [0, 1]" in title and "Student t interval over the 2" in title
+    assert "Holm-adjusted over the 1 differences of this table" in title
     assert header[2:] == ["success % mean (std)", "− Naive", "− Base"]
     assert table[0][:3] == ["–", "Base", "50.0 (0.0)"]
     # Naive: 25, 25, 75, 75 → mean 50.0, std (ddof 1) 28.9; Naive − Base: −25 in collection 0,
-    # +25 in collection 1 (constant within each): interval [−25, +25], 1 of 2 agrees with 0
+    # +25 in collection 1: mean 0, se 25, t(0.975, 1) 12.706 → ±317.7; none agrees with 0
     assert table[1][:3] == ["op", "Naive", "50.0 (28.9)"]
-    assert table[1][4] == "+0.0 [-25.0, +25.0]; 0/2 collections agree in sign"
+    assert table[1][4] == (
+        "+0.0 [-317.7, +317.7] (Holm p 1.000); 0/2 collections agree in sign (sign test p 1.000)"
+    )
     # per-collection tables as before, titled with their collection
     titles = [t for t, _ in results_tables(data)]
     assert titles[0].startswith("collection 0: t — mlp") and titles[1].startswith("collection 1")
     assert "in 0 of 1 paired differences all 2 collections" in across_note(data)[1]
     assert across_tables(_data(r for r in rows if r.collection == 0)) == []
+
+
+def test_the_m_filter_is_compared_with_the_random_drop_and_adjusted_with_the_table():
+    rows = []
+    for c, shift in enumerate((0.0, 0.02, 0.04)):
+        for s in (0, 1, 2):
+            wiggle = 0.01 * s
+            rows += [
+                _row(c, "base", None, s, 0.5),
+                _row(c, "naive", "op", s, 0.2 + shift + wiggle),
+                _row(c, "filtered", "op", s, 0.5 + 1.5 * shift),
+                _row(c, "random", "op", s, 0.22 + shift + wiggle),
+            ]
+    ((title, (header, table)),) = across_tables(_data(rows))
+    assert header[-1] == "− Random filter (same amount)"
+    m_row = next(r for r in table if r[1] == "M-Filtered")
+    random_row = next(r for r in table if r[1] == "Random filter")
+    # M − Random per collection: 27, 28, 29 points → 28 ± 4.303 · 1 / √3 · 1 ... = [+25.5, +30.5]
+    assert m_row[-1].startswith("+28.0 [+25.5, +30.5] (Holm p ") and random_row[-1] == ""
+    assert m_row[-1].split(";")[0].endswith("*")
+    # 6 differences: Naive − Base, M − Naive, M − Base, Random − Naive, Random − Base,
+    # M − Random; Random − Naive has no spread (+2.0 in every collection): not a test
+    assert "Holm-adjusted over the 5 differences of this table" in title
+    assert "(no spread, not a test)" in random_row[3]
 
 
 def test_pairs_on_different_initial_states_are_not_compared():

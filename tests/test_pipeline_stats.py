@@ -82,17 +82,44 @@ def test_difference_table_naive_against_base_and_methods_against_naive():
     assert header == ["operator", "Naive − Base", "M-Filtered − Naive", "M-Filtered − Base"]
     # filtered - naive: d = (0.02, -0.06, -0.02), mean -0.02, sd 0.04, half 0.099367
     # filtered - base: d = (0.12, 0.14, 0.16), mean 0.14, sd 0.02, half 4.3027 * 0.02 / √3
-    assert body == [["x", "+16.0 [+2.9, +29.1] *", "-2.0 [-11.9, +7.9]", "+14.0 [+9.0, +19.0] *"]]
-    assert (
-        title
-        == "t — mlp: difference from Naive (M-filters also from Base), points (paired 95% interval)"
+    # Holm over the table's 3 tests: p 0.0067 × 3 = 0.020, 0.0345 × 2 = 0.069, 0.478 × 1. Naive
+    # − Base's interval excludes 0 on its own, but not once the table's other tests count.
+    assert body == [
+        [
+            "x",
+            "+16.0 [+2.9, +29.1] (Holm p 0.069)",
+            "-2.0 [-11.9, +7.9] (Holm p 0.478)",
+            "+14.0 [+9.0, +19.0] (Holm p 0.020) *",
+        ]
+    ]
+    assert title == (
+        "t — mlp: difference from Naive (M-filters also from Base), points (paired 95% "
+        "interval; Holm-adjusted over the 3 differences of this table, * only where the "
+        "adjusted p < 0.05)"
     )
     only_naive = ReportData(
         "p", "cpu", "", ".", "", tuple(r for r in rows if r.method != "filtered")
     )
     ((title, (header, _)),) = difference_tables(only_naive)
     assert header == ["operator", "Naive − Base"]
-    assert title == "t — mlp: Naive − Base, points (paired 95% interval)"
+    assert title == (
+        "t — mlp: Naive − Base, points (paired 95% interval; Holm-adjusted over the 1 "
+        "differences of this table, * only where the adjusted p < 0.05)"
+    )
+
+
+def test_every_filtering_table_compares_the_m_filter_with_the_random_drop():
+    rows = [_row("base", None, s, v) for s, v in enumerate((0.40, 0.36, 0.38))]
+    rows += [_row("naive", "x", s, v) for s, v in enumerate((0.20, 0.26, 0.22))]
+    rows += [_row("filtered", "x", s, v) for s, v in enumerate((0.52, 0.50, 0.54))]
+    rows += [_row("random", "x", s, v) for s, v in enumerate((0.24, 0.22, 0.30))]
+    data = ReportData("p", "cpu", "", ".", "", tuple(rows))
+    ((title, (header, body)),) = difference_tables(data)
+    assert header[-1] == "M-Filtered − Random filter"
+    assert "M-Filtered − Random filter (the same amount dropped at random)" in title
+    # d = (0.28, 0.28, 0.24): mean 0.2667, sd 0.023094, half 4.302653 · 0.023094 / √3
+    assert body[0][-1].startswith("+26.7 [+20.9, +32.4] (Holm p ")
+    assert "over the 5 differences" in title  # N − B, M − N, R − N, M − B and M − R
 
 
 def test_curation_table_says_when_demo_score_is_no_better_than_chance():
@@ -129,3 +156,30 @@ def test_a_difference_without_spread_over_seeds_is_not_called_beyond_the_noise()
     )
     same = paired_t_interval([0.4, 0.5], [0.4, 0.5])  # identical policies: exactly no difference
     assert same.no_spread and format_diff(same) == "+0.0 [+0.0, +0.0]"
+
+
+def test_the_study_verdicts_never_call_a_difference_real_that_holm_does_not(tmp_path):
+    """Planted: informed − naive excludes 0 on its own (p ≈ 0.03 over 4 people), but it is one
+    of the study table's 3 tests (Holm: ≈ 0.09); the generated prose must not call it real."""
+    import dataclasses
+
+    from elicit_jax.pipeline.elicitation.report import _verdicts
+    from elicit_jax.pipeline.elicitation.success import study_differences
+    from tests.test_report_rebuild import _study
+
+    naive = {"p0": 0.2, "p1": 0.8, "p2": 0.4, "p3": 0.6}
+    lift = {"p0": 0.05, "p1": 0.15, "p2": 0.10, "p3": 0.20}
+    rows = [ResultRow("t", "mlp", "base", None, s, v, 50.0, 50, "best") for s, v in
+            enumerate((0.5, 0.45, 0.55))]  # fmt: skip
+    for p, v in naive.items():
+        rows.append(ResultRow("t", "mlp", "naive", p, 0, v, 50.0, 50, "best"))
+        rows.append(ResultRow("t", "mlp", "informed", p, 0, v + lift[p], 50.0, 50, "best"))
+    data = dataclasses.replace(_study(tmp_path), results=tuple(rows), sessions=())
+    family = {(a, b): (d, adj) for *_, a, b, d, adj in study_differences(data) if d}
+    d, adjusted = family[("informed", "naive")]
+    assert d.excludes_zero and d.p < 0.05 and adjusted == pytest.approx(3 * d.p)
+    assert adjusted > 0.05 and len(family) == 3
+    (line,) = [v for v in _verdicts(data) if "Informed − Naive" in v]
+    assert "beyond the noise" not in line
+    assert "inside the noise once the table's other differences are counted" in line
+    assert "*" not in line.split(":", 1)[1]

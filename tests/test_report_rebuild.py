@@ -206,7 +206,7 @@ def test_a_two_collection_study_rebuilds_its_across_collections_table(tmp_path):
     assert len(frame[frame["collection"] == 0]) == len(frame[frame["collection"] == 1])
     assert "## reach-pillar — mlp: across 2 collections [0, 1] × training seeds" in text
     assert "## collection 0: reach-pillar — mlp" in text and "## collection 1: " in text
-    assert "two-level percentile bootstrap (10000 draws, seed 0)" in text
+    assert "Student's t over the 2 collections' means (df = 1)" in text and "Holm" in text
     assert "Sign agreement: in " in text and "collections agree in sign" in text
     assert "reach-pillar (collection 1)" in text  # rows of the later collection name it
     rebuild_report(folder, tmp_path / "again")

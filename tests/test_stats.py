@@ -1,57 +1,57 @@
-"""Seed statistics (paired bootstrap) and the CLI's log set-up."""
+"""Seed statistics (p-values, Holm, the sign test) and the CLI's log set-up."""
 
 import logging
 
 import numpy as np
 import pytest
 
-from elicit_jax.errors import ElicitError
 from elicit_jax.runtime import configure_logging
-from elicit_jax.stats import paired_difference, sample_std
-
-
-def test_paired_difference_per_collection_seed_and_mean():
-    new = {1: [30.0, 40.0], 2: [50.0, 50.0, 56.0], 3: [20.0]}
-    ref = {1: [40.0, 40.0], 2: [60.0, 54.0], 3: [30.0, 34.0, 26.0]}
-    d = paired_difference(new, ref, n_boot=2000)
-    # 35 - 40 = -5; 52 - 57 = -5; 20 - 30 = -10 -> mean -20/3
-    np.testing.assert_allclose(d.per_key, [-5.0, -5.0, -10.0])
-    assert d.keys == (1, 2, 3)
-    assert d.mean == pytest.approx(-20.0 / 3.0)
-    assert d.low <= d.mean <= d.high < 0.0 and d.excludes_zero
-    assert d.low >= -14.0  # the most negative resample: -10, -10 and 20 - 34 = -14
-    assert d.describe() == f"{d.mean:+.1f} [{d.low:+.1f}, {d.high:+.1f}]"
-    again = paired_difference(new, ref, n_boot=2000)
-    assert (again.low, again.high) == (d.low, d.high)  # deterministic given the seed
-
-
-def test_paired_difference_interval_covers_zero_when_signs_disagree():
-    new = {1: [10.0, 20.0, 30.0], 2: [60.0, 70.0, 80.0], 3: [40.0, 40.0, 40.0]}
-    ref = {1: [40.0, 40.0, 40.0], 2: [40.0, 40.0, 40.0], 3: [40.0, 40.0, 40.0]}
-    d = paired_difference(new, ref, n_boot=4000)
-    np.testing.assert_allclose(d.per_key, [-20.0, 30.0, 0.0])
-    assert d.low < 0.0 < d.high and not d.excludes_zero
-
-
-def test_paired_difference_without_spread_collapses_to_the_mean():
-    d = paired_difference({1: [50.0, 50.0], 2: [30.0]}, {1: [40.0], 2: [40.0, 40.0]})
-    assert d.per_key.tolist() == [10.0, -10.0]
-    # resampling collection seeds alone spreads the mean over {-10, 0, 10}
-    assert d.low == -10.0 and d.high == 10.0 and d.mean == 0.0
-
-
-@pytest.mark.parametrize(
-    ("new", "ref", "match"),
-    [
-        ({1: [1.0]}, {2: [1.0]}, "collection seeds differ"),
-        ({}, {}, "no collection seeds"),
-        ({1: []}, {1: [1.0]}, "needs at least one training seed"),
-        ({1: [np.nan]}, {1: [1.0]}, "non-finite"),
-    ],
+from elicit_jax.stats import (
+    format_diff,
+    holm,
+    holm_over,
+    paired_t_interval,
+    sample_std,
+    sign_test_p,
+    t_p_value,
 )
-def test_paired_difference_rejects_bad_input(new, ref, match):
-    with pytest.raises(ElicitError, match=match):
-        paired_difference(new, ref)
+
+
+def test_holm_by_hand():
+    # m = 3 tests: 0.01 x 3 = 0.03, 0.03 x 2 = 0.06, 0.04 x 1 = 0.04 -> raised to 0.06
+    out = holm([0.01, 0.04, 0.03, float("nan")])
+    assert out[:3] == pytest.approx([0.03, 0.06, 0.06]) and np.isnan(out[3])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])  # capped at 1
+    assert holm([]) == []
+
+
+def test_t_p_value_by_hand_and_no_test_without_spread():
+    # t = 2 on 1 degree of freedom: 2 * (1/2 - atan(2)/pi)
+    assert t_p_value(0.2, 0.1, 1) == pytest.approx(1 - 2 * np.arctan(2) / np.pi)
+    assert np.isnan(t_p_value(0.2, 0.0, 4)) and np.isnan(t_p_value(0.2, 0.1, 0))
+    for a in ([0.5, 0.7, 0.6], [0.5, 0.55, 0.6]):  # p 0.074 and 0.013
+        d = paired_t_interval(a, [0.4, 0.4, 0.4])
+        assert (d.p < 0.05) == d.excludes_zero  # the interval and the test agree
+
+
+def test_sign_test_by_hand():
+    assert sign_test_p([1.0, 2.0, 3.0]) == pytest.approx(0.25)  # 2 / 2**3
+    assert sign_test_p([1.0] * 5) == pytest.approx(0.0625)
+    assert sign_test_p([1.0, -1.0, 1.0]) == pytest.approx(1.0)
+    assert sign_test_p([1.0, 0.0, 2.0]) == pytest.approx(0.5)  # the zero is dropped
+    assert np.isnan(sign_test_p([0.0, 0.0]))
+
+
+def test_a_difference_beyond_its_own_noise_loses_its_mark_among_many_tests():
+    """Planted: p = 0.012 alone earns *, as one of five tests (Holm: 0.06) it does not."""
+    strong = paired_t_interval([0.30, 0.32, 0.45], [0.1, 0.1, 0.1])
+    weak = [paired_t_interval([0.1, 0.3, 0.2], [0.2, 0.1, 0.25]) for _ in range(4)]
+    assert 0.01 < strong.p < 0.05 and strong.excludes_zero
+    assert format_diff(strong).endswith(" *")
+    adjusted = holm_over([strong, *weak, None])
+    assert adjusted[0] == pytest.approx(5 * strong.p) and adjusted[-1] is None
+    text = format_diff(strong, adjusted=adjusted[0])
+    assert "*" not in text and f"(Holm p {adjusted[0]:.3f})" in text
 
 
 def test_configure_logging_writes_records_to_the_file_only(tmp_path, capfd):

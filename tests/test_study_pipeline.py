@@ -9,6 +9,7 @@ report; a re-run does nothing; deleting a session re-runs it and what depends on
 from __future__ import annotations
 
 import io
+import math
 import shutil
 
 import numpy as np
@@ -22,6 +23,7 @@ from elicit_jax.pipeline.elicitation.spec import load_study, parse_study
 from elicit_jax.pipeline.elicitation.success import compare, success_cells
 from elicit_jax.pipeline.elicitation.tables import (
     ablation_table,
+    ablation_tests,
     length_table,
     person_table,
     table2,
@@ -201,7 +203,10 @@ def test_table2_and_ablation_by_hand():
     diff = compare(success_cells(data), "t", "mlp", "informed", "naive")
     assert diff.mean == pytest.approx(0.25) and diff.n == 2
     assert diff.high - diff.mean == pytest.approx(12.7062 * 0.05, rel=1e-4)
-    assert cols["Informed − Naive"] == "+25.0 [-38.5, +88.5]"
+    # p = 2 · P(T_1 > .25 / .05 = 5) = 1 − 2 atan(5) / π = 0.1257, the smallest of Table 2's 3
+    # tests (informed − naive, naive − base, informed − base): Holm multiplies it by 3
+    assert diff.p == pytest.approx(1 - 2 * math.atan(5) / math.pi)
+    assert cols["Informed − Naive"] == "+25.0 [-38.5, +88.5] (Holm p 0.377)"
     one = compare(success_cells(data), "t", "mlp", "informed", "base")  # vs base: p0 +10, p1 +20
     assert one.mean == pytest.approx(0.15)
     # Welch: people .40, .50 → var/n .005/2; base seeds .2, .4 → .02/2; se √.0125;
@@ -210,7 +215,7 @@ def test_table2_and_ablation_by_hand():
     assert not one.excludes_zero
     # naive − base: people .20, .20 (no spread), base seeds .2, .4 → se = √(.02 / 2) = .1,
     # Welch df = .01² / (.01² / 1) = 1, t(0.975, 1) = 12.7062 → −10 ± 127.1 points
-    assert cols["Naive − Base"] == "-10.0 [-137.1, +117.1]"
+    assert cols["Naive − Base"].startswith("-10.0 [-137.1, +117.1] (Holm p ")
     assert list(header[6:10]) == [
         "Naive − Base", "Informed − Naive", "Naive + M-filtered − Naive", "Informed − Base"
     ]  # fmt: skip
@@ -218,6 +223,9 @@ def test_table2_and_ablation_by_hand():
     naive, informed = (dict(zip(header, r, strict=True)) for r in rows)
     assert naive["rule accepts"] == "0%" and naive["incompatible"] == "30.0%"
     assert informed["rule accepts"] == "67%" and informed["demos per accepted"] == "1.5"
+    # the ablation's family is its own column: one test here, so Holm leaves p as it is
+    assert informed["vs Naive"] == "+25.0 [-38.5, +88.5] (Holm p 0.126)"
+    assert ablation_tests(data, "t", "mlp") == 1
     assert informed["ends as base"] == "–"  # no D_base states to compare styles on
     lengths = {r[2]: r for r in length_table(data)[1]}
     # accepted 80, 70 → 75, sample std √50 = 7.1

@@ -1,19 +1,19 @@
-"""The study over several collections: its headline cells pooled over (collection, training
-seed), with intervals that resample both.
+"""The study over several collections: its headline cells pooled over collections, the
+collection the unit of replication.
 
 A cell's success varies with two seeds: the *collection* (which demonstrations a collection
 happens to contain; ``[collections]``) and the *training* seed. Within a collection every
 policy is trained with the same training seeds and evaluated on the same initial states, so a
-cell is compared with Naive or Base *paired*: d = success(cell, s) − success(reference, s) per
-training seed s of a collection. :func:`collections_interval` pools those differences over
-(collection, training seed) and gives a two-level percentile bootstrap interval: each draw
-takes as many collections as there are, with replacement, then within each drawn collection
-its training seeds with replacement (keeping each seed's pair together), and pools the drawn
-differences. The draws come from a fixed seed, so the interval is deterministic.
+cell is compared with Naive, Base or the random drop *paired*: d = success(cell, s) −
+success(reference, s) per training seed s of a collection. Each collection's differences are
+averaged, and :func:`~elicit_jax.stats.collections_interval` gives Student's t interval over
+those collection means (df = collections − 1): the collections are the independent draws, so
+they set the width, whatever the training seeds add inside each mean.
 
-With 3 collections the outer level resamples from 3 values (10 distinct multisets): the
-interval is a description of the spread over the collections run, not a guarantee of coverage;
-the report says so beside it, and counts how many collections agree in sign.
+Each table tests many differences; their p-values are Holm-adjusted within the table
+(:func:`~elicit_jax.stats.holm`) and ``*`` marks only an adjusted p-value below 0.05. How many
+collections agree in sign is printed with its sign-test p-value, a description rather than
+evidence (3 of 3 is p = 0.25).
 """
 
 from __future__ import annotations
@@ -21,9 +21,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
-import numpy as np
-
-from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.tables import (
     METHOD_LABELS,
     ReportData,
@@ -32,123 +29,13 @@ from elicit_jax.pipeline.tables import (
     collections_of,
     mean_std,
 )
-from elicit_jax.stats import NO_SPREAD_NOTE, interval_without_spread
-
-N_BOOT = 10_000
-BOOT_SEED = 0
-
-
-@dataclasses.dataclass(frozen=True)
-class CollectionsDiff:
-    """A paired difference pooled over (collection, training seed), with its interval.
-
-    Attributes:
-      mean: mean of every (collection, training seed) paired difference.
-      low: lower end of the two-level percentile bootstrap interval.
-      high: its upper end.
-      per_collection: mean paired difference within each collection, in input order.
-      n_pairs: paired differences pooled.
-      n_boot: bootstrap draws.
-    """
-
-    mean: float
-    low: float
-    high: float
-    per_collection: tuple[float, ...]
-    n_pairs: int
-    n_boot: int
-
-    @property
-    def no_spread(self) -> bool:
-        """True when every pooled difference is the same: an interval of no width, which
-        says nothing about noise."""
-        return self.n_pairs > 1 and interval_without_spread(self.low, self.high)
-
-    @property
-    def excludes_zero(self) -> bool:
-        """True when the whole interval lies on one side of 0; never without spread."""
-        return self.n_pairs > 1 and not self.no_spread and (self.low > 0 or self.high < 0)
-
-    @property
-    def agreeing(self) -> int:
-        """Collections whose own mean difference has the sign of the pooled mean (0 counts
-        as agreeing with 0 only)."""
-        sign = np.sign(self.mean)
-        return int(sum(np.sign(v) == sign for v in self.per_collection))
-
-
-def collections_interval(
-    diffs: Sequence[Sequence[float]],
-    *,
-    n_boot: int = N_BOOT,
-    level: float = 0.95,
-    seed: int = BOOT_SEED,
-) -> CollectionsDiff:
-    """Pooled mean and two-level percentile bootstrap interval of paired differences.
-
-    Args:
-      diffs: per collection, the paired differences of its training seeds (cell − reference,
-        one per training seed both have, evaluated on the same initial states).
-      n_boot: bootstrap draws.
-      level: coverage of the interval.
-      seed: seed of the draws (the result is deterministic).
-
-    Returns:
-      The pooled mean over (collection, training seed), the interval, and each collection's
-      own mean. Every difference equal gives the interval ``[d, d]``; one collection resamples
-      its training seeds only.
-
-    Raises:
-      ElicitError: no collection, a collection without differences, a non-finite difference,
-        ``n_boot < 1`` or ``level`` outside (0, 1).
-    """
-    if not diffs:
-        raise ElicitError("no collection to pool")
-    if n_boot < 1 or not 0.0 < level < 1.0:
-        raise ElicitError(f"need n_boot >= 1 and 0 < level < 1, got {n_boot}, {level}")
-    arrays = [np.asarray(d, dtype=float) for d in diffs]
-    for k, arr in enumerate(arrays):
-        if arr.ndim != 1 or arr.size == 0:
-            raise ElicitError(f"collection {k}: no paired training seed")
-        if not np.all(np.isfinite(arr)):
-            raise ElicitError(f"collection {k}: a paired difference is not finite")
-    rng = np.random.default_rng(seed)
-    c = len(arrays)
-    picks = rng.integers(0, c, (n_boot, c))
-    total, count = np.zeros(n_boot), np.zeros(n_boot)
-    for slot in range(c):  # every drawn slot resamples its collection's seeds afresh
-        for k, arr in enumerate(arrays):
-            rows = np.flatnonzero(picks[:, slot] == k)
-            drawn = arr[rng.integers(0, arr.size, (rows.size, arr.size))]
-            total[rows] += drawn.sum(axis=1)
-            count[rows] += arr.size
-    boot = total / count
-    tail = (1.0 - level) / 2.0
-    low, high = np.quantile(boot, [tail, 1.0 - tail])
-    pooled = np.concatenate(arrays)
-    return CollectionsDiff(
-        mean=float(pooled.mean()),
-        low=float(low),
-        high=float(high),
-        per_collection=tuple(float(a.mean()) for a in arrays),
-        n_pairs=int(pooled.size),
-        n_boot=n_boot,
-    )
-
-
-def format_collections_diff(diff: CollectionsDiff | None, scale: float = 100.0) -> str:
-    """``+2.0 [−1.0, +5.0]; 2/3 collections agree`` in points; ``*`` marks an interval that
-    excludes 0."""
-    if diff is None:
-        return "–"
-    k = len(diff.per_collection)
-    mark = " *" if diff.excludes_zero else ""
-    if diff.no_spread and abs(diff.mean * scale) >= 0.05:
-        mark = f" ({NO_SPREAD_NOTE})"
-    return (
-        f"{diff.mean * scale:+.1f} [{diff.low * scale:+.1f}, {diff.high * scale:+.1f}]{mark}; "
-        f"{diff.agreeing}/{k} collections agree in sign"
-    )
+from elicit_jax.stats import (
+    CollectionsDiff,
+    collections_interval,
+    format_collections_diff,
+    holm,
+    tested,
+)
 
 
 def paired_by_collection(
@@ -177,7 +64,8 @@ def _diff(
 
 @dataclasses.dataclass(frozen=True)
 class AcrossCell:
-    """One headline cell pooled over collections, with its differences from Naive and Base."""
+    """One headline cell pooled over collections, with its differences from Naive and Base
+    (and, for the M-filter, from the random drop of the same amount)."""
 
     task: str
     model: str
@@ -186,6 +74,11 @@ class AcrossCell:
     successes: tuple[float, ...]
     vs_naive: CollectionsDiff | None
     vs_base: CollectionsDiff | None
+    vs_random: CollectionsDiff | None = None
+
+    def diffs(self) -> tuple[CollectionsDiff | None, ...]:
+        """The cell's differences in table-column order (− Naive, − Base, − Random filter)."""
+        return (self.vs_naive, self.vs_base, self.vs_random)
 
 
 def across_cells(data: ReportData) -> list[AcrossCell]:
@@ -211,12 +104,18 @@ def across_cells(data: ReportData) -> list[AcrossCell]:
         )
         for op in ops:
             naive = rows_of.get((task, model, "naive", op), [])
+            random = rows_of.get((task, model, "random", op), [])
+            random = random if (task, model, "random", op) in everywhere else []
             for m in (m for m in METHOD_LABELS if (task, model, m, op) in everywhere):
                 mine = rows_of[(task, model, m, op)]
                 vs_naive = None if m == "naive" else _diff(mine, naive, colls)
+                vs_random = _diff(mine, random, colls) if m == "filtered" else None
                 out.append(
-                    AcrossCell(task, model, m, op, _succ(mine), vs_naive, _diff(mine, base, colls))
-                )
+                    AcrossCell(
+                        task, model, m, op, _succ(mine), vs_naive, _diff(mine, base, colls),
+                        vs_random,
+                    )
+                )  # fmt: skip
     return out
 
 
@@ -224,32 +123,60 @@ def _succ(rows: Sequence[ResultRow]) -> tuple[float, ...]:
     return tuple(r.success for r in rows)
 
 
+def adjusted_cells(
+    cells: Sequence[AcrossCell],
+) -> list[tuple[AcrossCell, tuple[float | None, ...]]]:
+    """Each cell with the Holm-adjusted p-values of its differences (None where there is no
+    difference), adjusted over every difference of the cells given (one table)."""
+    family = [d.p for c in cells for d in c.diffs() if d is not None]
+    adjusted = iter(holm(family))
+    return [(c, tuple(None if d is None else next(adjusted) for d in c.diffs())) for c in cells]
+
+
 def across_tables(data: ReportData) -> list[tuple[str, Table]]:
-    """Per task × model, the cells run on every collection, pooled over (collection, training
-    seed): success mean (std, ddof 1), and each cell's paired difference from Naive and from
-    Base with its two-level bootstrap interval (:func:`collections_interval`). Empty for a
-    single collection."""
+    """Per task × model, the cells run on every collection, pooled over collections: success
+    mean (std) over (collection, training seed), and each cell's paired difference from
+    Naive, from Base and (M-filter) from the random drop of the same amount, with Student's t
+    interval over the collections' means and its Holm-adjusted p-value within the table.
+    Empty for a single collection."""
     colls = collections_of(data.results)
-    tables: dict[tuple[str, str], list[list[str]]] = {}
+    by_table: dict[tuple[str, str], list[AcrossCell]] = {}
     for c in across_cells(data):
-        row = [
-            c.operator or "–",
-            METHOD_LABELS[c.method],
-            mean_std(c.successes),
-            "" if c.method in ("base", "naive") else format_collections_diff(c.vs_naive),
-            "" if c.method == "base" else format_collections_diff(c.vs_base),
-        ]
-        tables.setdefault((c.task, c.model), []).append(row)
-    header = ["operator", "training set", "success % mean (std)", "− Naive", "− Base"]
-    return [
-        (
-            f"{task} — {model}: across {len(colls)} collections {colls} × training seeds: "
-            "success % mean (std) over (collection, training seed); paired differences in "
-            f"points [95% two-level bootstrap interval, {N_BOOT} draws]",
-            (header, rows),
+        by_table.setdefault((c.task, c.model), []).append(c)
+    out = []
+    for (task, model), cells in by_table.items():
+        with_random = any(c.vs_random is not None for c in cells)
+        rows = []
+        for c, (p_naive, p_base, p_random) in adjusted_cells(cells):
+            row = [
+                c.operator or "–",
+                METHOD_LABELS[c.method],
+                mean_std(c.successes),
+                "" if c.vs_naive is None else format_collections_diff(c.vs_naive, adjusted=p_naive),
+                "" if c.vs_base is None else format_collections_diff(c.vs_base, adjusted=p_base),
+            ]
+            if with_random:
+                row.append(
+                    ""
+                    if c.vs_random is None
+                    else format_collections_diff(c.vs_random, adjusted=p_random)
+                )
+            rows.append(row)
+        header = ["operator", "training set", "success % mean (std)", "− Naive", "− Base"]
+        if with_random:
+            header.append("− Random filter (same amount)")
+        m = tested([d.p for c in cells for d in c.diffs() if d is not None])
+        out.append(
+            (
+                f"{task} — {model}: across {len(colls)} collections {colls} × training seeds: "
+                "success % mean (std) over (collection, training seed); paired differences in "
+                f"points [95% Student t interval over the {len(colls)} collections' means]; "
+                f"Holm-adjusted over the {m} differences of this table, * only where the "
+                "adjusted p < 0.05",
+                (header, rows),
+            )
         )
-        for (task, model), rows in tables.items()
-    ]
+    return out
 
 
 def across_note(data: ReportData) -> list[str]:
@@ -257,18 +184,21 @@ def across_note(data: ReportData) -> list[str]:
     colls = collections_of(data.results)
     if len(colls) < 2:
         return []
-    diffs = [d for c in across_cells(data) for d in (c.vs_naive, c.vs_base) if d is not None]
+    diffs = [d for c in across_cells(data) for d in c.diffs() if d is not None]
     unanimous = sum(d.agreeing == len(colls) for d in diffs)
     return [
         f"Across collections: every collection ({colls}) trains the same training seeds on its "
-        "own demonstrations; a cell's difference from Naive or Base is paired by training seed "
-        "and initial states within a collection and pooled over (collection, training seed). "
-        f"Its 95% interval is a two-level percentile bootstrap ({N_BOOT} draws, seed "
-        f"{BOOT_SEED}): draw {len(colls)} collections with replacement, then each drawn "
-        "collection's training seeds with replacement. With this few collections the "
-        "interval describes the spread over the collections run rather than promising "
-        "coverage; * marks one that excludes 0.",
+        "own demonstrations; a cell's difference from Naive, Base or the random drop is paired "
+        "by training seed and initial states within a collection and averaged per collection. "
+        "The collection is the unit of replication: the 95% interval is Student's t over the "
+        f"{len(colls)} collections' means (df = {len(colls) - 1}), which keeps its coverage at "
+        "any spread between collections (the training-seed and rollout noise are inside each "
+        "mean). Within each table the t tests' p-values are Holm-adjusted over the table's "
+        "differences, and * marks only an adjusted p-value below 0.05: an interval that "
+        "excludes 0 without * is not a finding once the table's other tests are counted.",
         f"Sign agreement: in {unanimous} of {len(diffs)} paired differences all "
-        f"{len(colls)} collections have the sign of the pooled mean; a claim that holds in "
-        "fewer depends on which demonstrations a collection happens to contain.",
+        f"{len(colls)} collections have the sign of the pooled mean. Each count is printed with "
+        "its two-sided sign-test p-value, and is never evidence on its own: all "
+        f"{len(colls)} of {len(colls)} agreeing is p = "
+        f"{0.5 ** (len(colls) - 1):.3g} by chance alone.",
     ]

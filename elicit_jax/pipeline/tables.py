@@ -36,7 +36,7 @@ from elicit_jax.pipeline.tables_fit import (
     threshold_table,
     trust_text,
 )
-from elicit_jax.stats import PairedDiff, format_diff, paired_t_interval
+from elicit_jax.stats import PairedDiff, format_diff, holm, paired_t_interval, tested
 
 __all__ = [
     "METHOD_LABELS",
@@ -65,7 +65,9 @@ __all__ = [
 INTERVAL_NOTE = (
     "95% interval of the difference, paired by training seed and initial states (every policy "
     "is evaluated on the same seeded initial states): Student's t over the per-seed differences "
-    "(see docs/pipelines.md); * marks an interval that excludes 0."
+    "(see docs/pipelines.md). Each table of differences adjusts its p-values for the number "
+    "of differences it tests (Holm), prints the adjusted p-value beside each interval, and "
+    "marks with * only an adjusted p-value below 0.05 (its interval then excludes 0 too)."
 )
 
 
@@ -204,22 +206,41 @@ def _differences(data: ReportData) -> list[tuple[str, Table]]:
         base = rows_of.get((task, model, "base", None), [])
         columns = [(m, "base" if m == "naive" else "naive") for m in methods]
         columns += [(m, "base") for m in FROM_BASE if m in methods and base]
-        rows = []
+        if "filtered" in methods and "random" in methods:
+            columns.append(("filtered", "random"))  # which pairs, not how many
+        diffs = []
         for op in ops:
-            refs = {"base": base, "naive": rows_of.get((task, model, "naive", op), [])}
-            cells = []
+            refs = {r: rows_of.get((task, model, r, op), []) for r in ("naive", "random")}
+            refs["base"] = base
             for m, ref in columns:
                 mine = rows_of.get((task, model, m, op), [])
-                cells.append(
-                    format_diff(paired_diff(mine, refs[ref])) if mine and refs[ref] else "–"
-                )
-            rows.append([op, *cells])
+                diffs.append(paired_diff(mine, refs[ref]) if mine and refs[ref] else None)
+        cells = holm_cells(diffs)
+        rows = [[op, *cells[k * len(columns) : (k + 1) * len(columns)]] for k, op in enumerate(ops)]
         header = ["operator", *[f"{METHOD_LABELS[m]} − {METHOD_LABELS[r]}" for m, r in columns]]
         what = "difference from Naive" if any(r == "naive" for _, r in columns) else "Naive − Base"
         if any(r == "base" and m != "naive" for m, r in columns):
             what += " (M-filters also from Base)"
-        out.append((f"{task} — {model}: {what}, points (paired 95% interval)", (header, rows)))
+        if ("filtered", "random") in columns:
+            what += ", M-Filtered − Random filter (the same amount dropped at random)"
+        out.append((f"{task} — {model}: {what}, points ({holm_title(diffs)})", (header, rows)))
     return out
+
+
+def holm_cells(diffs: Sequence[PairedDiff | None]) -> list[str]:
+    """The cells of one table's differences, each with its p-value Holm-adjusted over the
+    table (``–`` where there is none)."""
+    adjusted = iter(holm([d.p for d in diffs if d is not None]))
+    return ["–" if d is None else format_diff(d, adjusted=next(adjusted)) for d in diffs]
+
+
+def holm_title(diffs: Sequence[PairedDiff | None]) -> str:
+    """What a table of differences says of its intervals and its ``*``."""
+    m = tested([d.p for d in diffs if d is not None])
+    return (
+        f"paired 95% interval; Holm-adjusted over the {m} differences of this table, * only "
+        "where the adjusted p < 0.05"
+    )
 
 
 def models_table(data: ReportData) -> list[tuple[str, Table]]:
@@ -282,20 +303,28 @@ def sensitivity_tables(data: ReportData) -> list[tuple[str, Table]]:
                 if r.operator and (r.task, r.model) == (task, model)
             )
         )
+        means, diffs = [], []
         for op in ops:
             naive = rows_of.get((task, model, "naive", op), [])
-            vs_base = paired_diff(naive, base) if naive and base else None
-            cells = [f"{mean_std([r.success for r in naive])}; vs Base {format_diff(vs_base)}"]
+            means.append(mean_std([r.success for r in naive]))
+            diffs.append(paired_diff(naive, base) if naive and base else None)
             for p in pts:
                 mine = by_point.get((op, p.point), [])
-                diff = paired_diff(mine, naive) if mine and naive else None
-                cells.append(f"{mean_std([r.success for r in mine])}; Δ {format_diff(diff)}")
+                means.append(mean_std([r.success for r in mine]))
+                diffs.append(paired_diff(mine, naive) if mine and naive else None)
+        texts = holm_cells(diffs)
+        width = len(pts) + 1
+        for k, op in enumerate(ops):
+            at = slice(k * width, (k + 1) * width)
+            (first, *rest) = zip(means[at], texts[at], strict=True)
+            cells = [f"{first[0]}; vs Base {first[1]}", *[f"{m}; Δ {t}" for m, t in rest]]
             rows.append([op, *cells])
         seeds = sorted({r.seed for r in data.heldout if (r.task, r.model) == (task, model)})
         lo_hi = f"{pts[0].low:.4g} .. {pts[0].high:.4g}, fitted {pts[0].fitted:.4g}" if pts else "?"
         title = (
             f"{task} — {model}: λ sensitivity across the fitted margin (λ {lo_hi}); held-out "
-            f"training seeds {seeds} and initial states; success % mean (std), Δ from Naive"
+            f"training seeds {seeds} and initial states; success % mean (std), Δ from Naive "
+            f"({holm_title(diffs)})"
         )
         out.append((title, (header, rows)))
     return out

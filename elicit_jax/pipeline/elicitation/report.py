@@ -13,14 +13,13 @@ from elicit_jax.pipeline.elicitation.evidence import write_study_data
 from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
-    DIFFERENCES,
     cells_of,
-    compare,
     diff_text,
-    success_cells,
+    study_differences,
 )
 from elicit_jax.pipeline.elicitation.tables import (
     ablation_table,
+    ablation_tests,
     dagger_table,
     filter_table,
     learning_curves,
@@ -28,6 +27,7 @@ from elicit_jax.pipeline.elicitation.tables import (
     length_table,
     person_table,
     table2,
+    table2_tests,
     threshold_table,
 )
 from elicit_jax.pipeline.evidence import selection_lines
@@ -40,14 +40,17 @@ from elicit_jax.pipeline.report_folder import (
 )
 from elicit_jax.pipeline.tables import STD_NOTE
 from elicit_jax.render import html_figure
+from elicit_jax.stats import significant
 
 FIGURES = "figures"
 INTERVAL_NOTE = (
     "Differences are in success points, paired by person: each person's mean over training "
-    "seeds in one condition minus the other, with a 95% Student t interval over people; `*` "
-    "marks an interval that excludes 0. Without `*`, the difference is inside the noise of "
-    "this many people and seeds. A difference from Base is each person's mean against the "
-    "base policy's mean, Welch's t over the people and the base policy's seeds."
+    "seeds in one condition minus the other, with a 95% Student t interval over people. A "
+    "difference from Base is each person's mean against the base policy's mean, Welch's t "
+    "over the people and the base policy's seeds. Each table's differences are a family: "
+    "their p-values are Holm-adjusted together (the adjusted p-value is printed beside each "
+    "interval) and `*` marks only an adjusted p-value below 0.05. Without `*`, the difference "
+    "is inside the noise of this many people, seeds and tests."
 )
 MODEL_NOTE = (
     "The people are simulated (docs/people.md): the task's phase machine driven by each "
@@ -58,22 +61,23 @@ MODEL_NOTE = (
 
 
 def _verdicts(data: StudyData) -> list[str]:
-    cells = success_cells(data)
     out = []
-    for task, model in cells_of(data):
-        for a, b in DIFFERENCES:
-            d = compare(cells, task, model, a, b)
-            if d is None:
-                continue
-            out.append(
-                f"**{task}** ({model}): {CONDITION_LABELS[a]} − {CONDITION_LABELS[b]} = "
-                f"{diff_text(d)} points over {d.n} people — "
-                + (
-                    "beyond the noise."
-                    if d.excludes_zero
-                    else "inside the noise (not a demonstrated effect)."
-                )
+    for task, model, a, b, d, adjusted in study_differences(data):
+        if d is None:
+            continue
+        real = significant(d.excludes_zero, adjusted)
+        out.append(
+            f"**{task}** ({model}): {CONDITION_LABELS[a]} − {CONDITION_LABELS[b]}, "
+            f"{d.n} people, in points: {diff_text(d, adjusted)} — "
+            + (
+                "beyond the noise, after adjusting for the table's other differences."
+                if real
+                else "inside the noise once the table's other differences are counted "
+                "(not a demonstrated effect)."
+                if d.excludes_zero
+                else "inside the noise (not a demonstrated effect)."
             )
+        )
     return out
 
 
@@ -102,14 +106,23 @@ def _figure(data: StudyData, task: str, model: str) -> bytes | None:
 
 
 def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any]]:
-    title = "Base / Naive / Naive + M-filtered / Informed (success %, mean (std) over seeds)"
+    title = (
+        "Base / Naive / Naive + M-filtered / Informed (success %, mean (std) over seeds; "
+        f"differences Holm-adjusted over the {table2_tests(data)} of this table)"
+    )
     blocks: list[tuple[str, Any]] = [(title, table2(data))]
     for task, model in cells_of(data):
         where = f"{task} ({model})"
         blocks.append((f"{where}: per person", person_table(data, task, model)))
         abl = ablation_table(data, task, model)
         if abl[1]:
-            blocks.append((f"{where}: which part of the interface does the work", abl))
+            blocks.append(
+                (
+                    f"{where}: which part of the interface does the work (vs Naive "
+                    f"Holm-adjusted over the {ablation_tests(data, task, model)} of its column)",
+                    abl,
+                )
+            )
         learning = learning_table(data, task, model)
         blocks.append((f"{where}: do the people learn, and how fast?", learning))
         name = f"{task}-{model}-learning.png"

@@ -9,7 +9,9 @@ the pipeline's paired 95% Student t interval
 (:func:`~elicit_jax.stats.paired_t_interval`), here over people — the person is the
 unit a user study replicates; the training-seed noise enters through each person's mean.
 A difference from the base policy (one policy per seed, no person) is Welch's t over the
-people's means and the base policy's seeds.
+people's means and the base policy's seeds. The differences of one table are a family: their
+p-values are Holm-adjusted together (:func:`study_differences`), and ``*`` needs the adjusted
+p-value below 0.05.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.stats import (
     PairedDiff,
     format_diff,
+    holm_over,
     paired_t_interval,
     welch_t_interval,
 )
@@ -40,14 +43,27 @@ CONDITION_LABELS = {
 }
 
 
-def diff_text(diff: PairedDiff | None) -> str:
-    """A paired difference in points, ``+10.0 [−5.2, +25.2]`` (``*``: the interval excludes
-    0), as :func:`~elicit_jax.stats.format_diff` writes it; one person: no interval."""
+def diff_text(diff: PairedDiff | None, adjusted: float | None = None) -> str:
+    """A paired difference in points, ``+10.0 [−5.2, +25.2] (Holm p 0.210)``, as
+    :func:`~elicit_jax.stats.format_diff` writes it (``*`` only where the Holm-adjusted p-value
+    ``adjusted`` is below 0.05); one person: no interval."""
     if diff is None:
         return "–"
     if diff.n < 2:
         return f"{100 * diff.mean:+.1f} (1 person, no interval)"
-    return format_diff(diff)
+    return format_diff(diff, adjusted=adjusted)
+
+
+def study_differences(
+    data: StudyData,
+) -> list[tuple[str, str, str, str, PairedDiff | None, float | None]]:
+    """Every ``(task, model, a, b, a − b, Holm-adjusted p)`` of :data:`DIFFERENCES`, the family
+    of the study's Table 2: adjusted together, so neither the table nor the report's verdicts
+    call a difference real that is one of many tests."""
+    cells = success_cells(data)
+    keys = [(t, m, a, b) for t, m in cells_of(data) for a, b in DIFFERENCES]
+    diffs = [compare(cells, *k) for k in keys]
+    return [(*k, d, p) for k, d, p in zip(keys, diffs, holm_over(diffs), strict=True)]
 
 
 def success_cells(data: StudyData) -> dict[tuple, dict[int, float]]:

@@ -20,9 +20,11 @@ from elicit_jax.pipeline.elicitation.success import (
     diff_text,
     people_of,
     population_by_seed,
+    study_differences,
     success_cells,
 )
 from elicit_jax.pipeline.tables import Table, mean_std
+from elicit_jax.stats import holm_over, tested
 
 TABLE2 = ("base", "naive", "filtered", "informed")
 ARMS = ("naive", "rejection", "prompt", "indicator", "feedback", "informed")
@@ -40,6 +42,7 @@ def table2(data: StudyData) -> Table:
     header += [f"{CONDITION_LABELS[a]} − {CONDITION_LABELS[b]}" for a, b in DIFFERENCES]
     header += ["people"]
     rows = []
+    family = iter(study_differences(data))
     for task, model in cells_of(data):
         people = people_of(data, task, model)
         row = [task, model]
@@ -47,10 +50,17 @@ def table2(data: StudyData) -> Table:
             row.append(
                 mean_std(list(population_by_seed(cells, task, model, cond, people).values()))
             )
-        row += [diff_text(compare(cells, task, model, a, b)) for a, b in DIFFERENCES]
+        for _ in DIFFERENCES:
+            *_, diff, adjusted = next(family)
+            row.append(diff_text(diff, adjusted))
         row.append(str(len(people)))
         rows.append(row)
     return header, rows
+
+
+def table2_tests(data: StudyData) -> int:
+    """How many of Table 2's differences are tests (the m of its Holm adjustment)."""
+    return tested([d.p for *_, d, _ in study_differences(data) if d is not None])
 
 
 def _traits(record: Mapping[str, Any]) -> str:
@@ -239,10 +249,9 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
     header = ["shown", "success %", "vs Naive", "rule accepts", "incompatible"]
     header += ["demos per accepted", "people who changed", "ends as base"]
     rows = []
-    for cond in ARMS:
+    arms, vs_naive = _ablation_diffs(data, task, model)
+    for cond, diff, adjusted in zip(arms, vs_naive, holm_over(vs_naive), strict=True):
         sessions = _sessions(data, task, model, cond)
-        if not sessions:
-            continue
         demos = [r for s in sessions for r in s.demonstrations if r["rule_verdict"]]
         frac = [float(r["fraction_incompatible"]) for r in demos]
         accepted = sum(len(s.accepted) for s in sessions)
@@ -252,7 +261,7 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
             [
                 CONDITION_LABELS[cond] if cond != "informed" else "All three (informed)",
                 mean_std(list(population_by_seed(cells, task, model, cond, people).values())),
-                "" if cond == "naive" else diff_text(compare(cells, task, model, cond, "naive")),
+                "" if cond == "naive" else diff_text(diff, adjusted),
                 f"{100 * np.mean([r['rule_verdict'] == 'accept' for r in demos]):.0f}%"
                 if demos
                 else "–",
@@ -263,6 +272,17 @@ def ablation_table(data: StudyData, task: str, model: str) -> Table:
             ]
         )
     return header, rows
+
+
+def _ablation_diffs(data: StudyData, task: str, model: str) -> tuple[list[str], list]:
+    cells = success_cells(data)
+    arms = [c for c in ARMS if _sessions(data, task, model, c)]
+    return arms, [None if c == "naive" else compare(cells, task, model, c, "naive") for c in arms]
+
+
+def ablation_tests(data: StudyData, task: str, model: str) -> int:
+    """How many of the ablation's differences from Naive are tests (its Holm family's m)."""
+    return tested([d.p for d in _ablation_diffs(data, task, model)[1] if d is not None])
 
 
 def dagger_table(data: StudyData) -> Table:
