@@ -6,6 +6,7 @@ writes (never over or inside an input; never a directory; a file only with ``--o
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
 import platform
@@ -65,12 +66,19 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
     Works for files and directories. On error the temporary is removed and ``path`` is
     untouched, so no half-written artifact is ever visible; temporaries a killed writer left
-    behind are removed first (:func:`clean_stale_temporaries`). A destination that cannot be
-    written (read-only directory, a file in the way) is an :class:`ElicitError` naming
+    behind are removed first (:func:`clean_stale_temporaries`). What is written is flushed to
+    disk (``fsync``) before the rename, so the rename never publishes data still in flight.
+
+    A path that did not exist when the block began is created exclusively: when another
+    writer made it meanwhile (two commands writing the same output at once), this one fails
+    and leaves the other's file alone; only a path that existed at the start (an output the
+    caller was allowed to overwrite) is replaced. A destination that cannot be written
+    (read-only directory, a full disk, a file in the way) is an :class:`ElicitError` naming
     ``path``, not the temporary; so is an existing directory where a file was written (a
     directory is only ever replaced by a directory).
     """
     path = Path(path)
+    existed = path.exists() or path.is_symlink()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         clean_stale_temporaries(path)
@@ -85,19 +93,85 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
                 "is an existing directory; refusing to replace it with a file (nothing written)",
                 path,
             )
-        if path.is_dir() and not path.is_symlink():
-            old = path.with_name(f".{path.name}.old-{os.getpid()}")
-            os.replace(path, old)
-            os.replace(target, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(target, path)
+        try:
+            sync_tree(target)
+            _commit(target, path, existed)
+        except OSError as e:
+            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
+        _sync_dir(path.parent)
     except OSError as e:
         if e.filename and str(e.filename).startswith(str(tmp)):
-            raise ElicitError(f"cannot write ({e.strerror or e})", path) from e
+            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
         raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _commit(target: Path, path: Path, existed: bool) -> None:
+    """Rename ``target`` onto ``path``: exclusively when ``path`` did not exist at the start."""
+    if not existed:
+        if target.is_dir():
+            if path.exists() or path.is_symlink():
+                raise _appeared(path)
+            os.rename(target, path)
+            return
+        try:
+            os.link(target, path)  # fails if path exists: create-exclusive
+            return
+        except FileExistsError as e:
+            raise _appeared(path) from e
+        except OSError as e:
+            if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
+                raise
+            if path.exists() or path.is_symlink():  # no hard links here: check, then rename
+                raise _appeared(path) from e
+    if path.is_dir() and not path.is_symlink():
+        old = path.with_name(f".{path.name}.old-{os.getpid()}")
+        os.replace(path, old)
+        os.replace(target, path)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(target, path)
+
+
+def _appeared(path: Path) -> ElicitError:
+    return ElicitError(
+        "was created by another writer while this command ran; it is left as that writer "
+        "made it and nothing was written (run again with --overwrite to replace it)",
+        path,
+    )
+
+
+def sync_tree(path: Path) -> None:
+    """``fsync`` a file, or every file under a directory (and the directories themselves)."""
+    if path.is_symlink() or not path.exists():
+        return
+    if path.is_dir():
+        for root, _, files in os.walk(path):
+            for name in files:
+                sync_tree(Path(root) / name)
+            _sync_dir(Path(root))
+        return
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _sync_dir(path: Path) -> None:
+    """Best-effort ``fsync`` of a directory (makes a rename in it durable; some file systems
+    cannot, which is no reason to fail a write that already happened)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def refuse_overwriting_inputs(
