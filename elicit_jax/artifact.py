@@ -30,6 +30,7 @@ from elicit_jax.hashing import (  # noqa: F401  (re-exported: the artifact API)
 )
 from elicit_jax.output_rules import (  # noqa: F401  (re-exported: the artifact API)
     atomic_path,
+    atomic_paths,
     check_outputs,
     clean_stale_temporaries,
     refuse_overwriting_inputs,

@@ -13,7 +13,7 @@ import platform
 import re
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from elicit_jax.errors import ElicitError
@@ -103,6 +103,77 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         if e.filename and str(e.filename).startswith(str(tmp)):
             raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
         raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def atomic_paths(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
+    """:func:`atomic_path` for files that belong together (an output and its drop log):
+    yield a temporary per path; when the block succeeds, put them all in place.
+
+    The old files are first moved aside, then the new ones renamed in, in the order given
+    (give the file readers look for last), then the old ones deleted. A kill in between
+    never leaves a new file beside an old one of the pair: there are only new files and
+    missing ones (the old ones, moved aside, are removed as stale temporaries by the next
+    writer). A failure before the first new file is in place puts the old ones back.
+    """
+    paths = [Path(p) for p in paths]
+    with contextlib.ExitStack() as stack:
+        temps = [stack.enter_context(_staged(p)) for p in paths]
+        yield [t for t, _ in temps]
+        for target, _ in temps:
+            if target.is_dir():
+                raise ElicitError("atomic_paths writes files only", target)
+        try:
+            for target, _ in temps:
+                sync_tree(target)
+        except OSError as e:
+            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", paths[0]) from e
+        aside: list[tuple[Path, Path]] = []
+        for path in paths:
+            if path.is_dir() and not path.is_symlink():
+                raise ElicitError(
+                    "is an existing directory; refusing to replace it with a file "
+                    "(nothing written)",
+                    path,
+                )
+        done = 0
+        try:
+            for (_, existed), path in zip(temps, paths, strict=True):
+                if existed and (path.exists() or path.is_symlink()):
+                    old = path.with_name(f".{path.name}.old-{os.getpid()}")
+                    os.replace(path, old)
+                    aside.append((old, path))
+            for (target, _), path in zip(temps, paths, strict=True):
+                _commit(target, path, existed=False)
+                done += 1
+        except (OSError, ElicitError) as e:
+            if done == 0:  # nothing new is in place: put the old files back
+                for old, path in aside:
+                    with contextlib.suppress(OSError):
+                        os.replace(old, path)
+            if isinstance(e, ElicitError):
+                raise
+            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", paths[0]) from e
+        for old, _ in aside:
+            old.unlink(missing_ok=True)
+        for path in {p.parent for p in paths}:
+            _sync_dir(path)
+
+
+@contextlib.contextmanager
+def _staged(path: Path) -> Iterator[tuple[Path, bool]]:
+    """A temporary directory beside ``path`` (removed on exit) and whether ``path`` existed."""
+    existed = path.exists() or path.is_symlink()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        clean_stale_temporaries(path)
+        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
+    except OSError as e:
+        raise ElicitError(f"cannot write here ({e.strerror or e})", path) from e
+    try:
+        yield tmp / path.name, existed
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
