@@ -33,6 +33,8 @@ from elicit_jax.output_rules import (  # noqa: F401  (re-exported: the artifact 
     atomic_paths,
     check_outputs,
     clean_stale_temporaries,
+    foreign_files,
+    refuse_foreign_files,
     refuse_overwriting_inputs,
 )
 from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact API)

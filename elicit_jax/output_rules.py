@@ -245,11 +245,22 @@ def _sync_dir(path: Path) -> None:
         os.close(fd)
 
 
+_DIR_HEADER = "artifact.json"
+"""The header file of a directory artifact (``elicit_jax.artifact.DIR_HEADER``)."""
+
+
+def enclosing_artifacts(path: Path) -> list[Path]:
+    """The directory artifacts ``path`` lies in: each ancestor holding an ``artifact.json``
+    (a checkpoint's training run, a session's folder)."""
+    return [a for a in path.parents if (a / _DIR_HEADER).is_file()]
+
+
 def refuse_overwriting_inputs(
     outputs: Iterable[str | Path], inputs: Iterable[str | Path | None]
 ) -> None:
     """Raise when an output would replace an input, a directory holding one, or a file
-    inside an input directory (a run, a LeRobot dataset).
+    inside an input directory (a run, a LeRobot dataset) or inside the artifact directory
+    an input belongs to (``runs/base/artifact.json`` when the input is ``runs/base/seed0``).
 
     Args:
       outputs: paths about to be written.
@@ -272,6 +283,46 @@ def refuse_overwriting_inputs(
                     "choose an output outside it",
                     out,
                 )
+            for a in enclosing_artifacts(i):
+                if a in o.parents:
+                    raise ElicitError(
+                        f"refusing to write here: this path is inside {a}, the artifact the "
+                        f"input {i} belongs to; choose an output outside it",
+                        out,
+                    )
+
+
+def foreign_files(directory: str | Path, own: Callable[[str], bool]) -> list[str]:
+    """What in ``directory`` its writer did not write: files (and empty folders, with a
+    trailing ``/``) whose relative POSIX path ``own`` does not claim, sorted."""
+    root = Path(directory)
+    found = []
+    for base, dirs, files in os.walk(root):
+        rel = Path(base).relative_to(root).as_posix()
+        prefix = "" if rel == "." else rel + "/"
+        found += [prefix + f for f in files if not own(prefix + f)]
+        if not dirs and not files and prefix and not own(prefix):
+            found.append(prefix)
+    return sorted(found)
+
+
+def refuse_foreign_files(directory: str | Path, own: Callable[[str], bool], writer: str) -> None:
+    """Raise unless everything in ``directory`` was written by ``writer`` (``own`` claims
+    it): an artifact directory is replaced whole, so anything else in it would be lost.
+
+    Raises:
+      ElicitError: naming the directory and the first files in the way.
+    """
+    foreign = foreign_files(directory, own)
+    if foreign:
+        shown = ", ".join(foreign[:4]) + (
+            f" and {len(foreign) - 4} more" if len(foreign) > 4 else ""
+        )
+        raise ElicitError(
+            f"holds files {writer} did not write ({shown}); elicit-jax replaces only its own "
+            "files: move them out of the folder, or choose another output",
+            directory,
+        )
 
 
 def check_outputs(

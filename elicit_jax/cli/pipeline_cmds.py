@@ -107,15 +107,16 @@ def report(
       elicit-jax report runs/filtering-cpu -o docs/results/f --findings docs/results/f/findings.md
       elicit-jax report --rebuild docs/results/f
     """
-    from elicit_jax.artifact import check_outputs, holds_artifact, read_json
+    from elicit_jax.artifact import check_outputs, read_json
+    from elicit_jax.pipeline.report_folder import check_report_folder
 
-    # a report is re-rendered in place; any other directory at -o is never replaced (a
-    # rebuild in place needs no check here: rebuild_report refuses a folder without raw results)
-    check_outputs(
-        [out or (None if rebuild else run_dir / "report")],
-        overwrite=True,
-        replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
-    )
+    # a report is re-rendered in place; any other directory at -o, or a report holding the
+    # user's own files, is never replaced (a rebuild in place needs no check here:
+    # rebuild_report refuses a folder without raw results)
+    target = out or (None if rebuild else run_dir / "report")
+    check_outputs([target], overwrite=True, replaceable=lambda _: True)
+    if target is not None:
+        check_report_folder(target)
     if rebuild:
         from elicit_jax.pipeline.run import rebuild_report
 

@@ -8,13 +8,21 @@ run's header (the layout is :mod:`elicit_jax.policy.checkpoint`'s).
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import dumps, make_header, read_header, write_json, write_parquet
+from elicit_jax.artifact import (
+    dumps,
+    make_header,
+    read_header,
+    refuse_foreign_files,
+    write_json,
+    write_parquet,
+)
 from elicit_jax.data.demos import Demos
 from elicit_jax.data.duplicates import episode_digests
 from elicit_jax.errors import ElicitError
@@ -22,12 +30,24 @@ from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
 from elicit_jax.policy.dataset import TrainData, action_stats
 
+_RUN_FILE = re.compile(
+    r"^(artifact\.json|seed\d+/(artifact\.json|loss\.parquet|normalization\.npz"
+    r"|params/(best|epoch_\d+)\.npz))$"
+)
+"""The files a training run writes (:mod:`elicit_jax.policy.checkpoint`'s layout)."""
+
+
+def run_owns(relative: str) -> bool:
+    """Whether a training run writes the file at ``relative`` (a POSIX path in the run)."""
+    return bool(_RUN_FILE.match(relative))
+
 
 def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwrite: bool) -> None:
     """Refuse to replace ``out_dir`` unless it is empty, or it holds a training run and either
     ``overwrite`` is set or that run is of this very config on these very data (training is
     deterministic: nothing is lost). Anything else (a file, a folder of notes) is never
-    replaced, ``overwrite`` or not."""
+    replaced, ``overwrite`` or not; nor is a run holding files a run does not write (a
+    user's ``NOTES.md``, ``eval/``, ``seed0/mine.txt``): they are named instead."""
     if not out_dir.exists():
         return
     if out_dir.is_dir() and not any(out_dir.iterdir()):
@@ -37,6 +57,7 @@ def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwr
     except ElicitError:
         header = {}
     if header.get("kind") == ckpt.RUN_KIND:
+        refuse_foreign_files(out_dir, run_owns, "a training run")
         if overwrite:
             return
         same = header.get("config") == json.loads(dumps(config.to_dict()))
