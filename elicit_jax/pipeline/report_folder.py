@@ -34,8 +34,9 @@ RAW_FILES = (ROLLOUTS_FILE, DATA_FILE)
 """The raw results a report folder keeps, so that it can be rebuilt."""
 REPORT_KINDS = ("pipeline-report", "study-report", "session-report")
 """The artifact kinds of report folders (a pipeline's, a study's, a session's)."""
-_REPORT_FIGURE = re.compile(r"^((maps|figures)/[^/]+\.(png|svg)|session\.png)$")
-"""The figures a report folder holds besides the files its header lists."""
+_REPORT_FIGURE = re.compile(r"^((maps|figures)/([^/]+\.(png|svg))?|session\.png)$")
+"""The figures a report folder holds besides the files its header lists (and their folders,
+empty when there is nothing to draw)."""
 
 
 def check_report_folder(folder: str | Path) -> None:
