@@ -171,3 +171,38 @@ def test_masked_copy_on_a_full_disk_is_one_line_and_leaves_nothing(robomimic_fil
     assert line.endswith("nothing written")
     assert not out.exists() and temporaries(tmp_path) == []
     assert path.read_bytes() == before
+
+
+KILLED = """
+import os, signal, sys
+from elicit_jax.data import hdf5_write
+real = hdf5_write.edit_copy
+def edit_then_die(source, copy, datasets, needs=0):
+    real(source, copy, datasets, needs)  # the masked copy is complete: die before the rename
+    os.kill(os.getpid(), signal.SIGKILL)
+hdf5_write.edit_copy = edit_then_die
+from elicit_jax.data import robomimic_export
+robomimic_export.edit_copy = edit_then_die
+sys.argv = ["elicit-jax", *sys.argv[1:]]
+from elicit_jax.cli import main
+main()
+"""
+
+
+def test_in_place_mask_killed_before_the_rename_leaves_the_source_and_is_cleaned(
+    robomimic_file, tmp_path, cli
+):
+    path, demos, before = robomimic_file
+    args = ["export", str(demos), "-f", "robomimic", "--mask-key", "K", "--in-place"]
+    env = {**os.environ, "ELICIT_JAX_LOG": str(tmp_path / "cli.log")}
+    done = subprocess.run(
+        [sys.executable, "-c", KILLED, *args], capture_output=True, env=env, timeout=120
+    )
+    assert done.returncode == -9
+    assert len(temporaries(tmp_path)) == 1  # the killed writer's copy, beside the source
+    assert_intact(path, before, cli)
+    code, _, err = cli(*args)  # the next export removes it and adds the mask
+    assert code == 0, err
+    assert temporaries(tmp_path) == []
+    with h5py.File(path, "r") as f:
+        assert len(f["mask/K"]) == 8
