@@ -60,6 +60,10 @@ def clean_stale_temporaries(path: str | Path) -> list[Path]:
     return removed
 
 
+_DISK_FULL = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
+"""Errors only a write can meet: raised in a writer's block, they are about its output."""
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary sibling path; rename it onto ``path`` only if the block succeeds.
@@ -100,7 +104,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
         _sync_dir(path.parent)
     except OSError as e:
-        if e.filename and str(e.filename).startswith(str(tmp)):
+        if e.errno in _DISK_FULL or (e.filename and str(e.filename).startswith(str(tmp))):
             raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
         raise
     finally:

@@ -206,3 +206,17 @@ def test_in_place_mask_killed_before_the_rename_leaves_the_source_and_is_cleaned
     assert temporaries(tmp_path) == []
     with h5py.File(path, "r") as f:
         assert len(f["mask/K"]) == 8
+
+
+def test_any_artifact_on_a_full_disk_names_its_output(robomimic_file, tmp_path):
+    """A Parquet or ``.npz`` writer meeting a full disk: one line naming the output."""
+    _, demos, _ = robomimic_file
+    for out, args in (
+        (tmp_path / "sel.parquet", ("demos", "select", demos, "--episodes", "0-7")),
+        (tmp_path / "d.npz", ("export", demos, "-f", "npz")),
+    ):
+        done = run_limited(tmp_path, 4_000, *args, "-o", out)
+        assert done.returncode == 1, done.stderr
+        line = one_line(done.stderr)
+        assert line.startswith(f"error: {out}: cannot write (") and "nothing written" in line
+        assert not out.exists() and temporaries(tmp_path) == []
