@@ -18,6 +18,7 @@ Every failure becomes an :class:`ElicitError` with HDF5's message cut to one lin
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -97,7 +98,7 @@ def reserve_space(path: Path, nbytes: int) -> None:
         try:
             os.posix_fallocate(fd, size, nbytes)
         except OSError as e:
-            if e.errno not in (95, 22):  # EOPNOTSUPP, EINVAL: the file system cannot: write
+            if e.errno not in (errno.EOPNOTSUPP, errno.EINVAL):  # the file system cannot
                 raise
             os.lseek(fd, size, os.SEEK_SET)
             os.write(fd, b"\0" * nbytes)
