@@ -1,6 +1,9 @@
-"""Writing outputs safely: atomic writes (a temporary sibling renamed into place), the
-clean-up of temporaries killed writers left, and the one rule for every path a command
-writes (never over or inside an input; never a directory; a file only with ``--overwrite``).
+"""Writing outputs safely: atomic writes (a temporary sibling, flushed to disk, renamed into
+place; a new path created exclusively, so of two concurrent writers one wins), pairs of files
+put in place together, the clean-up of temporaries killed writers left, and the one rule for
+every path a command writes (never over or inside an input or the artifact it belongs to;
+never a directory; a file only with ``--overwrite``; a folder replaced whole only when it
+holds nothing but what its writer wrote).
 """
 
 from __future__ import annotations
