@@ -154,7 +154,7 @@ def test_new_robomimic_file_on_a_full_disk_is_one_line_and_leaves_nothing(
     out = tmp_path / "fresh.hdf5"
     done = run_limited(tmp_path, limit, "export", demos, "-f", "robomimic", "-o", out)
     assert done.returncode == 1, (done.returncode, done.stderr[-2000:])
-    assert one_line(done.stderr) == f"error: {out}: cannot write (File too large); nothing written"
+    assert one_line(done.stderr) == f"error: {out}: cannot write (File too large; nothing written)"
     assert not out.exists() and temporaries(tmp_path) == []
 
 

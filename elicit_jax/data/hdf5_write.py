@@ -84,7 +84,7 @@ def write_new_hdf5(path: str | Path, build: Callable[[Any], None]) -> None:
         with atomic_path(path) as tmp, open(tmp, "wb") as out:
             out.write(image)
     except OSError as e:
-        raise ElicitError(f"cannot write ({hdf5_reason(e)}); nothing written", path) from e
+        raise ElicitError(f"cannot write ({hdf5_reason(e)}; nothing written)", path) from e
     finally:
         image.release()
 
