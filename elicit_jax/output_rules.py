@@ -299,15 +299,25 @@ def refuse_overwriting_inputs(
                     )
 
 
+def _is_temporary(name: str) -> bool:
+    """``name`` is one of this module's temporaries (``.<target>.p<pid>-<host>.*.tmp``,
+    ``.<target>.old-<pid>``): written by elicit-jax, whatever the folder."""
+    return name.startswith(".") and any(
+        _TEMP_SUFFIX.match(name[i + 1 :]) for i, c in enumerate(name) if c == "." and i > 0
+    )
+
+
 def foreign_files(directory: str | Path, own: Callable[[str], bool]) -> list[str]:
     """What in ``directory`` its writer did not write: files (and empty folders, with a
-    trailing ``/``) whose relative POSIX path ``own`` does not claim, sorted."""
+    trailing ``/``) whose relative POSIX path ``own`` does not claim, sorted. Temporaries of
+    :func:`atomic_path` (a killed writer's) are elicit-jax's own wherever they are."""
     root = Path(directory)
     found = []
     for base, dirs, files in os.walk(root):
+        dirs[:] = [d for d in dirs if not _is_temporary(d)]
         rel = Path(base).relative_to(root).as_posix()
         prefix = "" if rel == "." else rel + "/"
-        found += [prefix + f for f in files if not own(prefix + f)]
+        found += [prefix + f for f in files if not own(prefix + f) and not _is_temporary(f)]
         if not dirs and not files and prefix and not own(prefix):
             found.append(prefix)
     return sorted(found)

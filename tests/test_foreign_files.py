@@ -112,3 +112,27 @@ def test_a_report_holding_the_users_files_is_not_replaced(tmp_path, cli):
     assert code == 1
     assert "holds files a report did not write (maps/my-notes.txt)" in err
     assert snapshot(folder) == before
+
+
+def test_elicit_overwrite_never_deletes_the_users_files_in_a_session(tmp_path):
+    from elicit_jax.elicit.store import SESSION_KIND, SessionStore
+
+    store = SessionStore(tmp_path / "s")
+    store.create({"kind": SESSION_KIND, "schema_version": 1})
+    (store.episodes_dir / "e000000.parquet").write_bytes(b"episode")
+    (store.root / "policies" / "batch1" / "seed0").mkdir(parents=True)
+    (store.root / "policies" / "batch1" / "seed0" / "loss.parquet").write_bytes(b"loss")
+    (store.root / "NOTES.md").write_text("my notes")
+    (store.root / "policies" / "batch1" / "mine.txt").write_text("mine")
+    before = snapshot(store.root)
+    with pytest.raises(ElicitError) as e:
+        store.wipe()  # what `elicit -o s --overwrite` does to start the session again
+    assert "holds files an elicitation session did not write" in str(e.value)
+    assert "NOTES.md" in str(e.value) and "policies/batch1/mine.txt" in str(e.value)
+    assert snapshot(store.root) == before
+    (store.root / "NOTES.md").unlink()
+    (store.root / "policies" / "batch1" / "mine.txt").unlink()
+    # a killed writer's temporary is elicit-jax's own
+    (store.episodes_dir / ".e000001.parquet.p999999999-0123abcd.x1.tmp").mkdir()
+    store.wipe()
+    assert not store.root.exists()

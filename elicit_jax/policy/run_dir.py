@@ -8,7 +8,6 @@ run's header (the layout is :mod:`elicit_jax.policy.checkpoint`'s).
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -30,17 +29,6 @@ from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
 from elicit_jax.policy.dataset import TrainData, action_stats
 
-_RUN_FILE = re.compile(
-    r"^(artifact\.json|seed\d+/(artifact\.json|loss\.parquet|normalization\.npz"
-    r"|params/(best|epoch_\d+)\.npz))$"
-)
-"""The files a training run writes (:mod:`elicit_jax.policy.checkpoint`'s layout)."""
-
-
-def run_owns(relative: str) -> bool:
-    """Whether a training run writes the file at ``relative`` (a POSIX path in the run)."""
-    return bool(_RUN_FILE.match(relative))
-
 
 def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwrite: bool) -> None:
     """Refuse to replace ``out_dir`` unless it is empty, or it holds a training run and either
@@ -57,7 +45,7 @@ def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwr
     except ElicitError:
         header = {}
     if header.get("kind") == ckpt.RUN_KIND:
-        refuse_foreign_files(out_dir, run_owns, "a training run")
+        refuse_foreign_files(out_dir, ckpt.run_owns, "a training run")
         if overwrite:
             return
         same = header.get("config") == json.loads(dumps(config.to_dict()))
