@@ -136,3 +136,33 @@ def test_elicit_overwrite_never_deletes_the_users_files_in_a_session(tmp_path):
     (store.episodes_dir / ".e000001.parquet.p999999999-0123abcd.x1.tmp").mkdir()
     store.wipe()
     assert not store.root.exists()
+
+
+def test_export_overwrite_replaces_only_a_lerobot_dataset_it_exported(tmp_path):
+    import numpy as np
+    from fixtures_data import lerobot_episode, robomimic_demo, write_lerobot_v30, write_robomimic
+
+    from elicit_jax.data.demos import write_demos
+    from elicit_jax.data.export import ExportConfig, export_dataset
+    from elicit_jax.data.robomimic import import_robomimic
+
+    rng = np.random.default_rng(0)
+    src = write_robomimic(
+        tmp_path / "r.hdf5", {f"demo_{i}": robomimic_demo(rng, 5) for i in range(3)}
+    )
+    demos = tmp_path / "d.parquet"
+    write_demos(demos, import_robomimic(src))
+
+    def export(out):
+        cfg = ExportConfig(str(demos), "lerobot", str(out), fps=20, overwrite=True)
+        return export_dataset(cfg)
+
+    export(tmp_path / "ours")
+    export(tmp_path / "ours")  # an earlier export: replaced with --overwrite
+    theirs = write_lerobot_v30(
+        tmp_path / "theirs", [lerobot_episode(rng, i, 6) for i in range(2)], ["pick"]
+    )
+    before = snapshot(theirs)
+    with pytest.raises(ElicitError, match="is an existing directory"):
+        export(theirs)  # recorded by LeRobot, not exported by elicit-jax: never replaced
+    assert snapshot(theirs) == before
