@@ -123,7 +123,8 @@ def atomic_paths(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
     (give the file readers look for last), then the old ones deleted. A kill in between
     never leaves a new file beside an old one of the pair: there are only new files and
     missing ones (the old ones, moved aside, are removed as stale temporaries by the next
-    writer). A failure before the first new file is in place puts the old ones back.
+    writer). A failure on the way (another writer made one of the paths meanwhile) takes the
+    new files out again and puts the old ones back: all of the pair, or none of it.
     """
     paths = [Path(p) for p in paths]
     with contextlib.ExitStack() as stack:
@@ -145,7 +146,7 @@ def atomic_paths(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
                     "(nothing written)",
                     path,
                 )
-        done = 0
+        done: list[Path] = []
         try:
             for (_, existed), path in zip(temps, paths, strict=True):
                 if existed and (path.exists() or path.is_symlink()):
@@ -154,12 +155,9 @@ def atomic_paths(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
                     aside.append((old, path))
             for (target, _), path in zip(temps, paths, strict=True):
                 _commit(target, path, existed=False)
-                done += 1
+                done.append(path)
         except (OSError, ElicitError) as e:
-            if done == 0:  # nothing new is in place: put the old files back
-                for old, path in aside:
-                    with contextlib.suppress(OSError):
-                        os.replace(old, path)
+            _roll_back(done, aside)
             if isinstance(e, ElicitError):
                 raise
             raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", paths[0]) from e
@@ -167,6 +165,17 @@ def atomic_paths(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
             old.unlink(missing_ok=True)
         for path in {p.parent for p in paths}:
             _sync_dir(path)
+
+
+def _roll_back(done: list[Path], aside: list[tuple[Path, Path]]) -> None:
+    """Undo a partial :func:`atomic_paths` commit: remove the new files put in place (each was
+    created exclusively, so it is this writer's) and move the old ones back."""
+    for path in done:
+        with contextlib.suppress(OSError):
+            path.unlink()
+    for old, path in aside:
+        with contextlib.suppress(OSError):
+            os.replace(old, path)
 
 
 @contextlib.contextmanager

@@ -74,6 +74,8 @@ def test_score_loses_to_a_writer_that_finished_first(work, tmp_path, monkeypatch
     assert len(errors) == 1 and "created by another writer while this command ran" in errors[0]
     assert err.endswith(errors[0] + "\n")
     assert file_sha256(out) == file_sha256(work / "s.parquet")
+    # and its episode summary is not left beside the other writer's scores
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.parquet"]
 
 
 KILL_AT_SECOND = """
@@ -118,3 +120,24 @@ def test_a_kill_between_the_renames_of_filter_never_pairs_new_and_old(work, tmp_
     assert read_header(out)["config"]["filter"] == read_header(log)["config"]
     assert read_header(log)["config"]["lambda_"] == 0.2
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
+def test_a_pair_is_put_in_place_whole_or_not_at_all(tmp_path):
+    from elicit_jax.output_rules import atomic_paths
+
+    log, out = tmp_path / "f.dropped.parquet", tmp_path / "f.parquet"
+    log.write_text("old log")
+    with (
+        pytest.raises(ElicitError, match="created by another writer"),
+        atomic_paths([log, out]) as (log_tmp, out_tmp),
+    ):
+        log_tmp.write_text("new log")
+        out_tmp.write_text("new output")
+        out.write_text("the other writer's output")  # made meanwhile
+    assert log.read_text() == "old log"  # the new log was taken out, the old one put back
+    assert out.read_text() == "the other writer's output"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.dropped.parquet", "f.parquet"]
+    with atomic_paths([log, out]) as (log_tmp, out_tmp):
+        log_tmp.write_text("new log")
+        out_tmp.write_text("new output")
+    assert (log.read_text(), out.read_text()) == ("new log", "new output")
