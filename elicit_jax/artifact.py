@@ -30,8 +30,11 @@ from elicit_jax.hashing import (  # noqa: F401  (re-exported: the artifact API)
 )
 from elicit_jax.output_rules import (  # noqa: F401  (re-exported: the artifact API)
     atomic_path,
+    atomic_paths,
     check_outputs,
     clean_stale_temporaries,
+    foreign_files,
+    refuse_foreign_files,
     refuse_overwriting_inputs,
 )
 from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact API)

@@ -44,6 +44,7 @@ from typing import Any, Literal
 import numpy as np
 
 from elicit_jax.artifact import (
+    atomic_paths,
     make_header,
     matches_recorded,
     refuse_overwriting_inputs,
@@ -282,8 +283,10 @@ def filter_demos(
     new, out = _kept_demos(demos, drop, config, base)
     cfg = dataclasses.asdict(config)
     record = {"filter": cfg} | ({"duplicates_of_base": dups} if dups else {})
-    write_demos(out_path, out, config=record, inputs=inputs, seed=config.seed)
-    lp = _write_drop_log(out_path, demos, scores, drop, reasons, cfg, inputs)
+    lp = log_path(out_path)
+    with atomic_paths([lp, out_path]) as (log_tmp, out_tmp):  # the pair is replaced together
+        write_demos(out_tmp, out, config=record, inputs=inputs, seed=config.seed)
+        _write_drop_log(log_tmp, demos, scores, drop, reasons, cfg, inputs)
     return FilterResult(
         Path(out_path),
         lp,
@@ -334,15 +337,15 @@ def _kept_demos(demos: Any, drop: np.ndarray, config: FilterConfig, base: Any) -
 
 
 def _write_drop_log(
-    out_path: str | Path,
+    lp: Path,
     demos: Any,
     scores: dict[str, np.ndarray],
     drop: np.ndarray,
     reasons: np.ndarray,
     cfg: dict[str, Any],
     inputs: dict[str, Path],
-) -> Path:
-    """Write every dropped pair, with its scores and reason, beside ``out_path``."""
+) -> None:
+    """Write every dropped pair, with its scores and reason, to ``lp``."""
     import pyarrow as pa
 
     log = pa.table(
@@ -356,13 +359,11 @@ def _write_drop_log(
             "reason": pa.array(reasons[drop].tolist(), type=pa.string()),
         }
     )
-    lp = log_path(out_path)
     write_parquet(
         lp,
         log,
         make_header(LOG_KIND, 1, config=cfg, inputs=inputs, n_dropped=int(drop.sum())),
     )
-    return lp
 
 
 def _export_kept(out_path: str | Path, export: ExportSpec) -> dict[str, Any]:

@@ -21,7 +21,7 @@ import numpy as np
 
 from elicit_jax.artifact import (
     HEADER_KEY,
-    atomic_path,
+    atomic_paths,
     dumps,
     make_header,
     read_header,
@@ -193,7 +193,8 @@ def score_file(
     )
     ep_path = episodes_path(out_path)
     shown = progress(n_total) if progress is not None else contextlib.nullcontext(_no_op)
-    with atomic_path(out_path) as tmp, shown as advance:
+    # the scores and their episode summary are put in place together (all or none)
+    with atomic_paths([ep_path, out_path]) as (ep_tmp, tmp), shown as advance:
         episodes = _write_scores(tmp, schema, scored, config.accept_fraction, advance)
         ep_header = make_header(
             EPISODES_KIND,
@@ -202,7 +203,7 @@ def score_file(
             scores_file=out_path.name,
             n_episodes=len(episodes["episode"]),
         )
-        write_parquet(ep_path, episodes_table(episodes), ep_header)
+        write_parquet(ep_tmp, episodes_table(episodes), ep_header)
     return ScoreResult(out_path, ep_path, n_total, episodes)
 
 

@@ -185,7 +185,7 @@ def curate_demos(
     """
     import pyarrow as pa
 
-    from elicit_jax.artifact import make_header, write_parquet
+    from elicit_jax.artifact import atomic_paths, make_header, write_parquet
     from elicit_jax.compat.filtering import PRE_EPISODE, PRE_STEP, apply_drop, log_path
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
     from elicit_jax.data.duplicates import duplicate_reasons
@@ -223,7 +223,6 @@ def curate_demos(
             return CurateResult(None, None, *counts, reason + "; every demo dropped", dups)
         raise ElicitError(f"{reason}: every demonstration dropped, nothing to write")
     out = parts[0] if len(parts) == 1 else concat_demos(parts, renumber=True)
-    write_demos(out_path, out, config=record, inputs=all_inputs)
     per_step_score = np.asarray(scores.score, float)[index]
     log = pa.table(
         {
@@ -236,7 +235,9 @@ def curate_demos(
     )
     lp = log_path(out_path)
     header = make_header("filter-log", 1, config=record, inputs=all_inputs, n_dropped=counts[1])
-    write_parquet(lp, log, header)
+    with atomic_paths([lp, out_path]) as (log_tmp, out_tmp):  # the pair is replaced together
+        write_demos(out_tmp, out, config=record, inputs=all_inputs)
+        write_parquet(log_tmp, log, header)
     return CurateResult(Path(out_path), lp, *counts, reason, dups)
 
 
