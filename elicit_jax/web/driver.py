@@ -92,6 +92,7 @@ class OperatorDriver:
         self._phase: list[str] = []
         self._episode: list[str | bytes] = []
         self._indicators: list[list[float]] = []
+        self._last_indicator: IndicatorEvent | None = None
         self._frame: bytes | None = None
         self._review: list[str | bytes] = []
         self._clips: Any = None
@@ -301,8 +302,14 @@ class OperatorDriver:
             if isinstance(event, IndicatorEvent):
                 self._m = event.compatibility
                 self._indicators.append(
-                    [event.step, event.compatibility, float(event.incompatible)]
+                    [
+                        event.step,
+                        event.compatibility,
+                        float(event.incompatible),
+                        event.live.light if event.live else "",
+                    ]
                 )
+                self._last_indicator = event
                 self._send(messages.event(event))
             elif isinstance(event, EpisodeStartEvent):
                 self._on_episode_start(event)
@@ -336,7 +343,7 @@ class OperatorDriver:
         self._index, self._kind, self._step = event.episode, event.episode_kind, 0
         self._give_up = False
         self.operator.reset(self.config.dagger)
-        self._indicators = []
+        self._indicators, self._last_indicator = [], None
         frame = pack_frame(body_poses(self.session.sim_data, self._origin), event.episode, 0)
         self._episode = [messages.event(event)]
         self._frame = frame
@@ -389,7 +396,7 @@ class OperatorDriver:
     def _snapshot(self) -> list[str | bytes]:
         out: list[str | bytes] = [*self._static, *self._prompt, *self._phase, *self._episode]
         if self._indicators:
-            out.append(messages.indicators(self._indicators))
+            out.append(messages.indicators(self._indicators, self._last_indicator))
         if self._frame is not None:
             out.append(self._frame)
         if self._review_pending:
