@@ -241,7 +241,9 @@ class WindowFeedback:
       distance: retrieval distance (normalised states; L2 or DTW cost per step).
       fields: observation fields that differ most, largest first.
       actions: action dimensions that differ most, largest first.
-      operator_motion: mean per-step change of the operator's normalised state.
+      operator_motion: the operator's gripper speed in the window (m per step) where the
+        states follow the simulated tasks' layout; else the mean per-step change of the
+        normalised state.
       base_motion: the same for the base segment.
       motion: ``still`` (you hold still where the base moves), ``moving`` (you move where the
         base holds still) or empty.

@@ -43,7 +43,14 @@ def test_the_live_state_agrees_with_the_verdict_in_chromium(browser, demo, tmp_p
     server.args = serve_args(demo.dir.parent, sessions)
     url = server.start()
     page, errors = page_with_errors(browser, {"width": 1200, "height": 720})
+    phone, _ = page_with_errors(browser, {"width": 390, "height": 844})
     try:
+        # a phone-wide page says what it needs to be steered (it has no touch controls)
+        phone.goto(url)
+        phone.wait_for_selector("#needs-keys", state="visible")
+        assert "keyboard" in phone.inner_text("#needs-keys")
+        assert page.goto(url) and not page.is_visible("#needs-keys")  # a desktop's needs no note
+        phone.close()
         page.goto(url)
         page.fill("#name", "ana")
         page.keyboard.press("Enter")
