@@ -476,7 +476,7 @@ function updateIndicator() {
   stop.hidden = !doomed;
   if (live && doomed) {
     count.textContent = `✗ ${plural(live.red, 'red step')}, more than the ${live.allowed} allowed: this try can no longer be accepted.`;
-    now.textContent = 'Stop it and try again, or finish it for practice.';
+    now.textContent = '';  // the stop button takes its place (the box keeps its height)
   } else if (live) {
     count.textContent = `${plural(live.red, 'red step')} of ${live.allowed} allowed · ${live.left} more allowed in a full ${live.horizon}-step episode`;
     now.textContent = live.accept_now
