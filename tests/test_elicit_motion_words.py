@@ -25,6 +25,7 @@ KEYS = {  # a window of held keys, as the page sends them (the gripper held open
     "forward": (1, 0, 0),
     "forward-slow": (0.3, 0, 0),
     "right": (0, -1, 0),
+    "down": (0, 0, -1),
 }
 
 
@@ -66,6 +67,11 @@ def test_the_recorded_speeds_are_the_keys():
         (
             "you move right (D) where the base moves forward (W)",
             ("right", "forward"),
+            ("forward", "forward"),
+        ),
+        (
+            "you move down (F) where the base moves forward (W)",
+            ("down", "forward"),
             ("forward", "forward"),
         ),
         ("× as fast as the base here", ("forward", "forward-slow"), ("forward", "forward")),

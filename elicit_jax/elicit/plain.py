@@ -237,8 +237,10 @@ def _direction(net: Sequence[float]) -> str:
     for axis in np.argsort(-np.abs(v)):
         if abs(v[axis]) >= 0.5 * big:
             pos, neg, kpos, kneg = AXES[axis]
-            up = ("up", "down")[v[axis] < 0] if axis == 2 else None
-            words.append(up or (pos if v[axis] > 0 else neg))
+            if axis == 2:
+                words.append("up" if v[axis] > 0 else "down")
+            else:
+                words.append(pos if v[axis] > 0 else neg)
             keys.append(kpos if v[axis] > 0 else kneg)
     return f"{' and '.join(words)} ({', '.join(keys)})"
 
