@@ -111,6 +111,10 @@ def test_a_rejected_window_moving_fast_along_one_axis_is_not_called_still():
     assert fb.motion == "still" and "you hold still where the base moves" in fb.text
 
 
+def test_a_single_step_window_says_nothing_about_motion():
+    assert motion_sentences(record("pause")[:1], record("forward")) == []
+
+
 def test_other_layouts_keep_the_generic_motion_sentence():
     base = record("forward")
     words = plain_words("own-task", [], base, base, base, base, motion="still")

@@ -248,6 +248,8 @@ def _direction(net: Sequence[float]) -> str:
 def motion_sentences(op: np.ndarray, base: np.ndarray) -> list[str]:
     """How the operator's gripper moves against the base's over the window: holding still,
     moving, another direction, another speed (the base segment at its own steps)."""
+    if len(op) < 2 or len(base) < 2:  # a single step has no motion to speak of
+        return []
     mine, theirs = gripper_motion(op), gripper_motion(base)
     mm = (1000 * mine.speed, 1000 * theirs.speed)
     kind = motion_kind(mine, theirs)
