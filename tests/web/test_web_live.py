@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 from chromium import page_with_errors
-from test_web_browser import SHOTS, Server, drive, screen
+from test_web_browser import AUTOPILOT, SHOTS, Server, drive, screen
 
 from elicit_jax.elicit.store import SessionStore
 
@@ -133,6 +133,31 @@ def test_the_live_state_agrees_with_the_verdict_in_chromium(browser, demo, tmp_p
         assert page.inner_text("#verdict") == "You gave up"
         rec = SessionStore(sessions / "ana").read_episode(0)
         assert rec.n_incompatible > 10  # the episode could not have been accepted
+
+        # a wide detour right of the pillar at full speed (issue #49: the gripper moving
+        # 8 mm a step along one axis was told "you hold still where the base moves"):
+        # rejected, and no window whose recorded gripper moved in most steps says so
+        page.keyboard.press("Enter")
+        screen(page, "progress")
+        page.keyboard.press("Enter")
+        screen(page, "demonstrate", "ready")
+        wide = AUTOPILOT.replace("side * 0.09", "side * 0.14")
+        page.evaluate(
+            f"() => {{ window.__done = null; ({wide})(-1).then((r) => {{ window.__done = r; }}); }}"
+        )
+        screen(page, "review", timeout=90_000)
+        page.wait_for_selector("#verdict[data-verdict=rejected]", timeout=30_000)
+        episode = page.evaluate("elicit.state.review.episode")
+        flagged = page.evaluate(
+            "() => elicit.state.review.windows.map((w) => [w.episode_steps, w.plain.join('; ')])"
+        )
+        rec = SessionStore(sessions / "ana").read_episode(episode)
+        assert flagged
+        for steps, plain in flagged:
+            xyz = rec.obs[steps[0] : steps[-1] + 1, 0:3]
+            moved = np.linalg.norm(np.diff(xyz, axis=0), axis=1) >= 0.001
+            if moved.mean() >= 0.5:
+                assert "hold still" not in plain, (plain, xyz)
         assert not errors, errors
     finally:
         page.close()
