@@ -108,7 +108,8 @@ def test_robosuite_scene_and_indicator_in_chromium(browser, server):
         assert abs(before[2]) < 0.4  # the gripper starts just above the table top (height 0)
         page.keyboard.down("KeyR")  # up: a real key press starts the episode
         page.wait_for_function(
-            "() => ['green', 'red'].includes(document.getElementById('indicator').dataset.state)",
+            "() => ['green', 'red', 'unfamiliar']"  # a lit state (no data there: its own)
+            ".includes(document.getElementById('indicator').dataset.state)",
             timeout=60_000,
         )
         page.wait_for_function(
