@@ -16,6 +16,7 @@ from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.compat.filtering import FilterResult
+    from elicit_jax.compat.thresholds import Thresholds
 
 
 def _scores_scale(scores: Path) -> str:
@@ -23,6 +24,14 @@ def _scores_scale(scores: Path) -> str:
     from elicit_jax.artifact import read_header
 
     return str(read_header(scores).get("config", {}).get("action_scale", "none"))
+
+
+def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thresholds, list[str]]:
+    """:func:`~elicit_jax.compat.thresholds.applied_thresholds` on a scores file."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.compat.thresholds import applied_thresholds
+
+    return applied_thresholds(read_header(scores), scores, given, force)
 
 
 @app.command("fit-thresholds", rich_help_panel=COMPAT)
@@ -76,15 +85,15 @@ def fit_thresholds_cmd(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
-    from elicit_jax.compat.thresholds import FitConfig
+    from elicit_jax.compat.threshold_fit import FitConfig
+    from elicit_jax.compat.threshold_source import resolve_thresholds
 
     check_outputs([out], [scores], overwrite=overwrite)
     job = FitJob(
         compatible=compatible,
         incompatible=incompatible,
         fit=FitConfig(accept_fraction=accept_fraction, grid_size=grid_size),
-        lambda_=lambda_,
-        eta=eta,
+        manual=resolve_thresholds(None, lambda_, eta),
         force=force,
         base=() if base is None else (str(base),),
     )
@@ -92,7 +101,7 @@ def fit_thresholds_cmd(
 
 
 @app.command("filter", rich_help_panel=COMPAT)
-@with_flags(th.FLAGS, before="seed")
+@with_flags(th.APPLY_FLAGS, before="seed")
 def filter_cmd(
     ctx: typer.Context,
     scores: Path | None = fo.SCORES,
@@ -149,11 +158,16 @@ def filter_cmd(
 
     Example: elicit-jax filter --method cupid --policy runs/naive --trajectories steps.parquet
     --demos new.parquet --base base.parquet -o kept.parquet
+
+    Without --thresholds (or --lambda/--eta) the M-filter uses the thresholds the scores were
+    judged under, and says which; after fit-thresholds, pass --thresholds thresholds.json.
     """
     from elicit_jax.compat.filtering import filter_demos
 
     scale = _scores_scale(scores) if scores is not None else None
     given = th.from_params(ctx.params, action_scale=scale)
+    if scores is not None and (method not in fo.CURATORS or rate == "m"):
+        th.show_applied(_applied(scores, given, flags["force"])[1])
     inputs = [scores, demos, base, policy, source, flags["thresholds"], trajectories]
     fo.check_filter_outputs(out, method, export_out, overwrite, inputs)
     if method in fo.CURATORS:
@@ -161,8 +175,7 @@ def filter_cmd(
 
         if export is not None:
             raise ElicitError("--export works with the M-filter and its baselines only")
-        resolved = None if given is None else given.pair
-        curate(CurateArgs(method, demos, out, base, level, scores, resolved, rate, drop_fraction,
+        curate(CurateArgs(method, demos, out, base, level, scores, given, rate, drop_fraction,
                           policy, task, rollouts, policy_seed, trajectories, checkpoint,
                           proj_dim))  # fmt: skip
         return
@@ -185,7 +198,7 @@ def _print_filtered(r: FilterResult, out: Path, export_out: Path | None) -> None
 
 
 @app.command("map", rich_help_panel=COMPAT)
-@with_flags(th.FLAGS, before="axis")
+@with_flags(th.APPLY_FLAGS, before="axis")
 def map_cmd(
     ctx: typer.Context,
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
@@ -204,7 +217,8 @@ def map_cmd(
     from elicit_jax.compat.maps import map_scores_file
 
     given = th.from_params(ctx.params, action_scale=_scores_scale(scores))
-    resolved = None if given is None else given.pair
     check_outputs([out], [scores, flags["thresholds"]], overwrite=overwrite)
-    lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
-    typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")
+    chosen, lines = _applied(scores, given, flags["force"])
+    th.show_applied(lines)
+    map_scores_file(scores, out, chosen, axis=axis)
+    typer.echo(f"{out}: map with λ={chosen.lam:.3g}, η={chosen.eta:.3g}")

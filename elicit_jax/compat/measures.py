@@ -30,13 +30,16 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import jax.numpy as jnp
 from flax import struct
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.registry import preset_names, preset_table
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
 
 Likelihood = Literal["ensemble-mean", "member-average"]
 LIKELIHOODS: tuple[str, ...] = ("ensemble-mean", "member-average")
@@ -54,25 +57,6 @@ def preset_for_task(task: str | None) -> str | None:
     return TASK_PRESETS.get(str(task or "").strip().lower())
 
 
-def check_thresholds(lambda_: float, eta: float, source: str | None = None) -> tuple[float, float]:
-    """The one validation of (λ, η) every command applies: both finite and > 0.
-
-    Returns:
-      ``(float(lambda_), float(eta))``.
-
-    Raises:
-      ElicitError: naming ``source`` (a thresholds file) when given.
-    """
-    try:
-        lam, et = float(lambda_), float(eta)
-    except (TypeError, ValueError) as e:
-        raise ElicitError(f"thresholds must be numbers, got lambda={lambda_!r}, eta={eta!r}") from e
-    for name, v in (("lambda", lam), ("eta", et)):
-        if not (math.isfinite(v) and v > 0):
-            raise ElicitError(f"{name} must be a finite number > 0, got {v:g}", source)
-    return lam, et
-
-
 def check_accept_fraction(fraction: float) -> float:
     """The one validation of the accept/reject rule's fraction: in [0, 1)."""
     f = float(fraction)
@@ -86,15 +70,16 @@ def is_incompatible(ell: Any, nu: Any, lambda_: Any, eta: Any) -> Any:
     return (ell > lambda_) & (nu < eta)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class ScoreConfig:
     """How pairs are scored and judged.
 
     Attributes:
       likelihood: ``ensemble-mean`` (paper) or ``member-average`` (original sim code).
       ddof: delta degrees of freedom of the across-member std (0 paper, 1 original code).
-      lambda_: likelihood-error threshold λ.
-      eta: novelty threshold η.
+      thresholds: (λ, η) and where they came from; no default (every caller says which).
+        None only in the static part of a config the compiled kernel keys on
+        (:func:`~elicit_jax.compat.scorer.static_config`), which scores nothing by itself.
       accept_fraction: a demonstration is rejected when its number of incompatible pairs
         exceeds this fraction of its length (paper: 5%).
       chunk_size: pairs per jitted scoring call (the last chunk is padded).
@@ -109,8 +94,7 @@ class ScoreConfig:
 
     likelihood: Likelihood = "ensemble-mean"
     ddof: int = 0
-    lambda_: float = PRESETS["square-nut"][0]
-    eta: float = PRESETS["square-nut"][1]
+    thresholds: Thresholds | None
     accept_fraction: float = 0.05
     chunk_size: int = 4096
     clip: float | None = None
@@ -125,7 +109,10 @@ class ScoreConfig:
             )
         if self.ddof not in (0, 1):
             raise ElicitError(f"ddof must be 0 or 1, got {self.ddof}")
-        check_thresholds(self.lambda_, self.eta)
+        from elicit_jax.compat.thresholds import Thresholds
+
+        if self.thresholds is not None and not isinstance(self.thresholds, Thresholds):
+            raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
         check_accept_fraction(self.accept_fraction)
         if self.chunk_size < 1:
             raise ElicitError(f"chunk size must be >= 1, got {self.chunk_size}")
@@ -143,8 +130,10 @@ class ScoreConfig:
         """Config with the paper's thresholds for task ``name`` (see :data:`PRESETS`)."""
         if name not in PRESETS:
             raise ElicitError(f"unknown preset '{name}' (choose {', '.join(sorted(PRESETS))})")
-        lam, eta = PRESETS[name]
-        return cls(**{"lambda_": lam, "eta": eta, **overrides})  # type: ignore[arg-type]
+        from elicit_jax.compat.thresholds import Thresholds
+
+        chosen = Thresholds(*PRESETS[name], f"preset {name}")
+        return cls(**{"thresholds": chosen, **overrides})  # type: ignore[arg-type]
 
 
 @struct.dataclass
@@ -270,16 +259,20 @@ def rejects(n_incompatible: int, length: int, accept_fraction: float = 0.05) -> 
 
 
 def config_dict(config: ScoreConfig) -> dict[str, Any]:
-    """JSON form of a score config (``lambda_`` written as ``lambda``)."""
-    d = dataclasses.asdict(config)
-    d["lambda"] = d.pop("lambda_")
-    return d
+    """JSON form of a score config: its settings, and its thresholds as ``lambda`` and ``eta``
+    (:func:`elicit_jax.compat.thresholds.config_fields`)."""
+    from elicit_jax.compat.thresholds import config_fields
+
+    d = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    return {**d, **config_fields(d.pop("thresholds"))}
 
 
-def config_from_dict(d: dict[str, Any]) -> ScoreConfig:
-    """Inverse of :func:`config_dict`."""
+def config_from_dict(d: Mapping[str, Any], source: str) -> ScoreConfig:
+    """Inverse of :func:`config_dict`; ``source`` says where its thresholds came from."""
+    from elicit_jax.compat.thresholds import from_config_fields
+
     d = dict(d)
-    if "lambda" in d:
-        d["lambda_"] = d.pop("lambda")
-    names = {f.name for f in dataclasses.fields(ScoreConfig)}
-    return ScoreConfig(**{k: v for k, v in d.items() if k in names})
+    scale = str(d.get("action_scale", "none"))
+    thresholds = from_config_fields(d, source, action_scale=scale)
+    names = {f.name for f in dataclasses.fields(ScoreConfig)} - {"thresholds"}
+    return ScoreConfig(thresholds=thresholds, **{k: v for k, v in d.items() if k in names})

@@ -61,6 +61,7 @@ def static_config(config: ScoreConfig) -> ScoreConfig:
       λ, η or chunk size share one compile.
     """
     return ScoreConfig(
+        thresholds=None,
         likelihood=config.likelihood,
         ddof=config.ddof,
         action_scale=config.action_scale,
@@ -157,6 +158,8 @@ def score_inputs(
     else the demonstrations' recorded ``bounds``, else ±1), action weights, dropout seed."""
     import jax.numpy as jnp
 
+    if config.thresholds is None:
+        raise ElicitError("scoring needs thresholds: the config holds none")
     a = int(policy_spec(policy, "action_dim", 1))
     if config.clip is not None:
         low, high = -config.clip, config.clip
@@ -166,8 +169,8 @@ def score_inputs(
         low, high = -1.0, 1.0
     weight = action_weight(policy, config, source)
     return ScoreInputs(
-        lam=jnp.float32(config.lambda_),
-        eta=jnp.float32(config.eta),
+        lam=jnp.float32(config.thresholds.lam),
+        eta=jnp.float32(config.thresholds.eta),
         low=jnp.broadcast_to(jnp.asarray(low, jnp.float32), (a,)),
         high=jnp.broadcast_to(jnp.asarray(high, jnp.float32), (a,)),
         weight=None if weight is None else jnp.asarray(weight),

@@ -7,42 +7,10 @@ paper preset, so each validates them the same way and can show the user how far 
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
-from elicit_jax.compat.trust import Verdict
+from elicit_jax.compat.thresholds import STAND_IN, Thresholds, check_units, read_thresholds
 from elicit_jax.errors import ElicitError
-
-
-@dataclasses.dataclass(frozen=True)
-class Thresholds:
-    """Resolved thresholds.
-
-    Attributes:
-      lam: likelihood-error threshold λ (finite, > 0).
-      eta: novelty threshold η (finite, > 0).
-      source: where they came from: ``"file PATH"``, ``"preset NAME"`` or ``"given"``.
-      file: the thresholds file, when they came from one.
-      verdict: the trust verdict recorded when the file was fitted (None unless from a file).
-    """
-
-    lam: float
-    eta: float
-    source: str
-    file: Path | None = None
-    verdict: Verdict | None = None
-
-    @property
-    def pair(self) -> tuple[float, float]:
-        """``(λ, η)``."""
-        return self.lam, self.eta
-
-    def verdict_line(self) -> str | None:
-        """The line to show the user about the file's recorded verdict, or None when clean."""
-        if self.verdict is None or self.verdict.clean:
-            return None
-        what = "warning" if self.verdict.problems else "note"
-        return f"{what}: {self.file}: judged when fitted: {self.verdict.summary()}"
 
 
 def resolve_thresholds(
@@ -77,18 +45,12 @@ def resolve_thresholds(
     if (lam is None) != (eta is None):
         raise ElicitError("--lambda and --eta go together")
     if file is not None:
-        from elicit_jax.compat.thresholds import check_units, read_thresholds
-        from elicit_jax.compat.trust import thresholds_verdict
-
-        lam_, eta_, header = read_thresholds(file)
+        read = read_thresholds(file)
         if action_scale is not None:
-            check_units(file, action_scale)
-        verdict = thresholds_verdict(header)
-        return Thresholds(lam_, eta_, f"file {file}", file=file, verdict=verdict)
+            check_units(read, action_scale)
+        return read
     if lam is not None and eta is not None:
-        from elicit_jax.compat.measures import check_thresholds
-
-        return Thresholds(*check_thresholds(lam, eta), "given")
+        return Thresholds(lam, eta, "given", action_scale=action_scale or "none")
     if preset is not None:
         from elicit_jax.compat.measures import PRESETS
 
@@ -142,5 +104,5 @@ def task_thresholds(task: str, action_scale: str = "none") -> tuple[Thresholds, 
         "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
         "filter and map."
     )
-    source = f"raw-unit preset, not valid for --action-scale std scores: {source}"
-    return Thresholds(lam, eta, source), [note]
+    source = f"{STAND_IN}, not valid for --action-scale std scores: {source}"
+    return Thresholds(lam, eta, source, action_scale="std", stand_in=True), [note]

@@ -75,16 +75,13 @@ def session_stage(ctx: StageContext) -> None:
     from elicit_jax.elicit.setup import open_session
     from elicit_jax.pipeline.stages import demos_file
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
     config = SessionConfig.from_dict(
         {
             **ctx.config["session"],
             "policy": str(ctx.inputs["policy"]),
             "base_demos": str(demos_file(ctx.inputs["base"])),
-            "lambda": lam,
-            "eta": eta,
-            "thresholds_file": str(ctx.inputs["thresholds"]),
-        }
+        },
+        thresholds=read_thresholds(ctx.inputs["thresholds"]),
     )
     try:
         setup, operator, _ = open_session(config, ctx.output)
@@ -127,10 +124,10 @@ def filter_session_stage(ctx: StageContext) -> None:
     from elicit_jax.pipeline.stages_compat import write_filter_output
     from elicit_jax.policy.checkpoint import load_policy
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    thresholds = read_thresholds(ctx.inputs["thresholds"])
     source = ctx.inputs["session"] / DEMOS_FILE
     score_cfg = ctx.config["score"]
-    cfg = FilterConfig(**{**ctx.config["filter"]["filter"], "lambda_": lam, "eta": eta})
+    cfg = FilterConfig.from_dict(ctx.config["filter"]["filter"], thresholds)
     counts = {"pairs_in": 0, "pairs_dropped": 0, "episodes_in": 0, "episodes_out": 0}
     with atomic_path(ctx.output) as tmp:
         tmp.mkdir()
@@ -143,7 +140,7 @@ def filter_session_stage(ctx: StageContext) -> None:
                 policy,
                 source,
                 tmp / SCORES_FILE,
-                config_from_dict(score_cfg["score"]),
+                config_from_dict(score_cfg["score"], "the session filter's [score] settings"),
                 policy_path=ctx.inputs["policy"],
                 progress=scoring_bar,
             )
