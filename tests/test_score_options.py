@@ -56,13 +56,37 @@ def test_action_scaling_uses_the_training_action_std():
     std = score_demos(policy, demos, ScoreConfig.from_preset("square-nut", action_scale="std"))[
         "likelihood"
     ][0]
-    assert std == pytest.approx((2.0**2 + 0.5**2) / 2)  # dim 1 constant in training: left out
+    # dim 1 never moved in training: scored in units of the others' median std (1.25)
+    assert std == pytest.approx((2.0**2 + 0.0 + 0.5**2) / 3)
     none = score_demos(policy, demos, ScoreConfig.from_preset("square-nut"))["likelihood"][0]
     assert none == pytest.approx(2.0 / 3)
     with pytest.raises(ElicitError, match="predates"):
         score_demos(
             _zero_policy(3), demos, ScoreConfig.from_preset("square-nut", action_scale="std")
         )
+
+
+def test_an_operator_driving_a_dim_the_base_never_moved_is_told_apart_under_std_scaling():
+    """Issue #45 item 8: with the still dim left out, an operator driving it at ±0.9 got
+    exactly the unmodified operator's ℓ."""
+    policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
+    cfg = ScoreConfig.from_preset("square-nut", action_scale="std")
+    plain = score_demos(policy, _demos([[0.5, 0.0, 1.0]]), cfg)["likelihood"][0]
+    driving = score_demos(policy, _demos([[0.5, 0.9, 1.0]]), cfg)["likelihood"][0]
+    assert driving > plain + 0.1
+    assert driving - plain == pytest.approx((0.9 / 1.25) ** 2 / 3)
+
+
+def test_std_scores_file_records_the_still_dims(tmp_path):
+    from elicit_jax.compat.score_file import score_file
+
+    policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
+    write_demos(tmp_path / "d.parquet", _demos([[0.5, 0.9, 1.0]]))
+    cfg = ScoreConfig.from_preset("square-nut", action_scale="std")
+    score_file(policy, tmp_path / "d.parquet", tmp_path / "s.parquet", cfg)
+    header, _ = read_scores(tmp_path / "s.parquet")
+    assert header["still_action_dims"] == [1]
+    assert "never moved" in header["action_scale_note"]
 
 
 def test_mc_dropout_scoring_is_seeded_and_chunk_independent():

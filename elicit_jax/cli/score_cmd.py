@@ -96,7 +96,12 @@ def _score_and_show(
     from rich.console import Console
 
     from elicit_jax.cli.info_compat import print_operator_table
-    from elicit_jax.compat.score_file import one_member_note, policy_sha256, score_file
+    from elicit_jax.compat.score_file import (
+        one_member_note,
+        policy_sha256,
+        scale_note,
+        score_file,
+    )
     from elicit_jax.compat.show import scoring_bar
     from elicit_jax.compat.thresholds import check_policy
     from elicit_jax.policy.checkpoint import load_policy
@@ -109,6 +114,9 @@ def _score_and_show(
     warning = check_policy(chosen, policy_sha256(loaded), f"the policy {policy}", force)
     if warning:
         typer.echo(warning, err=True)
+    scaled = scale_note(loaded, config).get("action_scale_note")
+    if scaled:
+        typer.echo(f"note: --action-scale std: {scaled}", err=True)
     note = one_member_note(loaded, config)
     if note:
         Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)

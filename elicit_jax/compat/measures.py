@@ -16,8 +16,9 @@ predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action
   ``ℓ = λ`` M is 0 but the pair is not flagged).
 
 Options beyond the paper (default off): *action scaling* (``action_scale="std"``) divides each
-action dim by the std of the base policy's training actions and leaves dims that were constant
-there out of both means, so a ±1 gripper does not dominate ℓ; *MC-dropout scoring*
+action dim by the std of the base policy's training actions, so a ±1 gripper does not dominate
+ℓ; a dim that was constant there is divided by the median std of the others instead (it has
+none of its own), so driving it still counts; *MC-dropout scoring*
 (``dropout_samples=N``) runs every member N times with its dropout active, the K·N predictions
 forming the ensemble — the original code scored with dropout on.
 
@@ -86,7 +87,7 @@ class ScoreConfig:
       clip: ``member-average`` clipping bound ±clip; None (default): the scored demos'
         recorded action bounds, per dim.
       action_scale: ``none`` (paper) or ``std``: per-dim scaling by the base policy's training
-        action std, constant dims left out (see module docstring).
+        action std, constant dims by the median std of the others (see module docstring).
       dropout_samples: 0 (paper: deterministic members) or N > 0: MC-dropout scoring with N
         stochastic passes per member.
       dropout_seed: seed of the MC-dropout masks (scores are deterministic given it).

@@ -180,6 +180,7 @@ def score_file(
         "policy_kind": str(policy_spec(policy, "kind", "mlp")),
         "policy": {**dict(policy_info or {}), POLICY_KEY: policy_sha256(policy)},
         "thresholds_source": config.thresholds.source,
+        **scale_note(policy, config),
     }
     n_total = pf.metadata.num_rows
     scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=n_total)
@@ -207,6 +208,24 @@ def score_file(
         )
         write_parquet(ep_path, episodes_table(episodes), ep_header)
     return ScoreResult(out_path, ep_path, n_total, episodes)
+
+
+def scale_note(policy: Any, config: ScoreConfig) -> dict[str, Any]:
+    """``--action-scale std``: the dims the base never moved and how they were scored, for
+    the scores header (``still_action_dims``, ``action_scale_note``); else nothing."""
+    from elicit_jax.compat.scorer import still_dims
+
+    still = still_dims(policy) if config.action_scale == "std" else []
+    if not still:
+        return {}
+    return {
+        "still_action_dims": still,
+        "action_scale_note": (
+            f"action dim(s) {still} never moved in the base policy's training actions (std 0): "
+            "scored in units of the median std of the other dims, so an operator who drives "
+            "them is told apart from one who does not"
+        ),
+    }
 
 
 def policy_sha256(policy: Any) -> str:

@@ -50,6 +50,10 @@ class ScoreInputs:
     seed: Any
 
 
+STILL_STD = 1e-6
+"""An action dim whose training actions' std is below this never moved (:func:`still_dims`)."""
+
+
 def static_config(config: ScoreConfig) -> ScoreConfig:
     """The part of a config that shapes the compiled function (numbers are arguments).
 
@@ -132,9 +136,23 @@ def score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, con
     return jax.vmap(one)(obs, action)
 
 
+def still_dims(policy: Any) -> list[int]:
+    """The action dims the base policy's training actions never moved (std < 1e-6); empty
+    when the checkpoint records no action std."""
+    std = getattr(policy, "action_std", None)
+    if std is None:
+        return []
+    return [int(i) for i in np.flatnonzero(np.asarray(std, np.float64) < STILL_STD)]
+
+
 def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") -> Any:
-    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions, 0 for
-    dims that were constant there; None for ``action_scale='none'``."""
+    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions; None for
+    ``action_scale='none'``.
+
+    A dim the training actions never moved (:func:`still_dims`) has no std to divide by; it is
+    scored in units of the median std of the dims that moved (a floor on its scale), so an
+    operator who drives it differs from one who does not, as much as a typical dim's worth.
+    """
     if config.action_scale == "none":
         return None
     std = getattr(policy, "action_std", None)
@@ -145,10 +163,11 @@ def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") ->
             source,
         )
     std = np.asarray(std, np.float64)
-    weight = np.where(std >= 1e-6, 1.0 / np.maximum(std, 1e-6), 0.0)
-    if not weight.any():
+    moved = std >= STILL_STD
+    if not moved.any():
         raise ElicitError("every action dim was constant in the training data", source)
-    return weight.astype(np.float32)
+    floor = float(np.median(std[moved]))
+    return (1.0 / np.where(moved, std, floor)).astype(np.float32)
 
 
 def score_inputs(
