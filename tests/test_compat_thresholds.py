@@ -165,3 +165,69 @@ def test_thresholds_artifact_round_trip(tmp_path):
     bad.write_text('{"kind": "demos"}')
     with pytest.raises(ElicitError, match="expected thresholds"):
         read_thresholds(bad)
+
+
+# --- one carrier: no raw (λ, η) parameters outside the Thresholds module and the kernels ----
+
+RAW_NAMES = {"lambda_", "lam", "eta", "et", "lmbda"}
+RAW_ALLOWED = {
+    "elicit_jax/compat/thresholds.py": "the Thresholds type, its validation and its JSON",
+    "elicit_jax/compat/threshold_source.py": "command-line flags and presets into Thresholds",
+    "elicit_jax/compat/measures.py": "the kernels: is_incompatible, compatibility, score_pair",
+    "elicit_jax/compat/scorer.py": "the compiled kernel's inputs (ScoreInputs)",
+    "elicit_jax/pipeline/report_rows.py": "field names are keys of committed report-data.json",
+}
+
+
+def raw_threshold_parameters(source: str) -> list[str]:
+    """Function parameters and class fields of one module that carry λ or η as raw floats:
+    named like λ/η, or a ``thresholds`` annotated as a tuple of floats."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            a = node.args
+            for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs):
+                shape = ast.unparse(arg.annotation) if arg.annotation is not None else ""
+                if arg.arg in RAW_NAMES or ("threshold" in arg.arg and "tuple[float" in shape):
+                    found.append(f"{node.name}({arg.arg})")
+        if isinstance(node, ast.ClassDef):
+            for st in node.body:
+                if isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name):
+                    shape = ast.unparse(st.annotation)
+                    name = st.target.id
+                    if name in RAW_NAMES or ("threshold" in name and "tuple[float" in shape):
+                        found.append(f"{node.name}.{name}")
+    return found
+
+
+def test_no_raw_lambda_eta_parameters_outside_the_thresholds_module_and_the_kernels():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    offenders = {}
+    for path in sorted((root / "elicit_jax").rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel not in RAW_ALLOWED:
+            found = raw_threshold_parameters(path.read_text())
+            if found:
+                offenders[rel] = found
+    assert offenders == {}
+    for rel in RAW_ALLOWED:
+        assert (root / rel).exists(), rel
+
+
+def test_the_raw_parameter_search_catches_planted_cases():
+    planted = (
+        "def filter_demos(scores, lambda_: float, eta: float): ...\n"
+        "def write(out, thresholds: tuple[float, float]): ...\n"
+        "class FilterConfig:\n    lam: float = 0.4\n    level: str = 'pair'\n"
+    )
+    assert raw_threshold_parameters(planted) == [
+        "filter_demos(lambda_)",
+        "filter_demos(eta)",
+        "write(thresholds)",
+        "FilterConfig.lam",
+    ]
+    assert raw_threshold_parameters("def f(t: Thresholds, level: str): ...\n") == []

@@ -13,6 +13,7 @@ SCRIPT = textwrap.dedent(
     import jax, numpy as np
     import elicit_jax.compat.score as score
     from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.data.demos import from_episodes
     from elicit_jax.policy.base import init_policy
     from elicit_jax.sim.env import make_task

@@ -35,7 +35,9 @@ def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thres
 
 
 @app.command("fit-thresholds", rich_help_panel=COMPAT)
+@with_flags(th.HAND_SET, before="accept_fraction")
 def fit_thresholds_cmd(
+    ctx: typer.Context,
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
     compatible: str | None = typer.Option(
         None,
@@ -46,13 +48,6 @@ def fit_thresholds_cmd(
         None, "--incompatible", help="Same forms as --compatible."
     ),
     out: Path = typer.Option(..., "-o", "--out", help="thresholds.json to write."),
-    lambda_: float | None = typer.Option(
-        None,
-        "--lambda",
-        help="Hand-set λ instead of fitting (with --eta); contrast sets, if given, only "
-        "evaluate it.",
-    ),
-    eta: float | None = typer.Option(None, "--eta", help="Hand-set η (with --lambda)."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
     grid_size: int = typer.Option(64, "--grid-size", help="Quantile levels per axis."),
     force: bool = typer.Option(
@@ -65,6 +60,7 @@ def fit_thresholds_cmd(
         "those in the scores, and the file the checkpoint records).",
     ),
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
 
@@ -86,14 +82,13 @@ def fit_thresholds_cmd(
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
     from elicit_jax.compat.threshold_fit import FitConfig
-    from elicit_jax.compat.threshold_source import resolve_thresholds
 
     check_outputs([out], [scores], overwrite=overwrite)
     job = FitJob(
         compatible=compatible,
         incompatible=incompatible,
         fit=FitConfig(accept_fraction=accept_fraction, grid_size=grid_size),
-        manual=resolve_thresholds(None, lambda_, eta),
+        manual=th.hand_set(ctx.params),
         force=force,
         base=() if base is None else (str(base),),
     )

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from elicit_jax.cli import session_options as so
+from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import ELICIT, app
 from elicit_jax.cli.params import with_flags
-from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
@@ -21,7 +21,7 @@ DEMO_TASK = "reach-pillar"
 
 
 @app.command("serve", rich_help_panel=ELICIT)
-@with_flags(so.SERVE_FLAGS)
+@with_flags((*so.SERVE_FLAGS, *th.FLAGS_AND_PRESET))
 def serve_cmd(
     ctx: typer.Context,
     sessions: Path = typer.Option(
@@ -50,10 +50,6 @@ def serve_cmd(
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
-    preset: str | None = so.PRESET,
     **flags: Any,
 ) -> None:
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
@@ -72,7 +68,7 @@ def serve_cmd(
     from elicit_jax.web.serve import serve
 
     given = so.given(ctx.params)
-    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
+    chosen = th.from_params(ctx.params, action_scale="none")
     if demo_dir is not None and not demo:
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
@@ -130,7 +126,7 @@ def _demo_inputs(
     inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo)
     given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
     given["base_demos"] = str(inputs.base_demos)
-    return thresholds_from_flags(inputs.thresholds, None, None)
+    return th.thresholds_from_flags(inputs.thresholds, None, None)
 
 
 def _print_summary(hub: OperatorHub) -> None:

@@ -37,6 +37,20 @@ FLAGS = (
 :func:`elicit_jax.cli.params.with_flags` and resolves them with :func:`from_params`."""
 FLAGS_AND_PRESET = (*FLAGS, ("preset", str | None, PRESET))
 """The same with ``--preset`` (``score``, ``elicit``, ``serve``, ``watch``)."""
+HAND_SET = (
+    (
+        "lambda_",
+        float | None,
+        typer.Option(
+            None,
+            "--lambda",
+            help="Hand-set λ instead of fitting (with --eta); contrast sets, if given, only "
+            "evaluate it.",
+        ),
+    ),
+    ("eta", float | None, typer.Option(None, "--eta", help="Hand-set η (with --lambda).")),
+)
+"""``fit-thresholds``'s hand-set λ and η (:func:`hand_set` resolves them)."""
 APPLY_FLAGS = (*FLAGS, ("force", bool, FORCE))
 """The flags of the commands that apply thresholds to a scores file (``filter``, ``map``):
 :data:`FLAGS` and ``--force``."""
@@ -82,3 +96,8 @@ def show_applied(lines: list[str]) -> None:
     λ, η a command applies and where they came from; warnings) to stderr."""
     for line in lines:
         typer.echo(line, err=True)
+
+
+def hand_set(params: Mapping[str, Any]) -> Thresholds | None:
+    """The thresholds ``fit-thresholds --lambda --eta`` sets by hand (None without them)."""
+    return resolve_thresholds(None, params["lambda_"], params["eta"])

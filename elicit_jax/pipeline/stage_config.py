@@ -75,6 +75,7 @@ def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
 
 def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.compat.threshold_fit import FitConfig
+    from elicit_jax.compat.thresholds import from_config_fields
 
     keys = (
         "task",
@@ -88,8 +89,12 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
         "force",
     )
     meta, over = _split(raw, keys)
-    if ("lambda" in meta) != ("eta" in meta):
-        raise ElicitError("[thresholds] give both lambda and eta (manual), or neither (fit)")
+    try:  # manual thresholds: both or neither, numbers, finite and > 0
+        from_config_fields(dict(meta), "[thresholds]")
+    except ElicitError as e:
+        raise ElicitError(
+            f"[thresholds] {e}: both lambda and eta (manual), or neither (fit)"
+        ) from None
     if meta["compatible_operator"] == meta["incompatible_operator"]:
         raise ElicitError("incompatible_operator must differ from the base operator")
     fit = FitConfig(**section_fields(FitConfig, over, "thresholds"))

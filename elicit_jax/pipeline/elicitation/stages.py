@@ -19,21 +19,23 @@ from elicit_jax.pipeline.runner import StageContext, StageFn
 
 # Session fields only known when the stage runs: stand-ins while the settings are validated,
 # removed again before they are recorded.
-_SET_AT_RUN_TIME = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
+_SET_AT_RUN_TIME = {"policy": "-", "base_demos": "-"}
 _META = ("task", "model", "person", "condition")
 
 
 def _resolve_session(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.compat.thresholds import SESSION_KEYS, Thresholds
     from elicit_jax.elicit.config import SessionConfig
 
     meta = {k: raw[k] for k in _META if k in raw}
     fields = {k: v for k, v in raw.items() if k not in ("model", "person", "condition")}
     try:
-        config = SessionConfig.from_dict({**fields, **_SET_AT_RUN_TIME})
+        stand_in = Thresholds(1.0, 1.0, "set when the stage runs: the fitted thresholds")
+        config = SessionConfig.from_dict({**fields, **_SET_AT_RUN_TIME}, thresholds=stand_in)
     except ElicitError as e:
         raise ElicitError(f"[session] {e}") from None
     settings = config.to_dict()
-    for key in ("policy", "base_demos", "lambda", "eta", "thresholds_file"):
+    for key in (*_SET_AT_RUN_TIME, *SESSION_KEYS):
         settings.pop(key)
     return {**meta, "session": settings}
 
