@@ -27,9 +27,9 @@ def _scores_scale(scores: Path) -> str:
 
 
 def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thresholds, list[str]]:
-    """:func:`~elicit_jax.compat.thresholds.applied_thresholds` on a scores file."""
+    """:func:`~elicit_jax.compat.threshold_source.applied_thresholds` on a scores file."""
     from elicit_jax.artifact import read_header
-    from elicit_jax.compat.thresholds import applied_thresholds
+    from elicit_jax.compat.threshold_source import applied_thresholds
 
     return applied_thresholds(read_header(scores), scores, given, force)
 

@@ -103,7 +103,7 @@ def _score_and_show(
         score_file,
     )
     from elicit_jax.compat.show import scoring_bar
-    from elicit_jax.compat.thresholds import check_policy
+    from elicit_jax.compat.threshold_source import check_policy
     from elicit_jax.policy.checkpoint import load_policy
 
     loaded = load_policy(policy, which, seed=seed)

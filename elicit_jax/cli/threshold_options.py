@@ -92,7 +92,7 @@ def thresholds_from_flags(
 
 
 def show_applied(lines: list[str]) -> None:
-    """Print the lines :func:`~elicit_jax.compat.thresholds.applied_thresholds` returns (which
+    """Print the lines :func:`~elicit_jax.compat.threshold_source.applied_thresholds` returns (which
     λ, η a command applies and where they came from; warnings) to stderr."""
     for line in lines:
         typer.echo(line, err=True)

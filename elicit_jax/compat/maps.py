@@ -318,7 +318,7 @@ def map_scores_file(
     axis: str = "likelihood-error",
 ) -> None:
     """Draw the map of a scores file under ``thresholds`` (those it was scored with, or others:
-    :func:`~elicit_jax.compat.thresholds.applied_thresholds` chooses)."""
+    :func:`~elicit_jax.compat.threshold_source.applied_thresholds` chooses)."""
     from elicit_jax.artifact import refuse_overwriting_inputs
     from elicit_jax.compat.score_file import read_scores
 

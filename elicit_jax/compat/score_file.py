@@ -43,7 +43,7 @@ from elicit_jax.compat.score import (
     policy_spec,
     score_batches,
 )
-from elicit_jax.compat.thresholds import POLICY_KEY
+from elicit_jax.compat.thresholds import POLICY_KEY, scores_fields
 from elicit_jax.errors import ElicitError
 
 _CORE = ("episode", "operator", "step", "obs", "action")
@@ -152,7 +152,7 @@ def score_file(
       out_path: where to write the per-pair scores (the per-episode summary goes to
         :func:`~elicit_jax.compat.score.episodes_path` of it).
       config: scoring config (thresholds, likelihood kind, ddof, chunk size); where its
-        thresholds came from is recorded as ``thresholds_source``.
+        thresholds came from is recorded too (:func:`~elicit_jax.compat.thresholds.scores_fields`).
       policy_path: the checkpoint the policy was loaded from (its hash goes in the header).
       policy_info: how it was loaded (e.g. ``{"which": "best", "seed": 0}``), recorded too.
       progress: ``progress(total_pairs)`` opens a context yielding ``advance(n)``, called as
@@ -173,13 +173,12 @@ def score_file(
     common = {
         "config": config_dict(config),
         "inputs": inputs,
-        "thresholds": config.thresholds.to_json(),
+        **scores_fields(config.thresholds),
         "obs_dim": pf.schema_arrow.field("obs").type.list_size,
         "action_dim": action_dim,
         "task": header.get("task", "unknown"),
         "policy_kind": str(policy_spec(policy, "kind", "mlp")),
         "policy": {**dict(policy_info or {}), POLICY_KEY: policy_sha256(policy)},
-        "thresholds_source": config.thresholds.source,
         **scale_note(policy, config),
     }
     n_total = pf.metadata.num_rows

@@ -283,6 +283,12 @@ def fitted_on(t: Thresholds, scores_header: Mapping[str, Any]) -> Thresholds:
     return dataclasses.replace(t, action_scale=scale, policy=scores_policy(scores_header))
 
 
+def scores_fields(t: Thresholds) -> dict[str, Any]:
+    """How a scores header records the thresholds it was judged under: ``thresholds``
+    (``{lambda, eta}``) and ``thresholds_source`` (read back by :func:`scores_thresholds`)."""
+    return {"thresholds": t.to_json(), "thresholds_source": t.source}
+
+
 def scores_policy(header: Mapping[str, Any]) -> str | None:
     """The policy content hash a scores header records (None for files written before)."""
     value = dict(header.get("policy") or {}).get(POLICY_KEY)
@@ -306,94 +312,3 @@ def scores_thresholds(header: Mapping[str, Any], path: str | Path) -> Thresholds
         policy=scores_policy(header),
         stand_in=recorded.startswith(STAND_IN),
     )
-
-
-def check_units(t: Thresholds, action_scale: str) -> None:
-    """Raise unless ``t`` is in the units of scores of ``action_scale`` (``none``: raw action
-    units; ``std``: per-dim scaled). λ and η of one scale mean nothing on the other, and no
-    exact conversion exists."""
-    if t.action_scale != action_scale:
-        raise ElicitError(
-            f"these thresholds were fitted on --action-scale {t.action_scale} scores and do "
-            f"not apply to --action-scale {action_scale} scores: fit thresholds on scores of "
-            "the same scale (docs/thresholds.md)",
-            t.file,
-        )
-
-
-def check_policy(t: Thresholds, policy: str | None, what: str, force: bool = False) -> str | None:
-    """Refuse thresholds fitted for another policy than the one ``what`` comes from.
-
-    Args:
-      t: the thresholds (from a file: they record their policy).
-      policy: the content hash of the policy of ``what`` (None: not recorded).
-      what: the scores file or checkpoint they are applied to (named in the message).
-      force: apply them anyway (the refusal becomes a warning).
-
-    Returns:
-      A warning line, or None when the policies match or ``t`` is not from a file.
-
-    Raises:
-      ElicitError: the two policies differ and ``force`` is false.
-    """
-    if t.file is None:
-        return None
-    if t.policy is None or policy is None:
-        which = t.file if t.policy is None else what
-        return (
-            f"warning: {which} does not record its policy (written by an older elicit-jax): "
-            f"cannot check that {t.file} was fitted for the policy of {what}"
-        )
-    if t.policy == policy:
-        return None
-    message = (
-        f"{t.file} was fitted for another policy (params {t.policy[:12]}) than {what} "
-        f"(params {policy[:12]}); refit on these scores, or --force"
-    )
-    if force:
-        return f"warning: {message} given: applied anyway"
-    raise ElicitError(message)
-
-
-def applied_thresholds(
-    header: Mapping[str, Any],
-    scores_path: str | Path,
-    given: Thresholds | None,
-    force: bool = False,
-) -> tuple[Thresholds, list[str]]:
-    """The thresholds a command applies to a scores file, and the lines to tell the user.
-
-    ``given`` (from ``--thresholds``, ``--lambda``/``--eta``) must have been fitted for the
-    policy the scores came from (:func:`check_policy`); without them, the values the scores
-    file was judged under are used, and said so — unless those are a raw-unit preset standing
-    in on std-scaled scores (not a verdict), which is refused.
-
-    Args:
-      header: the scores file's header.
-      scores_path: the scores file (named in messages).
-      given: thresholds from the command line, or None.
-      force: apply them anyway: another policy's thresholds, or a stand-in preset.
-
-    Returns:
-      The thresholds, and the lines for stderr (which λ, η and where from; warnings).
-
-    Raises:
-      ElicitError: another policy's thresholds or stand-in values, without ``force``.
-    """
-    if given is not None:
-        warning = check_policy(given, scores_policy(header), str(scores_path), force)
-        return given, [f"thresholds: {given.describe()}", *([warning] if warning else [])]
-    stored = scores_thresholds(header, scores_path)
-    lines = [
-        f"thresholds: {stored.describe()}; pass --thresholds to apply a fitted thresholds.json"
-    ]
-    if stored.stand_in:
-        message = (
-            f"{scores_path} was scored with --action-scale std: its λ, η are a raw-unit preset "
-            "standing in, not a verdict; give --thresholds fitted on these scores (or "
-            "--lambda/--eta in std-scaled units), or --force"
-        )
-        if not force:
-            raise ElicitError(message)
-        lines.append(f"warning: {message} given: applied anyway")
-    return stored, lines
