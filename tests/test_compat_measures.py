@@ -167,3 +167,25 @@ def test_action_scaling_by_hand():
     assert float(likelihood_error(members, action)) == pytest.approx(1.25 / 3)
     # novelty: per-dim std [0, 0, 0.5] -> scaled [0, -, 0.25] over 2 dims = 0.125
     assert float(novelty(members, 0, weight)) == pytest.approx(0.125)
+
+
+def test_config_json_is_the_layout_pipelines_have_always_recorded():
+    """Stage configs embed these dicts: a changed layout would re-run every cached stage."""
+    from elicit_jax.compat.filtering import FilterConfig
+    from elicit_jax.compat.measures import config_dict, config_from_dict
+
+    cfg = ScoreConfig.from_preset("square-nut")
+    d = config_dict(cfg)
+    assert d == {
+        "likelihood": "ensemble-mean", "ddof": 0, "lambda": 0.4, "eta": 0.05,
+        "accept_fraction": 0.05, "chunk_size": 4096, "clip": None, "action_scale": "none",
+        "dropout_samples": 0, "dropout_seed": 0,
+    }  # fmt: skip
+    back = config_from_dict(d, "preset square-nut")
+    assert back == cfg and back.thresholds.source == "preset square-nut"
+    assert FilterConfig().to_dict() == {
+        "level": "pair", "method": "m", "pair_mode": "renumber", "lambda_": None, "eta": None,
+        "accept_fraction": 0.05, "seed": 0,
+    }  # fmt: skip
+    given = FilterConfig(thresholds=Thresholds(0.3, 0.07, "given"))
+    assert FilterConfig.from_dict(given.to_dict()).thresholds.pair == (0.3, 0.07)

@@ -36,7 +36,7 @@ def score(
         "none",
         "--action-scale",
         help="none (paper: raw action units) or std (each dim divided by the training actions' "
-        "std; constant dims left out).",
+        "std; dims constant there by the others' median std).",
     ),
     dropout_samples: int = typer.Option(
         0,

@@ -97,7 +97,8 @@ class FilterConfig:
         """JSON form, as artifacts and pipeline stage configs store it (the thresholds as
         ``lambda_`` and ``eta``, :func:`~elicit_jax.compat.thresholds.config_fields`)."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return {**d, **config_fields(d.pop("thresholds"), key="lambda_")}
+        thresholds = d.pop("thresholds")
+        return {**d, **config_fields(thresholds, key="lambda_")}
 
     @classmethod
     def from_dict(

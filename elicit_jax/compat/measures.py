@@ -182,7 +182,8 @@ def likelihood_error(
       action: (A,) demonstrated action.
       kind: ``ensemble-mean`` or ``member-average`` (see module docstring).
       clip: ``member-average`` clipping: ±clip, or per-dim ``(low (A,), high (A,))``.
-      weight: (A,) per-dim scale (1/std, 0 for dims left out), or None for the plain mean.
+      weight: (A,) per-dim scale (1/std; a dim constant in training: 1/median std of the
+        others), or None for the plain mean.
 
     Returns:
       scalar ℓ.
@@ -265,7 +266,8 @@ def config_dict(config: ScoreConfig) -> dict[str, Any]:
     from elicit_jax.compat.thresholds import config_fields
 
     d = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
-    return {**d, **config_fields(d.pop("thresholds"))}
+    thresholds = d.pop("thresholds")
+    return {**d, **config_fields(thresholds)}
 
 
 def config_from_dict(d: Mapping[str, Any], source: str) -> ScoreConfig:

@@ -38,7 +38,8 @@ class ScoreInputs:
     Attributes:
       lam: λ; eta: η (scalars).
       low: (A,) lower clipping bound of ``member-average``; high: (A,) upper bound.
-      weight: (A,) action scaling (1/std, 0 for dims left out), or None (paper).
+      weight: (A,) action scaling (1/std; a dim constant in training: 1/median std of the
+        others), or None (paper).
       seed: MC-dropout seed (int32 scalar).
     """
 
