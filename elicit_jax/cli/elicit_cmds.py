@@ -77,6 +77,7 @@ def elicit_cmd(
             raise ElicitError(f"missing {', '.join(missing)} (or --resume an existing session)")
         config_dict = given
     config = SessionConfig.from_dict(config_dict, thresholds=chosen)
+    th.show_chosen(config.thresholds)
     elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
 
 
@@ -132,6 +133,7 @@ def _watch_config(params: dict[str, Any]) -> WatchConfig:
     chosen = th.from_params(p, action_scale="none")
     if chosen is None:
         raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
+    th.show_chosen(chosen)
     imp = do.import_config(p["inbox"], "", p)
     options = tuple(
         (f.name, getattr(imp, f.name))

@@ -76,6 +76,7 @@ def serve_cmd(
     server = {"sessions": str(sessions), "host": host, "port": port, "token": token}
     server |= {"max_operators": max_operators, "admin_token": admin_token}
     config = _serve_config(given, chosen, allow_hosts=tuple(allow_host), **server)
+    th.show_chosen(config.session.thresholds)
     serve(config, echo=typer.echo, summary=_print_summary)
 
 

@@ -91,6 +91,11 @@ def thresholds_from_flags(
     return resolved
 
 
+def show_chosen(thresholds: Thresholds) -> None:
+    """Say on stderr which (λ, η) a command runs with and where they came from."""
+    typer.echo(f"thresholds: {thresholds.describe()}", err=True)
+
+
 def show_applied(lines: list[str]) -> None:
     """Print the lines :func:`~elicit_jax.compat.threshold_source.applied_thresholds` returns (which
     λ, η a command applies and where they came from; warnings) to stderr."""

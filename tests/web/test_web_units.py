@@ -202,6 +202,7 @@ def test_serve_keeps_the_thresholds_whole(monkeypatch, tmp_path):
     kept = seen[0].session.thresholds
     assert kept == read_thresholds(t)
     assert kept.verdict is not None and not kept.verdict.clean and kept.source == f"file {t}"
+    assert f"thresholds: λ=0.3, η=0.07 from file {t}" in result.output  # said which
 
 
 def test_the_demo_cache_key_covers_the_version_and_the_training_config(monkeypatch):
