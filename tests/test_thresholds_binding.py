@@ -160,3 +160,8 @@ def test_source_date_epoch_makes_scores_and_thresholds_byte_identical(d, tmp_pat
     assert outs[0] == outs[1]
     header = json.loads((d / "e.json").read_text())
     assert header["provenance"]["time"] == header["created"] == "2023-11-14T22:13:20+00:00"
+
+
+def test_demos_given_as_scores_are_named_as_such(d):
+    r = _filter(d, "demos.parquet", "f.parquet")
+    assert "is a 'demos' artifact, expected scores" in _refused(r, d / "demos.parquet")

@@ -29,9 +29,13 @@ def _scores_scale(scores: Path) -> str:
 def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thresholds, list[str]]:
     """:func:`~elicit_jax.compat.threshold_source.applied_thresholds` on a scores file."""
     from elicit_jax.artifact import read_header
+    from elicit_jax.compat.score import SCORES_KIND
     from elicit_jax.compat.threshold_source import applied_thresholds
 
-    return applied_thresholds(read_header(scores), scores, given, force)
+    header = read_header(scores)
+    if header.get("kind") != SCORES_KIND:
+        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", scores)
+    return applied_thresholds(header, scores, given, force)
 
 
 @app.command("fit-thresholds", rich_help_panel=COMPAT)

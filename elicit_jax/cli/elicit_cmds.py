@@ -77,7 +77,6 @@ def elicit_cmd(
             raise ElicitError(f"missing {', '.join(missing)} (or --resume an existing session)")
         config_dict = given
     config = SessionConfig.from_dict(config_dict, thresholds=chosen)
-    th.show_chosen(config.thresholds)
     elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
 
 
