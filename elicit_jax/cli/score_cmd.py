@@ -111,7 +111,7 @@ def _score_and_show(
     if chosen is None:
         raise ElicitError("score needs thresholds: none resolved")
     typer.echo(f"thresholds: {chosen.describe()}", err=True)
-    warning = check_policy(chosen, policy_sha256(loaded), f"the policy {policy}", force)
+    warning = check_policy(chosen, policy_sha256(loaded), str(policy), force)
     if warning:
         typer.echo(warning, err=True)
     scaled = scale_note(loaded, config).get("action_scale_note")

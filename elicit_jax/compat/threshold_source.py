@@ -159,7 +159,7 @@ def check_policy(t: Thresholds, policy: str | None, what: str, force: bool = Fal
         return None
     message = (
         f"{t.file} was fitted for another policy (params {t.policy[:12]}) than {what} "
-        f"(params {policy[:12]}); refit on these scores, or --force"
+        f"(params {policy[:12]}); refit on scores of that policy, or --force"
     )
     if force:
         return f"warning: {message} given: applied anyway"
