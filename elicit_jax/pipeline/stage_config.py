@@ -75,7 +75,7 @@ def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
 
 def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
     from elicit_jax.compat.threshold_fit import FitConfig
-    from elicit_jax.compat.thresholds import from_config_fields
+    from elicit_jax.compat.thresholds import ETA_KEY, LAMBDA_KEY, from_config_fields
 
     keys = (
         "task",
@@ -84,8 +84,8 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
         "incompatible_operator",
         "holdout_seed",
         "incompatible_seed",
-        "lambda",
-        "eta",
+        LAMBDA_KEY,
+        ETA_KEY,
         "force",
     )
     meta, over = _split(raw, keys)
