@@ -12,9 +12,7 @@ the output rule live in :mod:`elicit_jax.output_rules`, the hashes in
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
-import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -43,6 +41,7 @@ from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact AP
     library_versions,
     provenance,
     provenance_line,
+    recorded_now,
     runtime_settings,
 )
 
@@ -53,13 +52,7 @@ def now_utc() -> str:
     """The time to record as an artifact's ``created``: now, or ``SOURCE_DATE_EPOCH`` when
     that is set (reproducible-builds convention), so that identical runs can also give
     identical bytes."""
-    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
-    when = (
-        _dt.datetime.fromtimestamp(int(epoch), _dt.UTC)
-        if epoch.isdigit()
-        else _dt.datetime.now(_dt.UTC)
-    )
-    return when.isoformat(timespec="seconds")
+    return recorded_now()
 
 
 def make_header(

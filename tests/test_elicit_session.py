@@ -158,7 +158,9 @@ def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, t
     assert demos.obs_fields == collected.obs_fields and demos.task == collected.task
     assert {"init_seed", "session_episode", "source_step"} <= set(demos.extra)
     assert set(CORE_COLUMNS) and demos.success.all()
-    score_demos(load_policy(nut.policy), demos, ScoreConfig())  # score takes it as is
+    score_demos(
+        load_policy(nut.policy), demos, ScoreConfig.from_preset("square-nut")
+    )  # score takes it as is
     store = SessionStore(tmp_path / "op1")
     ep = store.read_episode(int(demos.extra["session_episode"][0]))
     np.testing.assert_array_equal(demos.obs[: ep.length], ep.obs)

@@ -377,8 +377,7 @@ class Session:
                 "seconds": time.perf_counter() - self._t0,
                 "unstable": bool(self._sim.unstable[0]),
                 "gave_up": gave_up,
-                "lambda": self.config.thresholds.lam,
-                "eta": self.config.thresholds.eta,
+                **self.config.thresholds.to_json(),
             },
         )
 

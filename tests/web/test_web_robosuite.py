@@ -61,7 +61,7 @@ def server(inputs, tmp_path):
     """``serve``'s app for robosuite-square on a free port, in this process."""
     import uvicorn
 
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.elicit.config import SessionConfig
     from elicit_jax.web.access import access_policy
     from elicit_jax.web.hub import OperatorHub
