@@ -41,11 +41,12 @@ class _Outbox:
 
 def measure(earliest: float, presses: int, demo_dir: Path, out: Path) -> list[float]:
     """Command-to-frame latencies (ms) of ``presses`` changed commands."""
+    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+
     import elicit_jax.web.driver as driver_module
     from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.elicit.config import SessionConfig
-    from elicit_jax.web.demo import DemoRecipe, demo_inputs
     from elicit_jax.web.protocol import Message
 
     driver_module.EARLIEST = earliest
