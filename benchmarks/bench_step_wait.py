@@ -41,22 +41,21 @@ class _Outbox:
 
 def measure(earliest: float, presses: int, demo_dir: Path, out: Path) -> list[float]:
     """Command-to-frame latencies (ms) of ``presses`` changed commands."""
-    from elicit_jax.web.demo import DemoRecipe, demo_inputs
+    from rich.console import Console
 
     import elicit_jax.web.driver as driver_module
-    from elicit_jax.compat.threshold_source import Thresholds
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.elicit.config import SessionConfig
+    from elicit_jax.pipeline.serve_demo import DemoRecipe, demo_inputs
     from elicit_jax.web.protocol import Message
 
     driver_module.EARLIEST = earliest
-    demo = demo_inputs(DemoRecipe(), demo_dir, echo=lambda _: None)
-    lam, eta, _ = read_thresholds(demo.thresholds)
+    demo = demo_inputs(DemoRecipe(), demo_dir, echo=lambda _: None, console=Console(quiet=True))
     config = SessionConfig(
         task="reach-pillar",
         policy=str(demo.policy),
         base_demos=str(demo.base_demos),
-        thresholds=Thresholds(lam, eta, f"file {demo.thresholds}", file=demo.thresholds),
+        thresholds=read_thresholds(demo.thresholds),
         operator="browser:op",
         practice=0,
         prompt=0,
@@ -97,7 +96,7 @@ def main() -> None:
     p.add_argument("--demo-dir", type=Path, default=None, help="serve --demo's cache root")
     p.add_argument("--out", type=Path, default=None, help="append a Markdown section here")
     a = p.parse_args()
-    from elicit_jax.web.demo import default_demo_root
+    from elicit_jax.pipeline.serve_demo import default_demo_root
 
     demo_dir = a.demo_dir or default_demo_root()
     command = "python benchmarks/bench_step_wait.py " + " ".join(sys.argv[1:])
