@@ -4,7 +4,9 @@ Starts `elicit-jax serve --demo` (reach-pillar, informed mode: the live scorer r
 step; no practice, no prompt) in a subprocess, opens the page for N operators (default 2) in
 headless Chromium with software WebGL (SwiftShader: no GPU, as on a laptop without one), and
 has each operator demonstrate at the same time by keyboard: every cycle presses A or D (in
-turn) for 400 ms, then lets go for 500 ms so the gripper comes to rest.
+turn) for 400 ms, then lets go for 500–550 ms so the gripper comes to rest (the random part
+puts each press at a random phase of the server's 50 ms control step, as a person's presses
+are; a fixed 900 ms cycle, 18 steps, would press at the same phase every time).
 
 Measured in each page (the page's own clock):
 
@@ -17,7 +19,10 @@ Measured in each page (the page's own clock):
 * **key-to-pose latency**: from the key's ``keydown`` to the first drawn frame in which the
   gripper has moved 0.5 mm the key's way (the server applies the command at its next 50 ms
   step and streams the pose back; the page draws it); a press not drawn moving within
-  900 ms is a miss.
+  900 ms is a miss;
+* **key-to-frame latency**: from the ``keydown`` to the arrival of the first streamed pose
+  in which the gripper has moved 0.5 mm the key's way (the server's share: the wait for its
+  next step, the step, the send), so the drawing's share is the difference.
 
 Targets (issue 33): >= 15 frames/s while moving, p95 key-to-pose <= 120 ms, with 2 operators.
 ``--code DIR`` serves another checkout's ``elicit_jax`` (e.g. the code before a change) with
@@ -56,9 +61,23 @@ PROBE = """(duration) => new Promise((resolve) => {
   const g = view.names.indexOf('gripper');
   const drawn = () => view.instances[0].bodies[g].position;
   const render = view.render.bind(view);
+  const pose = view.pose.bind(view);
   const frames = [];
   let wait = null;
   const lat = [];
+  const arrive = [];  // key to the first streamed pose that has moved (before drawing)
+  let shownY = null;
+  view.pose = (poses, i = 0, glide = 0) => {
+    if (i === 0) {
+      const y = poses[g * 7 + 1];
+      if (wait && wait.arrived === null && (y - wait.a0) * wait.sign > 0.0005) {
+        wait.arrived = performance.now() - wait.t0;
+        arrive.push(wait.arrived);
+      }
+      shownY = y;
+    }
+    return pose(poses, i, glide);
+  };
   let held = 0;
   const cost = [];
   view.render = () => {
@@ -82,23 +101,29 @@ PROBE = """(duration) => new Promise((resolve) => {
     const heldSpans = [];
     while (performance.now() - t0 < duration * 1000) {
       const code = sign > 0 ? 'KeyA' : 'KeyD';
-      wait = { t0: performance.now(), y0: drawn().y, sign };
+      wait = { t0: performance.now(), y0: drawn().y, a0: shownY ?? drawn().y, sign, arrived: null };
       const h0 = performance.now();
       key(code, true);
       await sleep(400);
       key(code, false);
       heldSpans.push([h0, performance.now()]);
-      await sleep(500);
-      if (wait) { lat.push(Infinity); wait = null; }  // not drawn moving within 900 ms: a miss
+      await sleep(500 + Math.random() * 50);  // a random phase of the server's 50 ms step
+      if (wait) {  // not drawn moving within 900 ms: a miss
+        lat.push(Infinity);
+        if (wait.arrived === null) arrive.push(Infinity);
+        wait = null;
+      }
       sign = -sign;
     }
     const t1 = performance.now();
     view.render = render;
+    view.pose = pose;
     const inSpans = frames.filter((t) => heldSpans.some(([a, b]) => t >= a && t <= b)).length;
     held = heldSpans.reduce((s, [a, b]) => s + (b - a), 0);
     resolve({ frames: frames.filter((t) => t >= t0 && t <= t1).length, seconds: (t1 - t0) / 1000,
               heldFrames: inSpans, heldSeconds: held / 1000,
               latencies: lat.map((x) => (Number.isFinite(x) ? x : -1)),
+              arrivals: arrive.map((x) => (Number.isFinite(x) ? x : -1)),
               renderMs: cost.sort((a, b) => a - b)[Math.floor(cost.length / 2)] || 0,
               state: document.body.dataset.state });
   })();
@@ -223,6 +248,7 @@ def measure(a: argparse.Namespace) -> dict:
                     results.append(page.evaluate("window.__bench"))
                 cpu1, wall1 = tree_cpu(os.getpid()), time.monotonic()
                 busy1 = busy_cores()
+                load1 = os.getloadavg()[0]
                 browser.close()
         finally:
             proc.send_signal(signal.SIGINT)
@@ -235,6 +261,7 @@ def measure(a: argparse.Namespace) -> dict:
         "pages": results,
         "load_before": busy0,
         "busy_after": busy1,
+        "load_after": load1,
         "browser_cpu_s": cpu1 - cpu0,
         "browser_wall_s": wall1 - wall0,
     }
@@ -247,7 +274,11 @@ def summarise(r: dict) -> dict:
         (p["frames"] / p["seconds"], p["heldFrames"] / max(p["heldSeconds"], 1e-9))
         for p in r["pages"]
     ]
+    arr = [x for p in r["pages"] for x in p.get("arrivals", [])]
+    arr_ok = [x for x in arr if x >= 0]
     return {
+        "frame_p50": pct(arr_ok, 50),
+        "frame_p95": pct(arr_ok, 95) if len(arr_ok) == len(arr) else float("inf"),
         "fps_all": min(x for x, _ in per_page),
         "fps_moving": min(y for _, y in per_page),
         "lat_p50": pct(ok, 50),
@@ -280,12 +311,14 @@ def main() -> None:
         f"{busy_text(r['busy_after'])}.",
         "",
         "| frames/s while moving (worst page) | frames/s overall (worst page) | key-to-pose "
-        "p50 | p95 | max | key presses (missed) | browser CPU per drawn frame | browser CPU "
-        "(cores) |",
-        "|---|---|---|---|---|---|---|---|",
+        "p50 | p95 | max | key-to-frame p50 | p95 | key presses (missed) | browser CPU per "
+        "drawn frame | browser CPU (cores) | load average (1 min) before, after |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
         f"| {s['fps_moving']:.1f} | {s['fps_all']:.1f} | {s['lat_p50']:.0f} ms | "
-        f"{s['lat_p95']:.0f} ms | {s['lat_max']:.0f} ms | {s['presses']} ({s['missed']}) | "
-        f"{s['cpu_per_frame_ms']:.1f} ms | {s['browser_cores']:.2f} |",
+        f"{s['lat_p95']:.0f} ms | {s['lat_max']:.0f} ms | {s['frame_p50']:.0f} ms | "
+        f"{s['frame_p95']:.0f} ms | {s['presses']} ({s['missed']}) | "
+        f"{s['cpu_per_frame_ms']:.1f} ms | {s['browser_cores']:.2f} | "
+        f"{r['load_before']:.1f}, {r['load_after']:.1f} |",
         "",
         f"Targets: >= 15 frames/s while moving ({'met' if fps_ok else 'MISSED'}), p95 "
         f"key-to-pose <= 120 ms ({'met' if lat_ok else 'MISSED'}).",

@@ -97,7 +97,9 @@ def bench_size(hidden: int, steps: int, rounds: int) -> dict:
     act = rng.uniform(-1, 1, size=(steps, ACT)).astype(np.float32)
     mean, std = obs.mean(0), obs.std(0) + 0.5
     policy = bench_policy(hidden, mean, std)
-    scorer = LiveScorer(ScoreConfig(likelihood="member-average", ddof=1), policy)
+    scorer = LiveScorer(
+        ScoreConfig.from_preset("square-nut", likelihood="member-average", ddof=1), policy
+    )
     models = torch_models(policy)
     tm, ts = torch.from_numpy(mean), torch.from_numpy(std)
     obs_t, act_t = torch.from_numpy(obs), torch.from_numpy(act)

@@ -68,7 +68,9 @@ def _cfg(chunk: int):
     """Our scorer with the original code's definitions, at a chunk size."""
     from elicit_jax.compat.measures import ScoreConfig
 
-    return ScoreConfig(likelihood="member-average", ddof=1, chunk_size=chunk)
+    return ScoreConfig.from_preset(
+        "square-nut", likelihood="member-average", ddof=1, chunk_size=chunk
+    )
 
 
 def _best_of(fn: Callable[[], object], calls: int) -> float:
@@ -234,7 +236,7 @@ def _compile(policy, demos, episode, chunks: list[int]):
         t = time.perf_counter()
         ref = score_demos(policy, demos, _cfg(c))
         compile_s[c] = time.perf_counter() - t
-    stream_chunk = ScoreConfig().chunk_size
+    stream_chunk = ScoreConfig.from_preset("square-nut").chunk_size
     score_demos(policy, episode, _cfg(stream_chunk))
     return compile_s, ref, stream_chunk
 

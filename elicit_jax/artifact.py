@@ -12,9 +12,7 @@ the output rule live in :mod:`elicit_jax.output_rules`, the hashes in
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
-import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -30,8 +28,11 @@ from elicit_jax.hashing import (  # noqa: F401  (re-exported: the artifact API)
 )
 from elicit_jax.output_rules import (  # noqa: F401  (re-exported: the artifact API)
     atomic_path,
+    atomic_paths,
     check_outputs,
     clean_stale_temporaries,
+    foreign_files,
+    refuse_foreign_files,
     refuse_overwriting_inputs,
 )
 from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact API)
@@ -40,6 +41,7 @@ from elicit_jax.provenance import (  # noqa: F401  (re-exported: the artifact AP
     library_versions,
     provenance,
     provenance_line,
+    recorded_now,
     runtime_settings,
 )
 
@@ -50,13 +52,7 @@ def now_utc() -> str:
     """The time to record as an artifact's ``created``: now, or ``SOURCE_DATE_EPOCH`` when
     that is set (reproducible-builds convention), so that identical runs can also give
     identical bytes."""
-    epoch = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
-    when = (
-        _dt.datetime.fromtimestamp(int(epoch), _dt.UTC)
-        if epoch.isdigit()
-        else _dt.datetime.now(_dt.UTC)
-    )
-    return when.isoformat(timespec="seconds")
+    return recorded_now()
 
 
 def make_header(

@@ -115,6 +115,23 @@ def current_command() -> str:
     return " ".join([program, *map(shlex.quote, sys.argv[1:])])
 
 
+SOURCE_DATE_EPOCH = "SOURCE_DATE_EPOCH"
+"""The reproducible-builds variable: when set (seconds since 1970), every time an artifact
+records is that time, so identical runs give identical bytes (docs/outputs.md)."""
+
+
+def recorded_now() -> str:
+    """The time an artifact records (its ``created`` and ``provenance.time``): now (UTC, to
+    the second), or :data:`SOURCE_DATE_EPOCH` when that is set."""
+    epoch = os.environ.get(SOURCE_DATE_EPOCH, "").strip()
+    when = (
+        _dt.datetime.fromtimestamp(int(epoch), _dt.UTC)
+        if epoch.isdigit()
+        else _dt.datetime.now(_dt.UTC)
+    )
+    return when.isoformat(timespec="seconds")
+
+
 def provenance() -> dict[str, Any]:
     """Where an artifact made now comes from: code commit and dirty flag, the command line,
     the elicit-jax and library versions and the UTC time (kept under
@@ -126,7 +143,7 @@ def provenance() -> dict[str, Any]:
         "versions": versions,
         "command": current_command(),
         "python": platform.python_version(),
-        "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "time": recorded_now(),
     }
 
 

@@ -650,7 +650,7 @@ class SessionInputs:
     def session_config(self, operator: str, **overrides):
         """A square-nut ``SessionConfig`` on these inputs for ``operator``: 1 practice, 2
         prompt and 2 demonstration episodes, at most 4 episodes; ``overrides`` replace fields."""
-        from elicit_jax.compat.threshold_source import Thresholds
+        from elicit_jax.compat.thresholds import Thresholds
         from elicit_jax.elicit.config import SessionConfig
 
         base = dict(
@@ -674,7 +674,7 @@ def square_nut_session_inputs(d: Path) -> SessionInputs:
     must separate perfectly)."""
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import score_demos
-    from elicit_jax.compat.thresholds import fit_thresholds
+    from elicit_jax.compat.threshold_fit import fit_thresholds
     from elicit_jax.data.demos import concat_demos, from_episodes, read_demos
     from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.policy.config import TrainConfig
@@ -697,8 +697,10 @@ def square_nut_session_inputs(d: Path) -> SessionInputs:
         )
         parts.append(from_episodes(r.episodes, operators=op, obs_fields=task.obs_fields))
     contrast = concat_demos(parts)
-    scores = score_demos(load_policy(d / "base_run"), contrast, ScoreConfig())
+    scores = score_demos(
+        load_policy(d / "base_run"), contrast, ScoreConfig.from_preset("square-nut")
+    )
     labels = {e: op == "same-style" for e, op in contrast.episode_operator().items()}
     fit = fit_thresholds(scores["likelihood"], scores["novelty"], contrast.episode, labels)
     assert fit.balanced_accuracy == 1.0
-    return SessionInputs(d / "base.parquet", d / "base_run", fit.lambda_, fit.eta)
+    return SessionInputs(d / "base.parquet", d / "base_run", *fit.thresholds.pair)

@@ -69,7 +69,8 @@ def test_score_fit_filter_map(run):
     header, s = read_scores(d / "scores.parquet")
     assert header["thresholds"] == {"lambda": 0.05, "eta": 0.5}
     assert "policy" in header["inputs"]
-    assert header["policy"] == {"which": "best", "seed": None}
+    assert header["policy"]["which"] == "best" and header["policy"]["seed"] is None
+    assert len(header["policy"]["policy_sha256"]) == 64  # what the policy computes with
     ops = s["operator"].astype(str)
     # the policy learned the base mapping: the opposite-style operator has far larger errors
     assert s["likelihood"][ops == "bad"].mean() > 5 * s["likelihood"][ops == "good"].mean()

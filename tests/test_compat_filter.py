@@ -15,6 +15,7 @@ from elicit_jax.compat.filtering import (
 )
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score_file import read_scores, score_file
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import init_policy
@@ -45,11 +46,13 @@ def files(tmp_path_factory):
     # about half the episodes have an incompatible pair (all of them are >= 9 steps, so one
     # pair exceeds 5% and rejects the episode)
     probe = d / "probe.parquet"
-    score_file(policy, new, probe, ScoreConfig(chunk_size=32))
+    score_file(policy, new, probe, ScoreConfig.from_preset("square-nut", chunk_size=32))
     p = read_scores(probe)[1]
     lam = float(np.median([p["likelihood"][p["episode"] == e].max() for e in range(10, 15)]))
     scores = d / "scores.parquet"
-    score_file(policy, new, scores, ScoreConfig(lambda_=lam, eta=100.0, chunk_size=32))
+    score_file(
+        policy, new, scores, ScoreConfig(thresholds=Thresholds(lam, 100.0, "given"), chunk_size=32)
+    )
     return {"new": new, "base": base, "scores": scores, "dir": d}
 
 
@@ -87,7 +90,7 @@ def test_drop_masks_by_hand():
     b, _ = drop_mask(s, FilterConfig(method="random", seed=1))
     assert a.sum() == 3 and a.tolist() == b.tolist()
     # explicit thresholds recompute incompatibility: l >= 0.15 and nu < 0.05 -> rows 1, 3, 6
-    drop, _ = drop_mask(s, FilterConfig(lambda_=0.15, eta=0.05))
+    drop, _ = drop_mask(s, FilterConfig(thresholds=Thresholds(0.15, 0.05, "given")))
     assert np.flatnonzero(drop).tolist() == [1, 3, 6]
 
 
@@ -147,7 +150,9 @@ def test_filter_round_trips_as_valid_demos(files, tmp_path, level, method, mode)
 
 
 def test_dropping_everything(files, tmp_path):
-    cfg = FilterConfig(level="episode", lambda_=1e-9, eta=1e9)  # every pair incompatible
+    cfg = FilterConfig(
+        thresholds=Thresholds(1e-9, 1e9, "given"), level="episode"
+    )  # every pair incompatible
     r = filter_demos(
         files["scores"], files["new"], tmp_path / "f.parquet", cfg, base_path=files["base"]
     )
@@ -167,7 +172,9 @@ def test_bad_filter_config():
     with pytest.raises(ElicitError, match="unknown method"):
         FilterConfig(method="best")
     with pytest.raises(ElicitError, match="both lambda and eta"):
-        FilterConfig(lambda_=0.3)
+        FilterConfig.from_dict({"lambda_": 0.3, "eta": None})
+    with pytest.raises(ElicitError, match="Thresholds value"):
+        FilterConfig(thresholds=(0.3, 0.05))
 
 
 def test_episode_filter_exports_a_robomimic_mask(tmp_path):
@@ -189,14 +196,14 @@ def test_episode_filter_exports_a_robomimic_mask(tmp_path):
         jax.random.key(0), kind="mlp", obs_dim=4, action_dim=2, n_members=3, hidden=(8,)
     )
     scores = tmp_path / "scores.parquet"
-    score_file(policy, demos_path, scores, ScoreConfig(chunk_size=64))
+    score_file(policy, demos_path, scores, ScoreConfig.from_preset("square-nut", chunk_size=64))
     s = read_scores(scores)[1]
     # lambda between the per-episode largest errors: the lower half of episodes is accepted
     worst = np.array([s["likelihood"][s["episode"] == e].max() for e in range(6)])
     lam = float(np.sort(worst)[2] + 1e-6)
     kept_ids = np.flatnonzero(worst < lam)
     out = tmp_path / "compatible.hdf5"
-    cfg = FilterConfig(level="episode", lambda_=lam, eta=1e9)
+    cfg = FilterConfig(thresholds=Thresholds(lam, 1e9, "given"), level="episode")
     r = filter_demos(
         scores,
         demos_path,

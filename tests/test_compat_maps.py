@@ -7,7 +7,10 @@ import numpy as np
 import pytest
 
 from elicit_jax.compat.maps import write_map
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
+
+T = Thresholds(0.4, 0.05, "given")
 
 
 def _scores(n=3000):
@@ -25,7 +28,7 @@ def _scores(n=3000):
 @pytest.mark.parametrize("axis", ["likelihood-error", "neg-likelihood-error"])
 def test_png_map(tmp_path, axis):
     out = tmp_path / "map.png"
-    write_map(_scores(), 0.4, 0.05, out, axis)
+    write_map(_scores(), T, out, axis)
     data = out.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 
@@ -35,8 +38,7 @@ def test_html_map_is_self_contained(tmp_path):
     s = _scores()
     write_map(
         s,
-        0.4,
-        0.05,
+        T,
         out,
         "neg-likelihood-error",
     )
@@ -55,4 +57,4 @@ def test_html_map_is_self_contained(tmp_path):
 
 def test_bad_map_output(tmp_path):
     with pytest.raises(ElicitError, match=r"png or \.html"):
-        write_map(_scores(10), 0.4, 0.05, tmp_path / "map.pdf")
+        write_map(_scores(10), T, tmp_path / "map.pdf")

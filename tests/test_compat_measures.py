@@ -16,6 +16,7 @@ from elicit_jax.compat.measures import (
     rejects,
     score_pair,
 )
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 
 # Two members, two action dims.
@@ -56,7 +57,7 @@ def test_compatibility_by_hand():
 
 
 def test_score_pair_and_mdn_spread():
-    cfg = ScoreConfig(lambda_=4.0, eta=1.5)
+    cfg = ScoreConfig(thresholds=Thresholds(4.0, 1.5, "given"))
     s = score_pair(MEMBERS, ACTION, jnp.float32(4.0), jnp.float32(1.5), cfg)
     # l = 2 (above), nu = 1 < 1.5 familiar -> M = 1 - 2/4 = 0.5
     assert float(s.likelihood) == pytest.approx(2.0)
@@ -83,11 +84,18 @@ def test_five_percent_rule_by_hand():
 
 
 def test_config_validation_and_presets():
-    assert ScoreConfig.from_preset("round-nut").lambda_ == PRESETS["round-nut"][0] == 0.35
-    assert ScoreConfig.from_preset("hammer-drawer").eta == 0.06
-    for bad in ({"likelihood": "x"}, {"ddof": 2}, {"lambda_": 0.0}, {"eta": -1.0}):
+    assert ScoreConfig.from_preset("round-nut").thresholds.lam == PRESETS["round-nut"][0] == 0.35
+    assert ScoreConfig.from_preset("hammer-drawer").thresholds.eta == 0.06
+    assert ScoreConfig.from_preset("round-nut").thresholds.source == "preset round-nut"
+    for bad in ({"likelihood": "x"}, {"ddof": 2}):
         with pytest.raises(ElicitError):
-            ScoreConfig(**bad)
+            ScoreConfig.from_preset("square-nut", **bad)
+    for lam, eta in ((0.0, 0.05), (0.4, -1.0), (True, 0.05), ("0.3", 0.05), (float("nan"), 1)):
+        with pytest.raises(ElicitError):
+            ScoreConfig(thresholds=Thresholds(lam, eta, "given"))
+    # no silent task default: every caller says which thresholds it scores with
+    with pytest.raises(TypeError, match="thresholds"):
+        ScoreConfig()
     with pytest.raises(ElicitError, match="unknown preset"):
         ScoreConfig.from_preset("peg")
 
@@ -123,7 +131,7 @@ def test_pinned_to_the_original_codes_get_compatibility():
     # dim 1 [-0.2, 0, 0.1]: var 0.0466667/2; nu = (sqrt(0.39) + sqrt(0.0233333)) / 2
     nu = novelty(members, ddof=1)
     assert float(nu) == pytest.approx((np.sqrt(0.39) + np.sqrt(0.14 / 6)) / 2, abs=1e-6)
-    cfg = ScoreConfig(likelihood="member-average", ddof=1)
+    cfg = ScoreConfig.from_preset("square-nut", likelihood="member-average", ddof=1)
     bad = score_pair(members, action, jnp.float32(0.5), jnp.float32(0.4), cfg, clip=(-1.0, 1.0))
     assert bool(bad.incompatible) and float(bad.compatibility) == 0.0  # 0.5567 > 0.5, 0.389 < 0.4
     ok = score_pair(members, action, jnp.float32(0.6), jnp.float32(0.4), cfg, clip=(-1.0, 1.0))
@@ -159,3 +167,25 @@ def test_action_scaling_by_hand():
     assert float(likelihood_error(members, action)) == pytest.approx(1.25 / 3)
     # novelty: per-dim std [0, 0, 0.5] -> scaled [0, -, 0.25] over 2 dims = 0.125
     assert float(novelty(members, 0, weight)) == pytest.approx(0.125)
+
+
+def test_config_json_is_the_layout_pipelines_have_always_recorded():
+    """Stage configs embed these dicts: a changed layout would re-run every cached stage."""
+    from elicit_jax.compat.filtering import FilterConfig
+    from elicit_jax.compat.measures import config_dict, config_from_dict
+
+    cfg = ScoreConfig.from_preset("square-nut")
+    d = config_dict(cfg)
+    assert d == {
+        "likelihood": "ensemble-mean", "ddof": 0, "lambda": 0.4, "eta": 0.05,
+        "accept_fraction": 0.05, "chunk_size": 4096, "clip": None, "action_scale": "none",
+        "dropout_samples": 0, "dropout_seed": 0,
+    }  # fmt: skip
+    back = config_from_dict(d, "preset square-nut")
+    assert back == cfg and back.thresholds.source == "preset square-nut"
+    assert FilterConfig().to_dict() == {
+        "level": "pair", "method": "m", "pair_mode": "renumber", "lambda_": None, "eta": None,
+        "accept_fraction": 0.05, "seed": 0,
+    }  # fmt: skip
+    given = FilterConfig(thresholds=Thresholds(0.3, 0.07, "given"))
+    assert FilterConfig.from_dict(given.to_dict()).thresholds.pair == (0.3, 0.07)

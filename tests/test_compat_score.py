@@ -12,6 +12,7 @@ from elicit_jax.compat.episode_summary import summarise_episodes
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.score import score_demos
 from elicit_jax.compat.score_file import read_scores, score_file
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.data.demos import from_episodes, write_demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import init_policy
@@ -75,7 +76,8 @@ def _reference(policy, demos, cfg):
         if spread is not None
         else preds.std(axis=0, ddof=cfg.ddof).mean(axis=1)
     )
-    m = np.where(nu < cfg.eta, 1 - np.minimum(ell / cfg.lambda_, 1), 1.0)
+    lam, eta = cfg.thresholds.pair
+    m = np.where(nu < eta, 1 - np.minimum(ell / lam, 1), 1.0)
     return ell, nu, m, mean
 
 
@@ -90,7 +92,9 @@ def _reference(policy, demos, cfg):
 )
 def test_scores_match_direct_computation(policies, kind, likelihood, ddof):
     demos = _demos()
-    cfg = ScoreConfig(likelihood=likelihood, ddof=ddof, lambda_=0.3, eta=0.2, chunk_size=16)
+    cfg = ScoreConfig(
+        thresholds=Thresholds(0.3, 0.2, "given"), likelihood=likelihood, ddof=ddof, chunk_size=16
+    )
     got = score_demos(policies[kind], demos, cfg)
     ell, nu, m, mean = _reference(policies[kind], demos, cfg)
     np.testing.assert_allclose(got["likelihood"], ell, rtol=2e-5, atol=1e-6)
@@ -107,10 +111,14 @@ def test_streaming_equals_in_memory_for_any_chunk_size(policies, demos_file, tmp
     from elicit_jax.data.demos import read_demos
 
     demos = read_demos(demos_file)
-    memory = score_demos(policies[kind], demos, ScoreConfig(chunk_size=1000))
+    memory = score_demos(
+        policies[kind], demos, ScoreConfig.from_preset("square-nut", chunk_size=1000)
+    )
     for chunk in (3, 16, 85):
         out = tmp_path / f"s{chunk}.parquet"
-        score_file(policies[kind], demos_file, out, ScoreConfig(chunk_size=chunk))
+        score_file(
+            policies[kind], demos_file, out, ScoreConfig.from_preset("square-nut", chunk_size=chunk)
+        )
         _, got = read_scores(out)
         for k in ("likelihood", "novelty", "compatibility", "prediction"):
             np.testing.assert_allclose(got[k], memory[k], rtol=1e-5, atol=1e-6, err_msg=k)
@@ -123,7 +131,9 @@ def test_streaming_equals_in_memory_for_any_chunk_size(policies, demos_file, tmp
 
 def test_headers_and_episode_summary(policies, demos_file, tmp_path):
     out = tmp_path / "scores.parquet"
-    cfg = ScoreConfig(lambda_=0.05, eta=10.0, chunk_size=8)  # eta huge: every state familiar
+    cfg = ScoreConfig(
+        thresholds=Thresholds(0.05, 10.0, "given"), chunk_size=8
+    )  # eta huge: every state familiar
     result = score_file(policies["mlp"], demos_file, out, cfg)
     header = read_header(out)
     assert header["kind"] == "scores"
@@ -153,15 +163,21 @@ def test_dimension_mismatch_is_a_clear_error(policies, tmp_path):
     path = tmp_path / "d.parquet"
     write_demos(path, _demos(obs_dim=OBS + 1))
     with pytest.raises(ElicitError, match="obs_dim=6 but the policy expects obs_dim=5"):
-        score_file(policies["mlp"], path, tmp_path / "s.parquet", ScoreConfig())
+        score_file(
+            policies["mlp"], path, tmp_path / "s.parquet", ScoreConfig.from_preset("square-nut")
+        )
     assert not (tmp_path / "s.parquet").exists()
 
 
 def test_scoring_non_demos_artifact_fails(policies, tmp_path, demos_file):
     out = tmp_path / "s.parquet"
-    score_file(policies["mlp"], demos_file, out, ScoreConfig(chunk_size=64))
+    score_file(
+        policies["mlp"], demos_file, out, ScoreConfig.from_preset("square-nut", chunk_size=64)
+    )
     with pytest.raises(ElicitError, match="expected demonstrations"):
-        score_file(policies["mlp"], out, tmp_path / "t.parquet", ScoreConfig())
+        score_file(
+            policies["mlp"], out, tmp_path / "t.parquet", ScoreConfig.from_preset("square-nut")
+        )
 
 
 def test_obs_field_mismatch_is_a_clear_error(policies, tmp_path):
@@ -173,10 +189,12 @@ def test_obs_field_mismatch_is_a_clear_error(policies, tmp_path):
     write_demos(path, demos)
     policy = policies["mlp"].replace(obs_fields=("pos", "vel"))
     with pytest.raises(ElicitError, match=r"obs fields \['pos', 'goal'\] but the policy"):
-        score_file(policy, path, tmp_path / "s.parquet", ScoreConfig())
+        score_file(policy, path, tmp_path / "s.parquet", ScoreConfig.from_preset("square-nut"))
     # same names in the same order: fine
     ok = policies["mlp"].replace(obs_fields=("pos", "goal"))
-    score_file(ok, path, tmp_path / "s.parquet", ScoreConfig(chunk_size=64))
+    score_file(
+        ok, path, tmp_path / "s.parquet", ScoreConfig.from_preset("square-nut", chunk_size=64)
+    )
 
 
 def test_a_one_member_policy_earns_the_novelty_warning():
@@ -187,7 +205,9 @@ def test_a_one_member_policy_earns_the_novelty_warning():
 
     def note(n: int, kind: str = "mlp", samples: int = 0) -> str | None:
         policy = SimpleNamespace(n_members=n, kind=kind, entry=model_kind(kind))
-        return one_member_note(policy, ScoreConfig(dropout_samples=samples))
+        return one_member_note(
+            policy, ScoreConfig.from_preset("square-nut", dropout_samples=samples)
+        )
 
     assert "novelty is 0 for every state" in note(1)
     assert note(5) is None  # an ensemble's members disagree
@@ -211,7 +231,13 @@ def test_progress_is_told_the_pairs_and_advanced_through_all_of_them(
         seen.append(("closed", None))
 
     out = tmp_path / "s.parquet"
-    score_file(policies["mlp"], demos_file, out, ScoreConfig(chunk_size=64), progress=progress)
+    score_file(
+        policies["mlp"],
+        demos_file,
+        out,
+        ScoreConfig.from_preset("square-nut", chunk_size=64),
+        progress=progress,
+    )
     rows = pq.ParquetFile(demos_file).metadata.num_rows
     steps = [n for what, n in seen if what == "advance"]
     assert seen[0] == ("total", rows) and seen[-1] == ("closed", None)

@@ -4,13 +4,17 @@ import numpy as np
 import pytest
 
 from elicit_jax.compat.selection import parse_selection, select_episodes
-from elicit_jax.compat.thresholds import (
+from elicit_jax.compat.threshold_fit import (
     FitConfig,
     evaluate_thresholds,
     fit_thresholds,
     incompatible_counts,
     operator_rejections,
+)
+from elicit_jax.compat.thresholds import (
+    Thresholds,
     read_thresholds,
+    read_thresholds_header,
     write_thresholds,
 )
 from elicit_jax.errors import ElicitError
@@ -59,12 +63,12 @@ def test_recovers_planted_thresholds():
     ell, nu, ep, labels = _planted()
     fit = fit_thresholds(ell, nu, ep, labels, FitConfig(grid_size=64))
     assert fit.balanced_accuracy == 1.0
-    assert 0.35 <= fit.lambda_ <= 0.45
-    assert 0.044 <= fit.eta <= 0.052
+    assert 0.35 <= fit.thresholds.lam <= 0.45
+    assert 0.044 <= fit.thresholds.eta <= 0.052
     assert fit.loo_accuracy == 1.0 and fit.n_loo == 10
     assert fit.episodes["rejected"].tolist() == [False] * 5 + [True] * 5
     # the reported thresholds really give that accuracy when re-evaluated
-    ba, _ = evaluate_thresholds(ell, nu, ep, labels, fit.lambda_, fit.eta)
+    ba, _ = evaluate_thresholds(ell, nu, ep, labels, fit.thresholds)
     assert ba == 1.0
 
 
@@ -73,7 +77,7 @@ def test_fit_is_deterministic_and_order_invariant():
     a = fit_thresholds(ell, nu, ep, labels)
     perm = np.random.default_rng(0).permutation(len(ell))
     b = fit_thresholds(ell[perm], nu[perm], ep[perm], labels)
-    assert (a.lambda_, a.eta, a.margin_steps) == (b.lambda_, b.eta, b.margin_steps)
+    assert (a.thresholds, a.margin_steps) == (b.thresholds, b.margin_steps)
 
 
 def test_single_demo_sets_have_no_loo():
@@ -105,7 +109,7 @@ def test_operator_rejections_by_hand():
     ell[[0, 1, 20]] = 1.0
     ep = np.repeat([0, 1], 20)
     op = np.repeat(["alice", "bob"], 20)
-    r = operator_rejections(ell, nu, ep, op, 0.4, 0.05)
+    r = operator_rejections(ell, nu, ep, op, Thresholds(0.4, 0.05, "given"))
     assert r["alice"] == {
         "pairs": 20,
         "incompatible_pairs": 2,
@@ -144,14 +148,86 @@ def test_thresholds_artifact_round_trip(tmp_path):
     scores = tmp_path / "scores.parquet"
     scores.write_bytes(b"stand-in scores content")
     out = tmp_path / "t.json"
-    write_thresholds(
-        out, lambda_=0.3, eta=0.07, method="manual", scores_path=scores, config={}, report={}
+    given = Thresholds(0.3, 0.07, "given", policy="ab" * 32)
+    inputs = {"scores": scores}
+    write_thresholds(out, given, method="manual", inputs=inputs, config={}, report={})
+    read = read_thresholds(out)
+    assert (read.pair, read.file, read.policy, read.action_scale) == (
+        (0.3, 0.07),
+        out,
+        "ab" * 32,
+        "none",
     )
-    lam, eta, header = read_thresholds(out)
-    assert (lam, eta) == (0.3, 0.07)
+    header = read_thresholds_header(out)
     assert header["kind"] == "thresholds"
     assert len(header["inputs"]["scores"]["sha256"]) == 64
     bad = tmp_path / "bad.json"
     bad.write_text('{"kind": "demos"}')
     with pytest.raises(ElicitError, match="expected thresholds"):
         read_thresholds(bad)
+
+
+# --- one carrier: no raw (λ, η) parameters outside the Thresholds module and the kernels ----
+
+RAW_NAMES = {"lambda_", "lam", "eta", "et", "lmbda"}
+RAW_ALLOWED = {
+    "elicit_jax/compat/thresholds.py": "the Thresholds type, its validation and its JSON",
+    "elicit_jax/compat/threshold_source.py": "command-line flags and presets into Thresholds",
+    "elicit_jax/compat/measures.py": "the kernels: is_incompatible, compatibility, score_pair",
+    "elicit_jax/compat/scorer.py": "the compiled kernel's inputs (ScoreInputs)",
+    "elicit_jax/pipeline/report_rows.py": "field names are keys of committed report-data.json",
+}
+
+
+def raw_threshold_parameters(source: str) -> list[str]:
+    """Function parameters and class fields of one module that carry λ or η as raw floats:
+    named like λ/η, or a ``thresholds`` annotated as a tuple of floats."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            a = node.args
+            for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs):
+                shape = ast.unparse(arg.annotation) if arg.annotation is not None else ""
+                if arg.arg in RAW_NAMES or ("threshold" in arg.arg and "tuple[float" in shape):
+                    found.append(f"{node.name}({arg.arg})")
+        if isinstance(node, ast.ClassDef):
+            for st in node.body:
+                if isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name):
+                    shape = ast.unparse(st.annotation)
+                    name = st.target.id
+                    if name in RAW_NAMES or ("threshold" in name and "tuple[float" in shape):
+                        found.append(f"{node.name}.{name}")
+    return found
+
+
+def test_no_raw_lambda_eta_parameters_outside_the_thresholds_module_and_the_kernels():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    offenders = {}
+    for path in sorted((root / "elicit_jax").rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel not in RAW_ALLOWED:
+            found = raw_threshold_parameters(path.read_text())
+            if found:
+                offenders[rel] = found
+    assert offenders == {}
+    for rel in RAW_ALLOWED:
+        assert (root / rel).exists(), rel
+
+
+def test_the_raw_parameter_search_catches_planted_cases():
+    planted = (
+        "def filter_demos(scores, lambda_: float, eta: float): ...\n"
+        "def write(out, thresholds: tuple[float, float]): ...\n"
+        "class FilterConfig:\n    lam: float = 0.4\n    level: str = 'pair'\n"
+    )
+    assert raw_threshold_parameters(planted) == [
+        "filter_demos(lambda_)",
+        "filter_demos(eta)",
+        "write(thresholds)",
+        "FilterConfig.lam",
+    ]
+    assert raw_threshold_parameters("def f(t: Thresholds, level: str): ...\n") == []

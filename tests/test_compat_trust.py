@@ -13,12 +13,13 @@ from elicit_jax.cli import app
 from elicit_jax.compat.filtering import FilterConfig, drop_mask
 from elicit_jax.compat.fit import FitJob, fit_scores_file
 from elicit_jax.compat.measures import ScoreConfig, score_pair
-from elicit_jax.compat.thresholds import (
+from elicit_jax.compat.threshold_fit import (
     evaluate_thresholds,
     fit_thresholds,
     incompatible_counts,
     operator_rejections,
 )
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 
 # --- the tie ℓ = λ: the original code and the paper's "exceeds" do not flag it ------------
@@ -28,14 +29,22 @@ def test_a_pair_at_exactly_lambda_is_not_incompatible_anywhere():
     lam, eta = 0.5, 0.05
     # two members [0, 0] and [0, 0]; action [1, 0]: ℓ = mean([1, 0]) = 0.5 = λ; ν = 0
     s = score_pair(
-        jnp.zeros((2, 2)), jnp.array([1.0, 0.0]), jnp.float32(lam), jnp.float32(eta), ScoreConfig()
+        jnp.zeros((2, 2)),
+        jnp.array([1.0, 0.0]),
+        jnp.float32(lam),
+        jnp.float32(eta),
+        ScoreConfig.from_preset("square-nut"),
     )
     assert float(s.likelihood) == lam and float(s.novelty) == 0.0
     assert float(s.compatibility) == 0.0  # M bottoms out at the tie ...
     assert not bool(s.incompatible)  # ... but ℓ does not exceed λ
     # just above the tie it is flagged
     s2 = score_pair(
-        jnp.zeros((2, 2)), jnp.array([1.0, 0.0]), jnp.float32(0.49), jnp.float32(eta), ScoreConfig()
+        jnp.zeros((2, 2)),
+        jnp.array([1.0, 0.0]),
+        jnp.float32(0.49),
+        jnp.float32(eta),
+        ScoreConfig.from_preset("square-nut"),
     )
     assert bool(s2.incompatible)
     # every NumPy path agrees: 20 pairs of one episode, 2 of them exactly at λ
@@ -46,16 +55,22 @@ def test_a_pair_at_exactly_lambda_is_not_incompatible_anywhere():
     counts = incompatible_counts(ell, nu, ep, 1, np.array([lam]), np.array([eta]))
     assert counts[0, 0, 0] == 0
     _, dec = evaluate_thresholds(
-        np.r_[ell, ell * 0], np.r_[nu, nu], np.r_[ep, ep + 1], {0: False, 1: True}, lam, eta
+        np.r_[ell, ell * 0],
+        np.r_[nu, nu],
+        np.r_[ep, ep + 1],
+        {0: False, 1: True},
+        Thresholds(lam, eta, "given"),
     )
     assert dec["fraction_incompatible"].tolist() == [0.0, 0.0]
     assert (
-        operator_rejections(ell, nu, ep, np.full(20, "op"), lam, eta)["op"]["incompatible_pairs"]
+        operator_rejections(ell, nu, ep, np.full(20, "op"), Thresholds(lam, eta, "given"))["op"][
+            "incompatible_pairs"
+        ]
         == 0
     )
     drop, _ = drop_mask(
         {"episode": ep, "likelihood": ell, "novelty": nu, "incompatible": np.zeros(20, bool)},
-        FilterConfig(lambda_=lam, eta=eta),
+        FilterConfig(thresholds=Thresholds(lam, eta, "given")),
     )
     assert not drop.any()
 
@@ -80,7 +95,7 @@ def _paused(seed=0):
 
 
 def test_candidates_lie_strictly_between_observed_values():
-    from elicit_jax.compat.thresholds import candidates
+    from elicit_jax.compat.threshold_fit import candidates
 
     ell, nu, ep, labels = _paused()
     for values, upper in ((ell, False), (nu, True)):
@@ -93,10 +108,10 @@ def test_candidates_lie_strictly_between_observed_values():
         assert ((k == len(u)) | (u[np.minimum(k, len(u) - 1)] > cand)).all()
         assert (cand > u[np.maximum(k - 1, 0)]).all()
     fit = fit_thresholds(ell, nu, ep, labels)
-    assert np.float32(fit.lambda_) not in set(ell.tolist())
-    assert np.float32(fit.eta) not in set(nu.tolist())
+    assert np.float32(fit.thresholds.lam) not in set(ell.tolist())
+    assert np.float32(fit.thresholds.eta) not in set(nu.tolist())
     # the fitted λ separates: the paused pairs (0.3) exceed it, the others (<= 0.1) do not
-    assert 0.1 < fit.lambda_ < 0.3 and fit.balanced_accuracy == 1.0
+    assert 0.1 < fit.thresholds.lam < 0.3 and fit.balanced_accuracy == 1.0
 
 
 # --- trust -------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.compat.valley import log_density, valley_lambda
 
 
@@ -18,7 +19,9 @@ def test_lambda_moves_to_the_gap_between_two_clusters_of_familiar_pairs():
     # novel pairs (ν >= η) fill the gap; the rule must ignore them
     ell = np.concatenate([ell, np.full(300, 10.0**-0.25)])
     nu = np.concatenate([nu, np.full(300, 0.5)])
-    lam, rep = valley_lambda(ell, nu, eta=0.1, low=10**-0.45, high=10**-0.05, fitted=10**-0.12)
+    lam, rep = valley_lambda(
+        ell, nu, Thresholds(10**-0.12, 0.1, "fit"), low=10**-0.45, high=10**-0.05
+    )
     assert np.log10(lam) == pytest.approx(-0.25, abs=0.03)
     assert rep["familiar_pairs"] == 800 and rep["density_ratio_chosen_to_fitted"] < 0.05
     # between the two λ: the upper cluster's lower tail (its centre is above the fitted λ)
@@ -27,9 +30,9 @@ def test_lambda_moves_to_the_gap_between_two_clusters_of_familiar_pairs():
 
 def test_degenerate_margin_or_no_familiar_pairs_keep_the_fitted_lambda():
     ell = np.array([0.1, 0.2, 0.3])
-    lam, rep = valley_lambda(ell, np.zeros(3), 0.1, 0.2, 0.2, 0.2)
+    lam, rep = valley_lambda(ell, np.zeros(3), Thresholds(0.2, 0.1, "fit"), 0.2, 0.2)
     assert lam == 0.2 and "single value" in rep["note"]
-    lam, rep = valley_lambda(ell, np.ones(3), 0.1, 0.1, 0.3, 0.2)
+    lam, rep = valley_lambda(ell, np.ones(3), Thresholds(0.2, 0.1, "fit"), 0.1, 0.3)
     assert lam == 0.2 and "too few familiar" in rep["note"]
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.curation.episodes import (
     EpisodeScores,
     MatchedRule,
@@ -153,9 +154,9 @@ def test_matched_rule_from_a_scores_file(tmp_path):
     path = tmp_path / "scores.parquet"
     write_parquet(path, table, make_header("scores", 1))
     # λ 0.5, η 0.1: incompatible pairs are rows 0 and 5 (row 2 is novel)
-    assert matched_rule(path, "pair", 0.5, 0.1) == MatchedRule(pairs=2)
+    assert matched_rule(path, "pair", Thresholds(0.5, 0.1, "given")) == MatchedRule(pairs=2)
     # the 5% rule rejects episodes 0 and 2
-    assert matched_rule(path, "episode", 0.5, 0.1) == MatchedRule(episodes=2)
+    assert matched_rule(path, "episode", Thresholds(0.5, 0.1, "given")) == MatchedRule(episodes=2)
 
 
 def test_cli_deminf_own_cut_and_matched_to_the_m_filter(files):
@@ -183,7 +184,9 @@ def test_cli_deminf_own_cut_and_matched_to_the_m_filter(files):
     policy = init_policy(jax.random.key(0), kind="mlp", obs_dim=3, action_dim=2, n_members=3,
                          hidden=(8,))  # fmt: skip
     scores = files / "m-scores.parquet"
-    score_file(policy, files / "new.parquet", scores, ScoreConfig(chunk_size=32))
+    score_file(
+        policy, files / "new.parquet", scores, ScoreConfig.from_preset("square-nut", chunk_size=32)
+    )
     ell = read_scores(scores)[1]["likelihood"]
     lam = float(np.quantile(ell, 0.8))  # with η huge: the top 20% of pairs are M = 0
     n_inc = int((ell > lam).sum())  # the incompatible test is strict: ℓ > λ

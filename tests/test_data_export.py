@@ -107,17 +107,20 @@ def test_masks_added_by_other_tools_do_not_block_export(mh, tmp_path):
 
 
 def test_in_place_refuses_when_anything_else_changed(mh, monkeypatch):
-    _, demos = mh
-    real = robomimic_export.write_mask
+    path, demos = mh
+    real = robomimic_export.edit_copy
+    before = path.read_bytes()
 
-    def write_and_touch(p, key, names, header):
-        real(p, key, names, header)
-        with h5py.File(p, "a") as f:
+    def write_and_touch(source, copy, datasets, needs):
+        real(source, copy, datasets, needs)
+        with h5py.File(copy, "a") as f:
             f["data/demo_3"].attrs["num_samples"] = 99
 
-    monkeypatch.setattr(robomimic_export, "write_mask", write_and_touch)
-    with pytest.raises(ElicitError, match="content other than mask/k changed"):
+    monkeypatch.setattr(robomimic_export, "edit_copy", write_and_touch)
+    unchanged = r"content other than mask/k changed.*the source file was not changed"
+    with pytest.raises(ElicitError, match=unchanged):
         export(demos, "robomimic", mask_key="k", in_place=True)
+    assert path.read_bytes() == before
     with pytest.raises(ElicitError, match="needs --format robomimic and --mask-key"):
         ExportConfig(str(demos), "robomimic", in_place=True)
     with pytest.raises(ElicitError, match="not both"):

@@ -73,8 +73,11 @@ def test_offsets_gripper_and_motion_by_hand():
         gripper_sentence(base, closed)
         == "you keep the gripper open where the base has closed it (G)"
     )
-    still = plain_words("hammer-drawer", OBS_FIELDS, base, base, base, base, motion="still")
-    assert still == ("you hold still where the base moves",)
+    # the simulated layout's motion is read from the gripper, not from the motion argument
+    assert plain_words("hammer-drawer", OBS_FIELDS, base, base, base, base, motion="still") == ()
+    moving = states(route(0.0, z=0.1, n=4))  # 13 cm a step along x, centred on base
+    (still,) = plain_words("hammer-drawer", OBS_FIELDS, base, moving, base, moving)
+    assert still.startswith("you hold still where the base moves (your gripper still in 3 of 3")
 
 
 def test_nut_wrist_turned_and_grasp_point():

@@ -62,6 +62,35 @@ def _run(nut: SessionInputs, out: Path, operator: str, **kw):
     return run_session(setup, rec), rec
 
 
+def _live_by_episode(rec):
+    """The live states of each demonstration's indicator events, by episode."""
+    from elicit_jax.elicit.events import EpisodeStartEvent
+
+    out, current = {}, None
+    for e in rec.events:
+        if isinstance(e, EpisodeStartEvent):
+            current = e.episode
+        elif isinstance(e, IndicatorEvent):
+            out.setdefault(current, []).append(e.live)
+    return out
+
+
+def _check_live_agrees_with_verdicts(rec, reviews, horizon):
+    """At every step the live state agrees with the episode's final verdict."""
+    lives = _live_by_episode(rec)
+    for review in reviews:
+        states = lives[review.episode]
+        assert {s.allowed for s in states} == {int(0.05 * horizon)}  # fixed by the horizon
+        assert [s.red for s in states] == sorted(s.red for s in states)
+        doomed = [s.doomed for s in states]
+        assert doomed == sorted(doomed)  # once it can no longer be accepted, it never can
+        if any(doomed):
+            assert review.verdict == "rejected"
+        assert states[-1].accept_now == (review.verdict == "accepted")
+        assert (states[-1].red, states[-1].scored) == (review.incompatible, review.scored)
+    return lives
+
+
 def _yaw(q):
     from elicit_jax.sim.env import quat_yaw
 
@@ -104,6 +133,9 @@ def test_informed_conflicting_operator_is_rejected_where_its_style_differs(nut, 
                 names = [d.name for d in fb.fields[:2]] + [fb.actions[0].name]
                 assert "robot0_eef_quat" in names or "dyaw" in names, fb.text
     assert not store.demos_path.exists()  # nothing accepted
+    lives = _check_live_agrees_with_verdicts(rec, reviews, session.setup.task.config.horizon)
+    lights = {s.light for states in lives.values() for s in states}
+    assert {"red", "idle"} <= lights  # its pauses read as idle, never as green
 
 
 def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, tmp_path):
@@ -118,6 +150,7 @@ def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, t
     c = session.progress.counts
     assert (c.accepted, c.rejected, session.end_reason) == (2, 0, "complete")
     assert [r.verdict for r in rec.of(ReviewEvent)] == ["accepted", "accepted"]
+    _check_live_agrees_with_verdicts(rec, rec.of(ReviewEvent), session.setup.task.config.horizon)
     assert rec.of(SessionEndEvent)[0].reason == "complete"
     demos = read_demos(tmp_path / "op1" / "demos.parquet")
     collected = read_demos(nut.base)
@@ -125,7 +158,9 @@ def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, t
     assert demos.obs_fields == collected.obs_fields and demos.task == collected.task
     assert {"init_seed", "session_episode", "source_step"} <= set(demos.extra)
     assert set(CORE_COLUMNS) and demos.success.all()
-    score_demos(load_policy(nut.policy), demos, ScoreConfig())  # score takes it as is
+    score_demos(
+        load_policy(nut.policy), demos, ScoreConfig.from_preset("square-nut")
+    )  # score takes it as is
     store = SessionStore(tmp_path / "op1")
     ep = store.read_episode(int(demos.extra["session_episode"][0]))
     np.testing.assert_array_equal(demos.obs[: ep.length], ep.obs)

@@ -10,7 +10,7 @@ import jax
 import numpy as np
 import pytest
 
-from elicit_jax.compat.threshold_source import Thresholds
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.data.demos import fields_from_sizes, from_episodes
 from elicit_jax.elicit.config import SessionConfig
 from elicit_jax.elicit.events import (
@@ -146,7 +146,7 @@ def test_live_scorer_matches_the_batch_scorer_and_compiles_once(likelihood, ddof
     obs = rng.normal(size=(20, 5)).astype(np.float32)
     act = rng.uniform(-1, 1, size=(20, 3)).astype(np.float32)
     demos = from_episodes([{"obs": obs, "action": act}])
-    config = ScoreConfig(likelihood=likelihood, ddof=ddof, lambda_=0.3, eta=0.2)
+    config = ScoreConfig(thresholds=Thresholds(0.3, 0.2, "given"), likelihood=likelihood, ddof=ddof)
     scorer = LiveScorer(config, _policy(seed=0), bounds=(-1.0, 1.0))
     for policy in (_policy(seed=0), _policy(seed=1)):  # a retrained policy: same architecture
         ref = score_demos(policy, demos, config)
@@ -157,8 +157,12 @@ def test_live_scorer_matches_the_batch_scorer_and_compiles_once(likelihood, ddof
             assert s.compatibility == pytest.approx(ref["compatibility"][i], abs=1e-6)
             assert s.incompatible == bool(ref["incompatible"][i])
             np.testing.assert_allclose(s.policy_action, ref["prediction"][i], atol=1e-6)
-    assert scorer.score(policy, obs[0], act[0], lambda_=1e-6, eta=10.0).compatibility == 0.0
-    assert scorer.score(policy, obs[0], act[0], lambda_=10.0, eta=1e-6).compatibility == 1.0
+    assert (
+        scorer.score(policy, obs[0], act[0], Thresholds(1e-6, 10.0, "given")).compatibility == 0.0
+    )
+    assert (
+        scorer.score(policy, obs[0], act[0], Thresholds(10.0, 1e-6, "given")).compatibility == 1.0
+    )
     assert scorer.traces == 1  # policies, steps and thresholds never recompiled
 
 
@@ -265,8 +269,6 @@ def test_session_config_checks_and_round_trip():
     for bad in (
         {"mode": "nosy"},
         {"demos": 0},
-        {"thresholds": Thresholds(0.0, 0.05, "given")},
-        {"thresholds": Thresholds(0.4, float("nan"), "given")},
         {"thresholds": (0.4, 0.05)},
         {"operator": "noname"},
         {"reject_count": -2},
@@ -274,6 +276,9 @@ def test_session_config_checks_and_round_trip():
     ):
         with pytest.raises(ElicitError):
             SessionConfig(**{**base, **bad})
+    for lam, eta in ((0.0, 0.05), (0.4, float("nan"))):
+        with pytest.raises(ElicitError):  # a Thresholds value checks itself
+            Thresholds(lam, eta, "given")
     for bad in ({"lambda": 0.0}, {"eta": "x"}, {"thresholds": 0.4}, {"lambd": 1.0}):
         with pytest.raises(ElicitError):
             SessionConfig.from_dict({**c.to_dict(), **bad})
@@ -323,7 +328,7 @@ def test_a_stored_session_header_loads_and_is_written_back_the_same():
     assert (t.lam, t.eta, t.file, t.source) == (
         0.35, 0.045, Path("/data/thresholds.json"), "file /data/thresholds.json"
     )  # fmt: skip
-    assert c.score_config().lambda_ == 0.35 and c.score_config().eta == 0.045
+    assert c.score_config().thresholds.pair == (0.35, 0.045)
     assert (c.show, c.batch, c.reject_count) == (("prompt", "feedback"), 5, 3)
     assert dumps(c.to_dict()) == STORED_CONFIG  # new headers keep the layout, byte for byte
     no_file = {**json.loads(STORED_CONFIG), "thresholds_file": None}

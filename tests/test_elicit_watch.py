@@ -157,7 +157,7 @@ def test_watch_a_lerobot_folder_that_grows(setup, tmp_path, monkeypatch, capsys)
 
 
 def test_a_file_still_being_written_is_not_read(setup, tmp_path):
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     inbox = tmp_path / "inbox"

@@ -69,7 +69,7 @@ def test_a_file_of_random_bytes_named_npz(run, tmp_path):
 
 
 def test_watch_errors_name_the_item(run, tmp_path):
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     inbox = tmp_path / "inbox"

@@ -201,7 +201,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
 
     from elicit_jax.compat.measures import is_incompatible
     from elicit_jax.compat.score_file import read_scores
-    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.compat.thresholds import read_thresholds, read_thresholds_header
     from elicit_jax.curation.episodes import read_episode_scores
 
     spec, out, first = first_run(tmp_path, CURATION)
@@ -213,7 +213,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     assert {r.method for r in data.results} == methods
     assert {(c.method, c.model) for c in data.curation} == {("deminf", None), ("demo-score", "mlp")}
     # matched: whole demos, lowest DemInf score first, until the M-filter's pair count is reached
-    lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
+    lam, eta = read_thresholds(out / "thresholds/reach-pillar/mlp.json").pair
     header, pairs = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
     assert header["thresholds_source"].startswith("the pipeline's threshold fit")  # after it
     budget = int(is_incompatible(pairs["likelihood"], pairs["novelty"], lam, eta).sum())
@@ -230,7 +230,8 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     assert {(r.method, r.point) for r in data.heldout} == {
         ("base", None), ("naive", None), ("filtered", 0), ("filtered", 1)
     }  # fmt: skip
-    lo, hi = read_thresholds(out / "thresholds/reach-pillar/mlp.json")[2]["report"]["lambda_range"]
+    fitted = read_thresholds_header(out / "thresholds/reach-pillar/mlp.json")
+    lo, hi = fitted["report"]["lambda_range"]
     assert sorted(p.lambda_ for p in data.lambda_points) == pytest.approx([lo, hi])
     main_states = {r.init_states for r in data.results}
     assert len(main_states) == 1 and main_states.isdisjoint({r.init_states for r in data.heldout})
@@ -239,7 +240,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     assert "λ sensitivity" in md and (out / "report/maps/lambda-sensitivity.png").exists()
     assert "Curation baselines" in md
     # the valley rule: λ inside the fitted margin, η as fitted
-    valley, _, _ = read_thresholds(out / "thresholds/reach-pillar/mlp-valley.json")
+    valley = read_thresholds(out / "thresholds/reach-pillar/mlp-valley.json").lam
     assert lo <= valley <= hi and "valley rule" in md
     assert run(spec, out).result.ran == []
 
@@ -312,7 +313,7 @@ def test_tiny_pipeline_over_two_collections(tmp_path):
     assert "across 2 collections [0, 1]" in text and "## collection 1: reach-pillar" in text
     assert [r.collection for r in data.thresholds] == [0]  # collection 1 filters nothing
 
-    lam, eta, _ = read_thresholds(out / "thresholds/reach-pillar/mlp.json")
+    lam, eta = read_thresholds(out / "thresholds/reach-pillar/mlp.json").pair
     _, scores = read_scores(out / "scores/reach-pillar/mlp/new-conflict-right/scores.parquet")
     expected = is_incompatible(
         np.asarray(scores["likelihood"]), np.asarray(scores["novelty"]), lam, eta

@@ -53,7 +53,7 @@ def test_nan_predictions_never_score_as_compatible(run, tmp_path):
     policy = policy.replace(params=jax.tree.map(jax.numpy.asarray, nan))
     out = tmp_path / "s.parquet"
     with pytest.raises(ElicitError, match=r"not finite.*episode 0, step 0"):
-        score_file(policy, run / "demos.parquet", out, ScoreConfig())
+        score_file(policy, run / "demos.parquet", out, ScoreConfig.from_preset("square-nut"))
     assert not out.exists()
 
 

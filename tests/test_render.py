@@ -116,7 +116,7 @@ def test_demo_page_renders_as_before(tmp_path):
 
 
 def _session_data() -> dict:
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.elicit.events import Counts
 
     config = types.SimpleNamespace(
@@ -156,6 +156,7 @@ def test_session_report_renders_as_before():
 @pytest.mark.parametrize("axis", ["likelihood-error", "neg-likelihood-error"])
 def test_html_map_renders_as_before(tmp_path, axis):
     from elicit_jax.compat.maps import write_html
+    from elicit_jax.compat.thresholds import Thresholds
 
     rng = np.random.default_rng(3)
     n = 40
@@ -167,7 +168,7 @@ def test_html_map_renders_as_before(tmp_path, axis):
         "episode": rng.integers(0, 5, n),
         "step": np.arange(n),
     }
-    write_html(scores, 0.04, 0.05, tmp_path / "m.html", axis, bins=8)
+    write_html(scores, Thresholds(0.04, 0.05, "given"), tmp_path / "m.html", axis, bins=8)
     _check(f"map-{axis}.txt", shape((tmp_path / "m.html").read_text()))
 
 

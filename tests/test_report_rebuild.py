@@ -400,6 +400,7 @@ def test_a_report_names_no_folder_of_the_machine_that_ran_the_study(tmp_path):
     write_json(
         run / fit.output,
         {
+            "kind": "thresholds",  # read as what a fit stage writes
             "lambda": 0.5,
             "eta": 0.1,
             "method": "fit",

@@ -39,22 +39,54 @@ def _demos(actions, low=-1.0, high=1.0):
 
 def test_member_average_clips_to_the_demos_recorded_bounds():
     demos = _demos([[1.5, 0.3]], low=(-2.0, -2.0), high=(2.0, 2.0))
-    cfg = ScoreConfig(likelihood="member-average")
+    cfg = ScoreConfig.from_preset("square-nut", likelihood="member-average")
     got = score_demos(_zero_policy(2), demos, cfg)["likelihood"][0]
     assert got == pytest.approx((1.5**2 + 0.3**2) / 2)  # 1.17; a fixed ±1 clip gave 0.545
-    fixed = score_demos(_zero_policy(2), demos, ScoreConfig(likelihood="member-average", clip=1))
+    fixed = score_demos(
+        _zero_policy(2),
+        demos,
+        ScoreConfig.from_preset("square-nut", likelihood="member-average", clip=1),
+    )
     assert fixed["likelihood"][0] == pytest.approx((1.0 + 0.09) / 2)
 
 
 def test_action_scaling_uses_the_training_action_std():
     demos = _demos([[1.0, 0.0, 1.0]])
     policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
-    std = score_demos(policy, demos, ScoreConfig(action_scale="std"))["likelihood"][0]
-    assert std == pytest.approx((2.0**2 + 0.5**2) / 2)  # dim 1 constant in training: left out
-    none = score_demos(policy, demos, ScoreConfig())["likelihood"][0]
+    std = score_demos(policy, demos, ScoreConfig.from_preset("square-nut", action_scale="std"))[
+        "likelihood"
+    ][0]
+    # dim 1 never moved in training: scored in units of the others' median std (1.25)
+    assert std == pytest.approx((2.0**2 + 0.0 + 0.5**2) / 3)
+    none = score_demos(policy, demos, ScoreConfig.from_preset("square-nut"))["likelihood"][0]
     assert none == pytest.approx(2.0 / 3)
     with pytest.raises(ElicitError, match="predates"):
-        score_demos(_zero_policy(3), demos, ScoreConfig(action_scale="std"))
+        score_demos(
+            _zero_policy(3), demos, ScoreConfig.from_preset("square-nut", action_scale="std")
+        )
+
+
+def test_an_operator_driving_a_dim_the_base_never_moved_is_told_apart_under_std_scaling():
+    """Issue #45 item 8: with the still dim left out, an operator driving it at ±0.9 got
+    exactly the unmodified operator's ℓ."""
+    policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
+    cfg = ScoreConfig.from_preset("square-nut", action_scale="std")
+    plain = score_demos(policy, _demos([[0.5, 0.0, 1.0]]), cfg)["likelihood"][0]
+    driving = score_demos(policy, _demos([[0.5, 0.9, 1.0]]), cfg)["likelihood"][0]
+    assert driving > plain + 0.1
+    assert driving - plain == pytest.approx((0.9 / 1.25) ** 2 / 3)
+
+
+def test_std_scores_file_records_the_still_dims(tmp_path):
+    from elicit_jax.compat.score_file import score_file
+
+    policy = _zero_policy(3, action_std=jnp.array([0.5, 0.0, 2.0]))
+    write_demos(tmp_path / "d.parquet", _demos([[0.5, 0.9, 1.0]]))
+    cfg = ScoreConfig.from_preset("square-nut", action_scale="std")
+    score_file(policy, tmp_path / "d.parquet", tmp_path / "s.parquet", cfg)
+    header, _ = read_scores(tmp_path / "s.parquet")
+    assert header["still_action_dims"] == [1]
+    assert "never moved" in header["action_scale_note"]
 
 
 def test_mc_dropout_scoring_is_seeded_and_chunk_independent():
@@ -65,16 +97,24 @@ def test_mc_dropout_scoring_is_seeded_and_chunk_independent():
     )  # fmt: skip
     eps = [{"obs": rng.normal(size=(37, 2)), "action": rng.uniform(-1, 1, size=(37, 2))}]
     demos = from_episodes(eps, operators="op")
-    cfg = ScoreConfig(dropout_samples=4, dropout_seed=7, chunk_size=16)
+    cfg = ScoreConfig.from_preset("square-nut", dropout_samples=4, dropout_seed=7, chunk_size=16)
     a = score_demos(policy, demos, cfg)
-    b = score_demos(policy, demos, ScoreConfig(dropout_samples=4, dropout_seed=7, chunk_size=64))
+    b = score_demos(
+        policy,
+        demos,
+        ScoreConfig.from_preset("square-nut", dropout_samples=4, dropout_seed=7, chunk_size=64),
+    )
     # masks are keyed by row, not chunk (what differs is float rounding of other batch shapes)
     np.testing.assert_allclose(a["novelty"], b["novelty"], rtol=1e-5)
     again = score_demos(policy, demos, cfg)
     np.testing.assert_array_equal(a["novelty"], again["novelty"])  # deterministic given the seed
-    c = score_demos(policy, demos, ScoreConfig(dropout_samples=4, dropout_seed=8, chunk_size=16))
+    c = score_demos(
+        policy,
+        demos,
+        ScoreConfig.from_preset("square-nut", dropout_samples=4, dropout_seed=8, chunk_size=16),
+    )
     assert np.abs(a["novelty"] - c["novelty"]).max() > 1e-4
-    det = score_demos(policy, demos, ScoreConfig(chunk_size=16))
+    det = score_demos(policy, demos, ScoreConfig.from_preset("square-nut", chunk_size=16))
     # dropout on makes members disagree more: novelty is inflated, as in the original code
     assert a["novelty"].mean() > det["novelty"].mean()
     # pinned semantics: member k, pass i of row r uses fold_in(fold_in(fold_in(key(seed), r), k), i)
@@ -86,7 +126,11 @@ def test_mc_dropout_scoring_is_seeded_and_chunk_independent():
     samples = policy.sample_members(jnp.asarray(demos.obs[5:6]), keys, 4)
     np.testing.assert_allclose(samples[2 * 4 + 3, 0], manual, rtol=1e-6)
     with pytest.raises(ElicitError, match="trained with dropout"):
-        score_demos(_zero_policy(2), _demos([[0.1, 0.2]]), ScoreConfig(dropout_samples=2))
+        score_demos(
+            _zero_policy(2),
+            _demos([[0.1, 0.2]]),
+            ScoreConfig.from_preset("square-nut", dropout_samples=2),
+        )
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ SCRIPT = textwrap.dedent(
     import jax, numpy as np
     import elicit_jax.compat.score as score
     from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.data.demos import from_episodes
     from elicit_jax.policy.base import init_policy
     from elicit_jax.sim.env import make_task
@@ -36,7 +37,7 @@ SCRIPT = textwrap.dedent(
         policy = init_policy(jax.random.key(1), kind=kind, obs_dim=5, action_dim=3,
                              n_members=1 if kind == "mdn" else 3, hidden=(16, 16))
         eta = 0.5 if kind == "mlp" else 0.7  # about the median novelty of each
-        cfg = ScoreConfig(chunk_size=7, lambda_=0.3, eta=eta)
+        cfg = ScoreConfig(thresholds=Thresholds(0.3, eta, "given"), chunk_size=7)
         one = score.score_demos(policy, demos, cfg, n_devices=1)
         seen.clear()
         compiles = real._cache_size()
@@ -52,7 +53,7 @@ SCRIPT = textwrap.dedent(
                        hidden=(16,))
     # chunk 40: 40 // 16 = 2 length-16 episodes per call; 40 // 32 = 1 length-32 episode,
     # rounded up to 2 (one per device)
-    cfg = ScoreConfig(chunk_size=40)
+    cfg = ScoreConfig.from_preset("square-nut", chunk_size=40)
     one, two = score.score_demos(lstm, demos, cfg, 1), score.score_demos(lstm, demos, cfg)
     for k in ("likelihood", "novelty", "compatibility"):
         np.testing.assert_allclose(two[k], one[k], rtol=1e-6, atol=1e-6, err_msg=k)

@@ -47,7 +47,7 @@ def test_the_paper_presets_and_their_aliases_are_as_before():
         "hammer-drawer": "hammer-drawer",
         "hammerplaceenv": "hammer-drawer",
     }
-    assert (ScoreConfig().lambda_, ScoreConfig().eta) == PRESETS["square-nut"]
+    assert ScoreConfig.from_preset("square-nut").thresholds.pair == PRESETS["square-nut"]
     assert preset_for_task("NutAssemblyRound") == "round-nut" and preset_for_task(None) is None
 
 

@@ -6,7 +6,7 @@ import json
 import pytest
 
 from elicit_jax.compat.threshold_source import resolve_thresholds, task_thresholds
-from elicit_jax.compat.thresholds import write_thresholds
+from elicit_jax.compat.thresholds import Thresholds, write_thresholds
 from elicit_jax.compat.trust import Verdict
 from elicit_jax.errors import ElicitError
 
@@ -15,8 +15,9 @@ def _file(tmp_path, report, scale=None):
     scores = tmp_path / "scores.txt"  # not a scores artifact: raw units unless patched below
     scores.write_text("hand-set")
     path = tmp_path / "t.json"
+    given = Thresholds(0.25, 0.125, "given")
     write_thresholds(
-        path, lambda_=0.25, eta=0.125, method="hand", scores_path=scores, config={}, report=report
+        path, given, method="hand", inputs={"scores": scores}, config={}, report=report
     )
     if scale is not None:
         data = json.loads(path.read_text())

@@ -17,6 +17,7 @@ from fixtures_data import invoke, tiny_episodes, tiny_train_config
 from elicit_jax.artifact import make_header, write_parquet
 from elicit_jax.compat.fit import FitJob, fit_scores_file
 from elicit_jax.compat.measures import ScoreConfig, config_dict
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.data.demos import from_episodes, read_demos, write_demos
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.train import train_policy
@@ -62,7 +63,7 @@ def _scores(d, name, demos_file, dirty=(), incompatible=()):
     header = make_header(
         "scores",
         1,
-        config=config_dict(ScoreConfig()),
+        config=config_dict(ScoreConfig.from_preset("square-nut")),
         inputs={"demos": d / demos_file, "policy": d / "run"},
         policy={"which": "best", "seed": None},
         thresholds={"lambda": 0.4, "eta": 0.05},
@@ -124,25 +125,39 @@ def test_training_demos_not_in_the_scores_are_scored_under_the_policy(d, tmp_pat
     s = _scores(d, "new-scores.parquet", "new.parquet", incompatible=range(20, 25))
     src = f"10 scored now under {d / 'run' / 'seed0'}"
     # thresholds so low that every pair is incompatible: all 10 training demos rejected
-    h = _fit(s, tmp_path / "low.json", None, None, lambda_=1e-9, eta=1e9)
+    h = _fit(s, tmp_path / "low.json", None, None, manual=Thresholds(1e-9, 1e9, "given"))
     assert h["report"]["training_check"] == {"demos": 10, "rejected": 10, "source": src}
     assert "reject 10 of the base policy's 10 own training" in h["report"]["trust"]["severe"][0]
-    h = _fit(s, tmp_path / "high.json", None, None, lambda_=1e9, eta=1e-9)
+    h = _fit(s, tmp_path / "high.json", None, None, manual=Thresholds(1e9, 1e-9, "given"))
     assert h["report"]["training_check"]["rejected"] == 0
     # the training data file the checkpoint records is gone: said, and --base supplies it
     moved = tmp_path / "moved.parquet"
     shutil.move(d / "train.parquet", moved)
     try:
-        h = _fit(s, tmp_path / "gone.json", None, None, lambda_=1e-9, eta=1e9)
+        h = _fit(s, tmp_path / "gone.json", None, None, manual=Thresholds(1e-9, 1e9, "given"))
         (note,) = [u for u in h["report"]["trust"]["unchecked"] if "training" in u]
         assert "10 of the 10 training demonstrations" in note and "is not there" in note
         assert "pass --base" in note
-        h = _fit(s, tmp_path / "b.json", None, None, lambda_=1e-9, eta=1e9, base=(str(moved),))
+        h = _fit(
+            s,
+            tmp_path / "b.json",
+            None,
+            None,
+            manual=Thresholds(1e-9, 1e9, "given"),
+            base=(str(moved),),
+        )
         assert h["report"]["training_check"]["rejected"] == 10
     finally:
         shutil.move(moved, d / "train.parquet")
     with pytest.raises(ElicitError, match=r"new.parquet: is not the data the base policy"):
-        _fit(s, tmp_path / "w.json", None, None, lambda_=1e-9, eta=1e9, base=(d / "new.parquet",))
+        _fit(
+            s,
+            tmp_path / "w.json",
+            None,
+            None,
+            manual=Thresholds(1e-9, 1e9, "given"),
+            base=(d / "new.parquet",),
+        )
 
 
 def test_commands_that_load_thresholds_show_a_verdict_that_is_not_clean(d, tmp_path):

@@ -16,6 +16,7 @@ from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.compat.filtering import FilterResult
+    from elicit_jax.compat.thresholds import Thresholds
 
 
 def _scores_scale(scores: Path) -> str:
@@ -25,8 +26,22 @@ def _scores_scale(scores: Path) -> str:
     return str(read_header(scores).get("config", {}).get("action_scale", "none"))
 
 
+def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thresholds, list[str]]:
+    """:func:`~elicit_jax.compat.threshold_source.applied_thresholds` on a scores file."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.compat.score import SCORES_KIND
+    from elicit_jax.compat.threshold_source import applied_thresholds
+
+    header = read_header(scores)
+    if header.get("kind") != SCORES_KIND:
+        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", scores)
+    return applied_thresholds(header, scores, given, force)
+
+
 @app.command("fit-thresholds", rich_help_panel=COMPAT)
+@with_flags(th.HAND_SET, before="accept_fraction")
 def fit_thresholds_cmd(
+    ctx: typer.Context,
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
     compatible: str | None = typer.Option(
         None,
@@ -37,13 +52,6 @@ def fit_thresholds_cmd(
         None, "--incompatible", help="Same forms as --compatible."
     ),
     out: Path = typer.Option(..., "-o", "--out", help="thresholds.json to write."),
-    lambda_: float | None = typer.Option(
-        None,
-        "--lambda",
-        help="Hand-set λ instead of fitting (with --eta); contrast sets, if given, only "
-        "evaluate it.",
-    ),
-    eta: float | None = typer.Option(None, "--eta", help="Hand-set η (with --lambda)."),
     accept_fraction: float = typer.Option(0.05, "--accept-fraction", help="The 5% rule."),
     grid_size: int = typer.Option(64, "--grid-size", help="Quantile levels per axis."),
     force: bool = typer.Option(
@@ -56,6 +64,7 @@ def fit_thresholds_cmd(
         "those in the scores, and the file the checkpoint records).",
     ),
     overwrite: bool = OVERWRITE,
+    **flags: Any,
 ) -> None:
     """Fit (λ, η) so the 5% rule accepts the compatible set and rejects the incompatible one.
 
@@ -78,15 +87,14 @@ def fit_thresholds_cmd(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
-    from elicit_jax.compat.thresholds import FitConfig
+    from elicit_jax.compat.threshold_fit import FitConfig
 
     check_outputs([out], [scores], overwrite=overwrite)
     job = FitJob(
         compatible=compatible,
         incompatible=incompatible,
         fit=FitConfig(accept_fraction=accept_fraction, grid_size=grid_size),
-        lambda_=lambda_,
-        eta=eta,
+        manual=th.hand_set(ctx.params),
         force=force,
         base=() if base is None else (str(base),),
     )
@@ -95,7 +103,7 @@ def fit_thresholds_cmd(
 
 
 @app.command("filter", rich_help_panel=COMPAT)
-@with_flags(th.FLAGS, before="seed")
+@with_flags(th.APPLY_FLAGS, before="seed")
 def filter_cmd(
     ctx: typer.Context,
     scores: Path | None = fo.SCORES,
@@ -152,11 +160,16 @@ def filter_cmd(
 
     Example: elicit-jax filter --method cupid --policy runs/naive --trajectories steps.parquet
     --demos new.parquet --base base.parquet -o kept.parquet
+
+    Without --thresholds (or --lambda/--eta) the M-filter uses the thresholds the scores were
+    judged under, and says which; after fit-thresholds, pass --thresholds thresholds.json.
     """
     from elicit_jax.compat.filtering import filter_demos
 
     scale = _scores_scale(scores) if scores is not None else None
     given = th.from_params(ctx.params, action_scale=scale)
+    if scores is not None and (method not in fo.CURATORS or rate == "m"):
+        th.show_applied(_applied(scores, given, flags["force"])[1])
     inputs = [scores, demos, base, policy, source, flags["thresholds"], trajectories]
     fo.check_filter_outputs(out, method, export_out, overwrite, inputs)
     if method in fo.CURATORS:
@@ -164,8 +177,7 @@ def filter_cmd(
 
         if export is not None:
             raise ElicitError("--export works with the M-filter and its baselines only")
-        resolved = None if given is None else given.pair
-        curate(CurateArgs(method, demos, out, base, level, scores, resolved, rate, drop_fraction,
+        curate(CurateArgs(method, demos, out, base, level, scores, given, rate, drop_fraction,
                           policy, task, rollouts, policy_seed, trajectories, checkpoint,
                           proj_dim))  # fmt: skip
         return
@@ -188,7 +200,7 @@ def _print_filtered(r: FilterResult, out: Path, export_out: Path | None) -> None
 
 
 @app.command("map", rich_help_panel=COMPAT)
-@with_flags(th.FLAGS, before="axis")
+@with_flags(th.APPLY_FLAGS, before="axis")
 def map_cmd(
     ctx: typer.Context,
     scores: Path = typer.Option(..., "--scores", help="Scores artifact."),
@@ -207,7 +219,8 @@ def map_cmd(
     from elicit_jax.compat.maps import map_scores_file
 
     given = th.from_params(ctx.params, action_scale=_scores_scale(scores))
-    resolved = None if given is None else given.pair
     check_outputs([out], [scores, flags["thresholds"]], overwrite=overwrite)
-    lam, et = map_scores_file(scores, out, *(resolved if resolved else (None, None)), axis=axis)
-    typer.echo(f"{out}: map with λ={lam:.3g}, η={et:.3g}")
+    chosen, lines = _applied(scores, given, flags["force"])
+    th.show_applied(lines)
+    map_scores_file(scores, out, chosen, axis=axis)
+    typer.echo(f"{out}: map with λ={chosen.lam:.3g}, η={chosen.eta:.3g}")

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from elicit_jax.cli.app import COMPAT, app
 from elicit_jax.cli.outputs import OVERWRITE, drop_reason
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,7 +27,7 @@ class CurateArgs:
     base: Path | None
     level: str
     scores: Path | None
-    thresholds: tuple[float, float] | None
+    thresholds: Thresholds | None
     rate: str
     drop_fraction: float
     policy: Path | None
@@ -57,7 +61,6 @@ def curate(a: CurateArgs) -> None:
         ),
         cupid=CupidConfig(proj_dim=a.proj_dim, checkpoint=a.checkpoint, policy_seed=a.policy_seed),
     )
-    lam, eta = a.thresholds if a.thresholds else (None, None)
     result, per_demo = curate_file(
         config,
         a.demos,
@@ -65,8 +68,7 @@ def curate(a: CurateArgs) -> None:
         rate=a.rate,  # type: ignore[arg-type]
         level=a.level,  # type: ignore[arg-type]
         scores_path=a.scores,
-        lambda_=lam,
-        eta=eta,
+        thresholds=a.thresholds,
         base_path=a.base,
         policy_path=a.policy,
         progress=lambda epoch, rate_: typer.echo(

@@ -140,9 +140,9 @@ MASK_KEY = typer.Option(
 IN_PLACE = typer.Option(
     False,
     "--in-place",
-    help="robomimic: add the mask to the source file itself instead of a copy (checks "
-    "that nothing else in it changed; not atomic: keep a backup of files you cannot "
-    "regenerate).",
+    help="robomimic: add the mask to the source file itself: a masked copy made beside it "
+    "(room for one copy is needed), checked that nothing else changed, then renamed over it; "
+    "on any failure the source is left as it was.",
 )
 EXPORT_OVERWRITE = typer.Option(
     False, "--overwrite", help="Replace an existing output, or an existing mask/<KEY>."

@@ -132,6 +132,7 @@ def _watch_config(params: dict[str, Any]) -> WatchConfig:
     chosen = th.from_params(p, action_scale="none")
     if chosen is None:
         raise ElicitError("missing thresholds: give --thresholds, --lambda/--eta or --preset")
+    th.show_chosen(chosen)
     imp = do.import_config(p["inbox"], "", p)
     options = tuple(
         (f.name, getattr(imp, f.name))

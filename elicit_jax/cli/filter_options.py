@@ -17,7 +17,7 @@ from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.compat.filtering import ExportSpec, FilterConfig
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
 
 CURATORS = ("deminf", "demo-score", "cupid", "quality")
 """The ``--method`` values that are curation methods (docs/curation.md), not the M-filter."""
@@ -104,8 +104,7 @@ def filter_config(
         level=level,  # type: ignore[arg-type]
         method=method,
         pair_mode=pair_mode,  # type: ignore[arg-type]
-        lambda_=None if thresholds is None else thresholds.lam,
-        eta=None if thresholds is None else thresholds.eta,
+        thresholds=thresholds,
         seed=seed,
     )
 

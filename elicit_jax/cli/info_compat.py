@@ -73,12 +73,14 @@ def describe_thresholds(path: Path, header: dict[str, Any]) -> None:
     from rich.console import Console
 
     from elicit_jax.compat.show import print_report
+    from elicit_jax.compat.thresholds import ETA_KEY, LAMBDA_KEY, POLICY_KEY
 
     _kv(
         f"{path}: thresholds ({header.get('method')})",
         [
-            ("lambda", header.get("lambda")),
-            ("eta", header.get("eta")),
+            ("lambda", header.get(LAMBDA_KEY)),
+            ("eta", header.get(ETA_KEY)),
+            ("fitted for policy", header.get(POLICY_KEY) or "not recorded"),
             ("compatible set", header.get("config", {}).get("compatible")),
             ("incompatible set", header.get("config", {}).get("incompatible")),
             *_inputs(header),

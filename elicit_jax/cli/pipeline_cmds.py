@@ -120,13 +120,19 @@ def report(
       elicit-jax report --rebuild docs/results/f
     """
     from elicit_jax.artifact import check_outputs, holds_artifact, read_json
+    from elicit_jax.pipeline.report_folder import check_report_folder
 
-    # a rebuild in place needs no check here: rebuild_report refuses a folder without raw results
+    # an existing report is replaced only with --overwrite, and never when it holds the user's
+    # own files (a rebuild in place needs no check here: rebuild_report refuses a folder
+    # without raw results)
+    target = out or (None if rebuild else run_dir / "report")
     check_outputs(
-        [out or (None if rebuild else run_dir / "report")],
+        [target],
         overwrite=overwrite,
         replaceable=holds_artifact("pipeline-report", "study-report", "session-report"),
     )
+    if target is not None:
+        check_report_folder(target)
     if rebuild:
         from elicit_jax.pipeline.run import rebuild_report
 

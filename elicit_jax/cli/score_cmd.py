@@ -3,6 +3,7 @@ with the thresholds it falls back to when none are given (the demos' task's pape
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -13,13 +14,15 @@ from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import COMPAT, app, check_seed
 from elicit_jax.cli.outputs import OVERWRITE
 from elicit_jax.cli.params import from_params, with_flags
+from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.compat.measures import ScoreConfig
+    from elicit_jax.compat.thresholds import Thresholds
 
 
 @app.command(rich_help_panel=COMPAT)
-@with_flags(th.FLAGS_AND_PRESET, before="likelihood")
+@with_flags((*th.FLAGS_AND_PRESET, ("force", bool, th.FORCE)), before="likelihood")
 def score(
     ctx: typer.Context,
     policy: Path = typer.Option(..., "--policy", help="Base policy checkpoint or run directory."),
@@ -33,7 +36,7 @@ def score(
         "none",
         "--action-scale",
         help="none (paper: raw action units) or std (each dim divided by the training actions' "
-        "std; constant dims left out).",
+        "std; dims constant there by the others' median std).",
     ),
     dropout_samples: int = typer.Option(
         0,
@@ -71,12 +74,12 @@ def score(
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import episodes_path
 
-    (lam, et), source = _score_thresholds(demos, ctx.params, action_scale)
+    chosen = _score_thresholds(demos, ctx.params, action_scale)
     inputs = [demos, policy, flags["thresholds"]]
     check_outputs([out, episodes_path(out)], inputs, overwrite=overwrite)
-    config = from_params(ScoreConfig, ctx.params, lambda_=lam, eta=et)
+    config = from_params(ScoreConfig, ctx.params, thresholds=chosen)
     which_: str | int = int(which) if which.isdigit() else which
-    _score_and_show(policy, demos, out, config, which_, seed, source)
+    _score_and_show(policy, demos, out, config, which_, seed, flags["force"])
 
 
 def _score_and_show(
@@ -86,18 +89,34 @@ def _score_and_show(
     config: ScoreConfig,
     which: str | int,
     seed: int | None,
-    source: str | None,
+    force: bool,
 ) -> None:
-    """Load the checkpoint, warn about a one-member policy, score with a progress bar and
-    print a table per operator."""
+    """Load the checkpoint, check a thresholds file was fitted for it, warn about a
+    one-member policy, score with a progress bar and print a table per operator."""
     from rich.console import Console
 
     from elicit_jax.cli.info_compat import print_operator_table
-    from elicit_jax.compat.score_file import one_member_note, score_file
+    from elicit_jax.compat.score_file import (
+        one_member_note,
+        policy_sha256,
+        scale_note,
+        score_file,
+    )
     from elicit_jax.compat.show import scoring_bar
+    from elicit_jax.compat.threshold_source import check_policy
     from elicit_jax.policy.checkpoint import load_policy
 
     loaded = load_policy(policy, which, seed=seed)
+    chosen = config.thresholds
+    if chosen is None:
+        raise ElicitError("score needs thresholds: none resolved")
+    typer.echo(f"thresholds: {chosen.describe()}", err=True)
+    warning = check_policy(chosen, policy_sha256(loaded), str(policy), force)
+    if warning:
+        typer.echo(warning, err=True)
+    scaled = scale_note(loaded, config).get("action_scale_note")
+    if scaled:
+        typer.echo(f"note: --action-scale std: {scaled}", err=True)
     note = one_member_note(loaded, config)
     if note:
         Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)
@@ -109,18 +128,15 @@ def _score_and_show(
         policy_path=policy,
         policy_info={"which": which, "seed": seed},
         progress=scoring_bar,
-        thresholds_source=source,
     )
     print_operator_table(
         result.episodes,
-        title=f"{demos.name} scored (λ={config.lambda_:.3g}, η={config.eta:.3g}, "
+        title=f"{demos.name} scored (λ={chosen.lam:.3g}, η={chosen.eta:.3g}, "
         f"reject > {100 * config.accept_fraction:g}% incompatible)",
     )
 
 
-def _score_thresholds(
-    demos: Path, params: Mapping[str, Any], action_scale: str
-) -> tuple[tuple[float, float], str]:
+def _score_thresholds(demos: Path, params: Mapping[str, Any], action_scale: str) -> Thresholds:
     """``score``'s (λ, η) and where they came from, in the units of ``action_scale``: the
     flags', else the demos' task's (:func:`~elicit_jax.compat.threshold_source.task_thresholds`)."""
     from elicit_jax.artifact import read_header
@@ -131,8 +147,8 @@ def _score_thresholds(
         chosen, notes = task_thresholds(read_header(demos).get("task", "unknown"), action_scale)
         for note in notes:
             typer.echo(note, err=True)
-        return chosen.pair, chosen.source
+        return chosen
     if action_scale == "std" and params["thresholds"] is None:
         typer.echo("thresholds: --lambda/--eta read in std-scaled units", err=True)
-        return given.pair, given.source + " (std-scaled units)"
-    return given.pair, given.source
+        return dataclasses.replace(given, source=given.source + " (std-scaled units)")
+    return given

@@ -8,19 +8,20 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from elicit_jax.cli import session_options as so
+from elicit_jax.cli import threshold_options as th
 from elicit_jax.cli.app import ELICIT, app
 from elicit_jax.cli.params import with_flags
-from elicit_jax.cli.threshold_options import ETA, LAMBDA, THRESHOLDS, thresholds_from_flags
 from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.web.hub import OperatorHub
 
 DEMO_TASK = "reach-pillar"
 
 
 @app.command("serve", rich_help_panel=ELICIT)
-@with_flags(so.SERVE_FLAGS)
+@with_flags((*so.SERVE_FLAGS, *th.FLAGS_AND_PRESET))
 def serve_cmd(
     ctx: typer.Context,
     sessions: Path = typer.Option(
@@ -49,10 +50,6 @@ def serve_cmd(
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
-    thresholds: Path | None = THRESHOLDS,
-    lambda_: float | None = LAMBDA,
-    eta: float | None = ETA,
-    preset: str | None = so.PRESET,
     **flags: Any,
 ) -> None:
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
@@ -71,21 +68,21 @@ def serve_cmd(
     from elicit_jax.web.serve import serve
 
     given = so.given(ctx.params)
-    chosen = thresholds_from_flags(thresholds, lambda_, eta, preset, action_scale="none")
+    chosen = th.from_params(ctx.params, action_scale="none")
     if demo_dir is not None and not demo:
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
-        thresholds, chosen = _demo_inputs(given, demo_dir, policy, base_demos, chosen)
+        chosen = _demo_inputs(given, demo_dir, policy, base_demos, chosen)
     server = {"sessions": str(sessions), "host": host, "port": port, "token": token}
     server |= {"max_operators": max_operators, "admin_token": admin_token}
-    config = _serve_config(given, chosen, thresholds, allow_hosts=tuple(allow_host), **server)
+    config = _serve_config(given, chosen, allow_hosts=tuple(allow_host), **server)
+    th.show_chosen(config.session.thresholds)
     serve(config, echo=typer.echo, summary=_print_summary)
 
 
-def _serve_config(
-    given: dict[str, Any], chosen: Any, thresholds: Path | None, **server: Any
-) -> Any:
-    """The ``ServeConfig`` of the given flags (``server``: its fields other than the session).
+def _serve_config(given: dict[str, Any], chosen: Thresholds | None, **server: Any) -> Any:
+    """The ``ServeConfig`` of the given flags (``server``: its fields other than the session)
+    and the thresholds, kept whole (their source, file and recorded verdict).
 
     Raises:
       ElicitError: an input or the thresholds missing.
@@ -93,17 +90,14 @@ def _serve_config(
     from elicit_jax.elicit.config import SessionConfig
     from elicit_jax.web.serve import ServeConfig, with_person_horizon
 
-    resolved = None if chosen is None else chosen.pair
     missing = [
         f"--{k.replace('_', '-')}" for k in ("task", "policy", "base_demos") if k not in given
     ]
-    if resolved is None:
+    if chosen is None:
         missing.append("thresholds (--thresholds, --lambda/--eta or --preset)")
     if missing:
         raise ElicitError(f"missing {', '.join(missing)} (or use --demo)")
-    given |= {"lambda": resolved[0], "eta": resolved[1], "operator": "browser:_"}
-    given["thresholds_file"] = None if thresholds is None else str(thresholds)
-    session = SessionConfig.from_dict(given)
+    session = SessionConfig.from_dict({**given, "operator": "browser:_"}, thresholds=chosen)
     # a person at a keyboard needs longer than the task's horizon, unless told otherwise
     return ServeConfig(
         session=session if "horizon" in given else with_person_horizon(session), **server
@@ -112,9 +106,9 @@ def _serve_config(
 
 def _demo_inputs(
     given: dict[str, Any], demo_dir: Path | None, policy: Any, base_demos: Any, chosen: Any
-) -> tuple[Path, Any]:
+) -> Thresholds | None:
     """``--demo``: the built-in inputs (built once, cached) go into ``given``; returns the
-    thresholds file and the thresholds read from it.
+    thresholds read from the built-in thresholds file.
 
     Raises:
       ElicitError: an input flag or another task given with ``--demo``.
@@ -135,7 +129,7 @@ def _demo_inputs(
     inputs = demo_inputs(DemoRecipe(task=DEMO_TASK), demo_dir, echo=typer.echo, console=Console())
     given |= {"task": DEMO_TASK, "policy": str(inputs.policy)}
     given["base_demos"] = str(inputs.base_demos)
-    return inputs.thresholds, thresholds_from_flags(inputs.thresholds, None, None)
+    return th.thresholds_from_flags(inputs.thresholds, None, None)
 
 
 def _print_summary(hub: OperatorHub) -> None:

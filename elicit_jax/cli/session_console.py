@@ -97,6 +97,8 @@ def elicit(
     )
     if resumed:
         console.print(f"resuming the session in {out}")
+    # which (λ, η) the session judges by, and where they came from
+    console.print(f"thresholds: {setup.config.thresholds.describe()}", markup=False)
     session = run_session(setup, operator, [lambda s: ConsoleReporter(s, console)])
     console.print(summary_table(session))
     return session

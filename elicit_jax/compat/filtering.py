@@ -38,18 +38,21 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from elicit_jax.artifact import (
+    atomic_paths,
     make_header,
     matches_recorded,
     refuse_overwriting_inputs,
     write_parquet,
 )
-from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
+from elicit_jax.compat.measures import check_accept_fraction, is_incompatible
+from elicit_jax.compat.thresholds import Thresholds, config_fields, from_config_fields
 from elicit_jax.data.duplicates import drop_rows, duplicate_reasons, duplicates_of
 from elicit_jax.errors import ElicitError
 
@@ -67,8 +70,8 @@ class FilterConfig:
       level: ``pair`` or ``episode``.
       method: one of :data:`METHODS`.
       pair_mode: ``renumber`` or ``split`` (pair level only).
-      lambda_: λ override (None: the ``incompatible`` column of the scores).
-      eta: η override (needed together with ``lambda_``).
+      thresholds: (λ, η) to judge the pairs by (None: the ``incompatible`` column of the
+        scores, judged under the thresholds they were scored with).
       accept_fraction: the 5% rule's fraction (episode level).
       seed: seed of the ``random`` baseline.
     """
@@ -76,8 +79,7 @@ class FilterConfig:
     level: Literal["pair", "episode"] = "pair"
     method: str = "m"
     pair_mode: Literal["renumber", "split"] = "renumber"
-    lambda_: float | None = None
-    eta: float | None = None
+    thresholds: Thresholds | None = None
     accept_fraction: float = 0.05
     seed: int = 0
 
@@ -88,11 +90,25 @@ class FilterConfig:
             raise ElicitError(f"unknown method '{self.method}' (choose {', '.join(METHODS)})")
         if self.pair_mode not in ("renumber", "split"):
             raise ElicitError(f"unknown pair mode '{self.pair_mode}' (choose renumber or split)")
-        if (self.lambda_ is None) != (self.eta is None):
-            raise ElicitError("give both lambda and eta, or neither")
-        if self.lambda_ is not None:
-            check_thresholds(self.lambda_, self.eta)
+        if self.thresholds is not None and not isinstance(self.thresholds, Thresholds):
+            raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
         check_accept_fraction(self.accept_fraction)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form, as artifacts and pipeline stage configs store it (the thresholds as
+        ``lambda_`` and ``eta``, :func:`~elicit_jax.compat.thresholds.config_fields`)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        thresholds = d.pop("thresholds")
+        return {**d, **config_fields(thresholds, key="lambda_")}
+
+    @classmethod
+    def from_dict(
+        cls, data: Mapping[str, Any], thresholds: Thresholds | None = None
+    ) -> FilterConfig:
+        """Inverse of :meth:`to_dict`; ``thresholds``, when given, replace the stored ones."""
+        d = dict(data)
+        stored = from_config_fields(d, "the filter config", key="lambda_")
+        return cls(**d, thresholds=thresholds if thresholds is not None else stored)
 
 
 def _episode_index(episode: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -111,8 +127,8 @@ def drop_mask(scores: dict[str, np.ndarray], config: FilterConfig) -> tuple[np.n
       ``(drop (N,) bool, reason)``.
     """
     ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
-    if config.lambda_ is not None:
-        inc = is_incompatible(ell, nu, config.lambda_, config.eta)
+    if config.thresholds is not None:
+        inc = is_incompatible(ell, nu, *config.thresholds.pair)
     else:
         inc = np.asarray(scores["incompatible"], bool)
     ids, index = _episode_index(np.asarray(scores["episode"]))
@@ -280,10 +296,12 @@ def filter_demos(
     if base_path is not None:
         inputs["base"] = Path(base_path)
     new, out = _kept_demos(demos, drop, config, base)
-    cfg = dataclasses.asdict(config)
+    cfg = config.to_dict()
     record = {"filter": cfg} | ({"duplicates_of_base": dups} if dups else {})
-    write_demos(out_path, out, config=record, inputs=inputs, seed=config.seed)
-    lp = _write_drop_log(out_path, demos, scores, drop, reasons, cfg, inputs)
+    lp = log_path(out_path)
+    with atomic_paths([lp, out_path]) as (log_tmp, out_tmp):  # the pair is replaced together
+        write_demos(out_tmp, out, config=record, inputs=inputs, seed=config.seed)
+        _write_drop_log(log_tmp, demos, scores, drop, reasons, cfg, inputs)
     return FilterResult(
         Path(out_path),
         lp,
@@ -334,15 +352,15 @@ def _kept_demos(demos: Any, drop: np.ndarray, config: FilterConfig, base: Any) -
 
 
 def _write_drop_log(
-    out_path: str | Path,
+    lp: Path,
     demos: Any,
     scores: dict[str, np.ndarray],
     drop: np.ndarray,
     reasons: np.ndarray,
     cfg: dict[str, Any],
     inputs: dict[str, Path],
-) -> Path:
-    """Write every dropped pair, with its scores and reason, beside ``out_path``."""
+) -> None:
+    """Write every dropped pair, with its scores and reason, to ``lp``."""
     import pyarrow as pa
 
     log = pa.table(
@@ -356,13 +374,11 @@ def _write_drop_log(
             "reason": pa.array(reasons[drop].tolist(), type=pa.string()),
         }
     )
-    lp = log_path(out_path)
     write_parquet(
         lp,
         log,
         make_header(LOG_KIND, 1, config=cfg, inputs=inputs, n_dropped=int(drop.sum())),
     )
-    return lp
 
 
 def _export_kept(out_path: str | Path, export: ExportSpec) -> dict[str, Any]:

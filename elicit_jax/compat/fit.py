@@ -16,15 +16,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from elicit_jax.compat.measures import check_thresholds, is_incompatible
+from elicit_jax.compat.measures import is_incompatible
 from elicit_jax.compat.selection import parse_selection, select_episodes
-from elicit_jax.compat.thresholds import (
+from elicit_jax.compat.threshold_fit import (
     FitConfig,
     evaluate_thresholds,
     fit_thresholds,
     operator_rejections,
-    write_thresholds,
 )
+from elicit_jax.compat.thresholds import Thresholds, fitted_on, write_thresholds
 from elicit_jax.compat.trust import (
     Verdict,
     assess_fit,
@@ -52,9 +52,8 @@ class FitJob:
         ``label:col=value``); optional with manual thresholds.
       incompatible: selection text of the incompatible set.
       fit: fitting settings.
-      lambda_: manual λ (with ``eta``): skip fitting, only evaluate (if sets are given) and
-        record.
-      eta: manual η.
+      manual: hand-set thresholds: skip fitting, only evaluate (if sets are given) and
+        record them.
       force: write a fit judged meaningless (:mod:`elicit_jax.compat.trust`) anyway, marked
         untrustworthy, instead of refusing.
       base: the base policy's training demonstrations (``--base``), to check the thresholds
@@ -65,19 +64,14 @@ class FitJob:
     compatible: str | None = None
     incompatible: str | None = None
     fit: FitConfig = dataclasses.field(default_factory=FitConfig)
-    lambda_: float | None = None
-    eta: float | None = None
+    manual: Thresholds | None = None
     force: bool = False
     base: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if (self.lambda_ is None) != (self.eta is None):
-            raise ElicitError("give both --lambda and --eta for a manual override, or neither")
-        if self.lambda_ is not None:
-            check_thresholds(self.lambda_, self.eta)
         if (self.compatible is None) != (self.incompatible is None):
             raise ElicitError("give both --compatible and --incompatible, or neither")
-        if self.compatible is None and self.lambda_ is None:
+        if self.compatible is None and self.manual is None:
             raise ElicitError(
                 "fitting needs contrast sets: give --compatible and --incompatible (or --lambda "
                 "and --eta to record hand-set thresholds)"
@@ -102,9 +96,9 @@ def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) 
     """λ, η, method and the contrast part of the report (fit, or manual thresholds)."""
     ell, nu, ep = s["likelihood"], s["novelty"], s["episode"]
     f = job.fit.accept_fraction
-    if job.lambda_ is None:
+    if job.manual is None:
         fit = fit_thresholds(ell, nu, ep, labels, job.fit)
-        lam, eta, method = fit.lambda_, fit.eta, "fit"
+        chosen, method = fit.thresholds, "fit"
         ba, decisions = fit.balanced_accuracy, fit.episodes
         extra = {
             "margin_steps": fit.margin_steps,
@@ -115,10 +109,10 @@ def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) 
             "n_loo": fit.n_loo,
         }
     else:
-        lam, eta, method = float(job.lambda_), float(job.eta), "manual"
+        chosen, method = job.manual, "manual"
         if not labels:
-            return {"lambda": lam, "eta": eta, "method": method, "report": {}}
-        ba, decisions = evaluate_thresholds(ell, nu, ep, labels, lam, eta, f)
+            return {"thresholds": chosen, "method": method, "report": {}}
+        ba, decisions = evaluate_thresholds(ell, nu, ep, labels, chosen, f)
         extra = {}
     names = s.get("source_episode")
     first = {int(e): i for i, e in reversed(list(enumerate(ep)))} if names is not None else {}
@@ -148,12 +142,12 @@ def _fit_report(s: dict[str, np.ndarray], labels: dict[int, bool], job: FitJob) 
         "n_incompatible": int(np.sum(~decisions["compatible"])),
         "contrast": contrast,
     }
-    return {"lambda": lam, "eta": eta, "method": method, "report": report}
+    return {"thresholds": chosen, "method": method, "report": report}
 
 
 def _rejected_episodes(s: dict[str, np.ndarray], out: dict[str, Any], f: float) -> np.ndarray:
     ell, nu, ep = s["likelihood"], s["novelty"], s["episode"]
-    inc = is_incompatible(ell, nu, out["lambda"], out["eta"])
+    inc = is_incompatible(ell, nu, *out["thresholds"].pair)
     ids, index = np.unique(ep, return_inverse=True)
     n_inc = np.bincount(index, weights=inc, minlength=len(ids))
     return ids[n_inc > f * np.bincount(index, minlength=len(ids))]
@@ -182,7 +176,7 @@ def _training_verdict(
     ev: TrainingEvidence, labels: dict[int, bool], out: dict[str, Any], f: float
 ) -> tuple[Verdict, dict[str, Any]]:
     """Checks (a) and (c) against the base policy's training demos, and their report."""
-    rejected = ev.rejected(out["lambda"], out["eta"], f)
+    rejected = ev.rejected(out["thresholds"], f)
     verdict = Verdict(unchecked=ev.notes) + training_rejections(rejected, ev.n_demos, ev.source)
     if labels and ev.training is not None and ev.scored is not None:
         sets = {
@@ -244,7 +238,7 @@ def fit_scores_file(
     verdict = dataclasses.replace(verdict, forced=job.force and verdict.meaningless)
     report["trust"] = verdict.to_dict()
     report["per_operator"] = operator_rejections(
-        s["likelihood"], s["novelty"], s["episode"], s["operator"], out["lambda"], out["eta"], f
+        s["likelihood"], s["novelty"], s["episode"], s["operator"], out["thresholds"], f
     )
     config = {
         "compatible": job.compatible,
@@ -253,7 +247,7 @@ def fit_scores_file(
         "base": list(job.base),
         **dataclasses.asdict(job.fit),
     }
-    header = {"lambda": out["lambda"], "eta": out["eta"], "method": out["method"]}
+    header = {**out["thresholds"].to_json(), "method": out["method"]}
     if verdict.meaningless and out["method"] == "fit" and not job.force:
         if show is not None:
             show({**header, "report": report})
@@ -264,10 +258,9 @@ def fit_scores_file(
         )
     header = write_thresholds(
         out_path,
-        lambda_=out["lambda"],
-        eta=out["eta"],
+        fitted_on(out["thresholds"], scores_header),
         method=out["method"],
-        scores_path=scores_path,
+        inputs={"scores": scores_path},
         config=config,
         report=report,
     )

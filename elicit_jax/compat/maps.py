@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import atomic_path
-from elicit_jax.compat.measures import check_thresholds, is_incompatible
+from elicit_jax.compat.measures import is_incompatible
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 from elicit_jax.render import html_page
 
@@ -36,7 +37,8 @@ def _log_ell(ell: np.ndarray) -> np.ndarray:
     return np.log10(np.maximum(np.asarray(ell, np.float64), FLOOR))
 
 
-def _ranges(ell: np.ndarray, nu: np.ndarray, lam: float, eta: float) -> tuple[float, ...]:
+def _ranges(ell: np.ndarray, nu: np.ndarray, t: Thresholds) -> tuple[float, ...]:
+    lam, eta = t.pair
     lx = _log_ell(ell)
     x0 = min(float(np.quantile(lx, 0.001)), np.log10(lam)) - 0.2
     x1 = max(float(lx.max()), np.log10(lam)) + 0.2
@@ -59,8 +61,7 @@ def _x_label(axis: str) -> str:
 
 def write_png(
     scores: Mapping[str, np.ndarray],
-    lambda_: float,
-    eta: float,
+    thresholds: Thresholds,
     out: str | Path,
     axis: str = "likelihood-error",
     bins: int = 60,
@@ -69,8 +70,7 @@ def write_png(
 
     Args:
       scores: per-pair ``likelihood``, ``novelty``, ``operator`` (and ``incompatible``).
-      lambda_: λ of the box.
-      eta: η of the box.
+      thresholds: (λ, η) of the box.
       out: PNG path.
       axis: :data:`AXES`.
       bins: histogram bins per axis.
@@ -85,9 +85,10 @@ def write_png(
     if axis not in AXES:
         raise ElicitError(f"unknown axis '{axis}' (choose {', '.join(AXES)})")
     ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
+    lambda_, eta = thresholds.pair
     ops = np.asarray(scores["operator"]).astype(str)
     names = sorted(set(ops.tolist()))
-    x0, x1, y0, y1 = _ranges(ell, nu, lambda_, eta)
+    x0, x1, y0, y1 = _ranges(ell, nu, thresholds)
     xe, ye = np.linspace(x0, x1, bins + 1), np.linspace(y0, y1, bins + 1)
     ncol = min(3, len(names))
     nrow = -(-len(names) // ncol)
@@ -140,8 +141,7 @@ def _subsample(n: int, limit: int, seed: int = 0) -> np.ndarray:
 
 def write_html(
     scores: Mapping[str, np.ndarray],
-    lambda_: float,
-    eta: float,
+    thresholds: Thresholds,
     out: str | Path,
     axis: str = "likelihood-error",
     max_points: int = 4000,
@@ -152,8 +152,7 @@ def write_html(
     Args:
       scores: per-pair ``likelihood``, ``novelty``, ``compatibility``, ``operator``,
         ``episode``, ``step``.
-      lambda_: λ of the box.
-      eta: η of the box.
+      thresholds: (λ, η) of the box.
       out: HTML path.
       axis: :data:`AXES`.
       max_points: points drawn per operator (a seeded subsample; the density uses all).
@@ -162,8 +161,9 @@ def write_html(
     if axis not in AXES:
         raise ElicitError(f"unknown axis '{axis}' (choose {', '.join(AXES)})")
     ell, nu = np.asarray(scores["likelihood"]), np.asarray(scores["novelty"])
-    frame = _Frame(*_ranges(ell, nu, lambda_, eta), sign=-1 if axis == AXES[1] else 1)
-    parts = _density_svg(frame, ell, nu, bins) + _axes_svg(frame, lambda_, eta, axis)
+    lambda_, eta = thresholds.pair
+    frame = _Frame(*_ranges(ell, nu, thresholds), sign=-1 if axis == AXES[1] else 1)
+    parts = _density_svg(frame, ell, nu, bins) + _axes_svg(frame, thresholds, axis)
     points, legend = _points_svg(frame, scores, max_points)
     w, h = _SVG_SIZE
     svg = f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}">'
@@ -213,7 +213,8 @@ def _density_svg(f: _Frame, ell: np.ndarray, nu: np.ndarray, bins: int) -> list[
     return parts
 
 
-def _axes_svg(f: _Frame, lambda_: float, eta: float, axis: str) -> list[str]:
+def _axes_svg(f: _Frame, thresholds: Thresholds, axis: str) -> list[str]:
+    lambda_, eta = thresholds.pair
     """The incompatible box, the tick labels, the axis titles and the frame."""
     (w, h), pad = _SVG_SIZE, _SVG_PAD
     bx = sorted((float(f.px(np.log10(lambda_))), float(f.px(f.x1))))
@@ -297,16 +298,15 @@ document.querySelectorAll("input[data-op]").forEach(box => {{
 
 def write_map(
     scores: Mapping[str, np.ndarray],
-    lambda_: float,
-    eta: float,
+    thresholds: Thresholds,
     out: str | Path,
     axis: str = "likelihood-error",
 ) -> None:
     """Write a PNG or (for ``.html``/``.htm`` paths) an interactive HTML map."""
     if Path(out).suffix.lower() in (".html", ".htm"):
-        write_html(scores, lambda_, eta, out, axis)
+        write_html(scores, thresholds, out, axis)
     elif Path(out).suffix.lower() == ".png":
-        write_png(scores, lambda_, eta, out, axis)
+        write_png(scores, thresholds, out, axis)
     else:
         raise ElicitError("map output must end in .png or .html", out)
 
@@ -314,21 +314,17 @@ def write_map(
 def map_scores_file(
     scores_path: str | Path,
     out: str | Path,
-    lambda_: float | None = None,
-    eta: float | None = None,
+    thresholds: Thresholds,
     axis: str = "likelihood-error",
-) -> tuple[float, float]:
-    """Draw the map of a scores file (thresholds default to those it was scored with)."""
+) -> None:
+    """Draw the map of a scores file under ``thresholds`` (those it was scored with, or others:
+    :func:`~elicit_jax.compat.threshold_source.applied_thresholds` chooses)."""
     from elicit_jax.artifact import refuse_overwriting_inputs
     from elicit_jax.compat.score_file import read_scores
 
     refuse_overwriting_inputs([out], [scores_path])
-    header, scores = read_scores(
+    _, scores = read_scores(
         scores_path,
         columns=["episode", "operator", "step", "likelihood", "novelty", "compatibility"],
     )
-    lam = header["thresholds"]["lambda"] if lambda_ is None else lambda_
-    et = header["thresholds"]["eta"] if eta is None else eta
-    lam, et = check_thresholds(lam, et)
-    write_map(scores, lam, et, out, axis)
-    return lam, et
+    write_map(scores, thresholds, out, axis)

@@ -16,8 +16,9 @@ predictions ``p`` of shape ``(K, A)`` at state ``s`` and the demonstrated action
   ``ℓ = λ`` M is 0 but the pair is not flagged).
 
 Options beyond the paper (default off): *action scaling* (``action_scale="std"``) divides each
-action dim by the std of the base policy's training actions and leaves dims that were constant
-there out of both means, so a ±1 gripper does not dominate ℓ; *MC-dropout scoring*
+action dim by the std of the base policy's training actions, so a ±1 gripper does not dominate
+ℓ; a dim that was constant there is divided by the median std of the others instead (it has
+none of its own), so driving it still counts; *MC-dropout scoring*
 (``dropout_samples=N``) runs every member N times with its dropout active, the K·N predictions
 forming the ensemble — the original code scored with dropout on.
 
@@ -30,13 +31,16 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import jax.numpy as jnp
 from flax import struct
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.registry import preset_names, preset_table
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
 
 Likelihood = Literal["ensemble-mean", "member-average"]
 LIKELIHOODS: tuple[str, ...] = ("ensemble-mean", "member-average")
@@ -54,25 +58,6 @@ def preset_for_task(task: str | None) -> str | None:
     return TASK_PRESETS.get(str(task or "").strip().lower())
 
 
-def check_thresholds(lambda_: float, eta: float, source: str | None = None) -> tuple[float, float]:
-    """The one validation of (λ, η) every command applies: both finite and > 0.
-
-    Returns:
-      ``(float(lambda_), float(eta))``.
-
-    Raises:
-      ElicitError: naming ``source`` (a thresholds file) when given.
-    """
-    try:
-        lam, et = float(lambda_), float(eta)
-    except (TypeError, ValueError) as e:
-        raise ElicitError(f"thresholds must be numbers, got lambda={lambda_!r}, eta={eta!r}") from e
-    for name, v in (("lambda", lam), ("eta", et)):
-        if not (math.isfinite(v) and v > 0):
-            raise ElicitError(f"{name} must be a finite number > 0, got {v:g}", source)
-    return lam, et
-
-
 def check_accept_fraction(fraction: float) -> float:
     """The one validation of the accept/reject rule's fraction: in [0, 1)."""
     f = float(fraction)
@@ -86,22 +71,23 @@ def is_incompatible(ell: Any, nu: Any, lambda_: Any, eta: Any) -> Any:
     return (ell > lambda_) & (nu < eta)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class ScoreConfig:
     """How pairs are scored and judged.
 
     Attributes:
       likelihood: ``ensemble-mean`` (paper) or ``member-average`` (original sim code).
       ddof: delta degrees of freedom of the across-member std (0 paper, 1 original code).
-      lambda_: likelihood-error threshold λ.
-      eta: novelty threshold η.
+      thresholds: (λ, η) and where they came from; no default (every caller says which).
+        None only in the static part of a config the compiled kernel keys on
+        (:func:`~elicit_jax.compat.scorer.static_config`), which scores nothing by itself.
       accept_fraction: a demonstration is rejected when its number of incompatible pairs
         exceeds this fraction of its length (paper: 5%).
       chunk_size: pairs per jitted scoring call (the last chunk is padded).
       clip: ``member-average`` clipping bound ±clip; None (default): the scored demos'
         recorded action bounds, per dim.
       action_scale: ``none`` (paper) or ``std``: per-dim scaling by the base policy's training
-        action std, constant dims left out (see module docstring).
+        action std, constant dims by the median std of the others (see module docstring).
       dropout_samples: 0 (paper: deterministic members) or N > 0: MC-dropout scoring with N
         stochastic passes per member.
       dropout_seed: seed of the MC-dropout masks (scores are deterministic given it).
@@ -109,8 +95,7 @@ class ScoreConfig:
 
     likelihood: Likelihood = "ensemble-mean"
     ddof: int = 0
-    lambda_: float = PRESETS["square-nut"][0]
-    eta: float = PRESETS["square-nut"][1]
+    thresholds: Thresholds | None
     accept_fraction: float = 0.05
     chunk_size: int = 4096
     clip: float | None = None
@@ -125,7 +110,10 @@ class ScoreConfig:
             )
         if self.ddof not in (0, 1):
             raise ElicitError(f"ddof must be 0 or 1, got {self.ddof}")
-        check_thresholds(self.lambda_, self.eta)
+        from elicit_jax.compat.thresholds import Thresholds
+
+        if self.thresholds is not None and not isinstance(self.thresholds, Thresholds):
+            raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
         check_accept_fraction(self.accept_fraction)
         if self.chunk_size < 1:
             raise ElicitError(f"chunk size must be >= 1, got {self.chunk_size}")
@@ -143,8 +131,10 @@ class ScoreConfig:
         """Config with the paper's thresholds for task ``name`` (see :data:`PRESETS`)."""
         if name not in PRESETS:
             raise ElicitError(f"unknown preset '{name}' (choose {', '.join(sorted(PRESETS))})")
-        lam, eta = PRESETS[name]
-        return cls(**{"lambda_": lam, "eta": eta, **overrides})  # type: ignore[arg-type]
+        from elicit_jax.compat.thresholds import Thresholds
+
+        chosen = Thresholds(*PRESETS[name], f"preset {name}")
+        return cls(**{"thresholds": chosen, **overrides})  # type: ignore[arg-type]
 
 
 @struct.dataclass
@@ -192,7 +182,8 @@ def likelihood_error(
       action: (A,) demonstrated action.
       kind: ``ensemble-mean`` or ``member-average`` (see module docstring).
       clip: ``member-average`` clipping: ±clip, or per-dim ``(low (A,), high (A,))``.
-      weight: (A,) per-dim scale (1/std, 0 for dims left out), or None for the plain mean.
+      weight: (A,) per-dim scale (1/std; a dim constant in training: 1/median std of the
+        others), or None for the plain mean.
 
     Returns:
       scalar ℓ.
@@ -270,16 +261,21 @@ def rejects(n_incompatible: int, length: int, accept_fraction: float = 0.05) -> 
 
 
 def config_dict(config: ScoreConfig) -> dict[str, Any]:
-    """JSON form of a score config (``lambda_`` written as ``lambda``)."""
-    d = dataclasses.asdict(config)
-    d["lambda"] = d.pop("lambda_")
-    return d
+    """JSON form of a score config: its settings, and its thresholds as ``lambda`` and ``eta``
+    (:func:`elicit_jax.compat.thresholds.config_fields`)."""
+    from elicit_jax.compat.thresholds import config_fields
+
+    d = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    thresholds = d.pop("thresholds")
+    return {**d, **config_fields(thresholds)}
 
 
-def config_from_dict(d: dict[str, Any]) -> ScoreConfig:
-    """Inverse of :func:`config_dict`."""
+def config_from_dict(d: Mapping[str, Any], source: str) -> ScoreConfig:
+    """Inverse of :func:`config_dict`; ``source`` says where its thresholds came from."""
+    from elicit_jax.compat.thresholds import from_config_fields
+
     d = dict(d)
-    if "lambda" in d:
-        d["lambda_"] = d.pop("lambda")
-    names = {f.name for f in dataclasses.fields(ScoreConfig)}
-    return ScoreConfig(**{k: v for k, v in d.items() if k in names})
+    scale = str(d.get("action_scale", "none"))
+    thresholds = from_config_fields(d, source, action_scale=scale)
+    names = {f.name for f in dataclasses.fields(ScoreConfig)} - {"thresholds"}
+    return ScoreConfig(thresholds=thresholds, **{k: v for k, v in d.items() if k in names})

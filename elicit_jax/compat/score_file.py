@@ -2,7 +2,8 @@
 
 Example:
     >>> from elicit_jax.compat.score_file import score_file
-    >>> score_file(policy, "new.parquet", "scores.parquet", ScoreConfig(), policy_path="runs/base")
+    >>> config = ScoreConfig.from_preset("square-nut")
+    >>> score_file(policy, "new.parquet", "scores.parquet", config, policy_path="runs/base")
 
 writes ``scores.parquet`` (per pair) and ``scores.episodes.parquet`` (per episode); see
 :mod:`elicit_jax.compat.score` for their columns.
@@ -21,7 +22,7 @@ import numpy as np
 
 from elicit_jax.artifact import (
     HEADER_KEY,
-    atomic_path,
+    atomic_paths,
     dumps,
     make_header,
     read_header,
@@ -42,6 +43,7 @@ from elicit_jax.compat.score import (
     policy_spec,
     score_batches,
 )
+from elicit_jax.compat.thresholds import POLICY_KEY, scores_fields
 from elicit_jax.errors import ElicitError
 
 _CORE = ("episode", "operator", "step", "obs", "action")
@@ -141,7 +143,6 @@ def score_file(
     policy_path: str | Path | None = None,
     policy_info: Mapping[str, Any] | None = None,
     progress: ScoreProgress | None = None,
-    thresholds_source: str | None = None,
 ) -> ScoreResult:
     """Score every pair of a demonstrations artifact, streaming; write scores + episode summary.
 
@@ -150,12 +151,12 @@ def score_file(
       demos_path: a ``demos`` Parquet artifact.
       out_path: where to write the per-pair scores (the per-episode summary goes to
         :func:`~elicit_jax.compat.score.episodes_path` of it).
-      config: scoring config (thresholds, likelihood kind, ddof, chunk size).
+      config: scoring config (thresholds, likelihood kind, ddof, chunk size); where its
+        thresholds came from is recorded too (:func:`~elicit_jax.compat.thresholds.scores_fields`).
       policy_path: the checkpoint the policy was loaded from (its hash goes in the header).
       policy_info: how it was loaded (e.g. ``{"which": "best", "seed": 0}``), recorded too.
       progress: ``progress(total_pairs)`` opens a context yielding ``advance(n)``, called as
         pairs are scored (:func:`elicit_jax.compat.show.scoring_bar` draws a bar).
-      thresholds_source: where λ and η came from (recorded as ``thresholds_source``).
 
     Returns:
       A :class:`ScoreResult`.
@@ -167,16 +168,18 @@ def score_file(
     action_dim = pf.schema_arrow.field("action").type.list_size
     schema = _scores_schema(action_dim, [(n, pf.schema_arrow.field(n).type) for n in passthrough])
     inputs = {"demos": demos_path} | ({"policy": policy_path} if policy_path else {})
+    if config.thresholds is None:
+        raise ElicitError("scoring needs thresholds: the config holds none")
     common = {
         "config": config_dict(config),
         "inputs": inputs,
-        "thresholds": {"lambda": config.lambda_, "eta": config.eta},
+        **scores_fields(config.thresholds),
         "obs_dim": pf.schema_arrow.field("obs").type.list_size,
         "action_dim": action_dim,
         "task": header.get("task", "unknown"),
         "policy_kind": str(policy_spec(policy, "kind", "mlp")),
-        "policy": dict(policy_info or {}),
-        "thresholds_source": thresholds_source or "given",
+        "policy": {**dict(policy_info or {}), POLICY_KEY: policy_sha256(policy)},
+        **scale_note(policy, config),
     }
     n_total = pf.metadata.num_rows
     scores_header = make_header(SCORES_KIND, SCHEMA_VERSION, **common, n_pairs=n_total)
@@ -193,7 +196,8 @@ def score_file(
     )
     ep_path = episodes_path(out_path)
     shown = progress(n_total) if progress is not None else contextlib.nullcontext(_no_op)
-    with atomic_path(out_path) as tmp, shown as advance:
+    # the scores and their episode summary are put in place together (all or none)
+    with atomic_paths([ep_path, out_path]) as (ep_tmp, tmp), shown as advance:
         episodes = _write_scores(tmp, schema, scored, config.accept_fraction, advance)
         ep_header = make_header(
             EPISODES_KIND,
@@ -202,8 +206,51 @@ def score_file(
             scores_file=out_path.name,
             n_episodes=len(episodes["episode"]),
         )
-        write_parquet(ep_path, episodes_table(episodes), ep_header)
+        write_parquet(ep_tmp, episodes_table(episodes), ep_header)
     return ScoreResult(out_path, ep_path, n_total, episodes)
+
+
+def scale_note(policy: Any, config: ScoreConfig) -> dict[str, Any]:
+    """``--action-scale std``: the dims the base never moved and how they were scored, for
+    the scores header (``still_action_dims``, ``action_scale_note``); else nothing."""
+    from elicit_jax.compat.scorer import still_dims
+
+    still = still_dims(policy) if config.action_scale == "std" else []
+    if not still:
+        return {}
+    return {
+        "still_action_dims": still,
+        "action_scale_note": (
+            f"action dim(s) {still} never moved in the base policy's training actions (std 0): "
+            "scored in units of the median std of the other dims, so an operator who drives "
+            "them is told apart from one who does not"
+        ),
+    }
+
+
+def policy_sha256(policy: Any) -> str:
+    """Content hash of what a policy computes with: its kind, every parameter array (name,
+    dtype, shape, values) and its normalisation. The same checkpoint gives the same hash
+    however its path was given; thresholds record it to name the policy they were fitted for.
+    """
+    import hashlib
+
+    import jax
+
+    h = hashlib.sha256(str(policy_spec(policy, "kind", "mlp")).encode())
+    parts = {
+        "params": policy.params,
+        "obs_mean": policy.obs_mean,
+        "obs_std": policy.obs_std,
+        "action_std": getattr(policy, "action_std", None),
+    }
+    for path, leaf in sorted(
+        jax.tree_util.tree_flatten_with_path(parts)[0], key=lambda kv: jax.tree_util.keystr(kv[0])
+    ):
+        arr = np.ascontiguousarray(np.asarray(leaf))
+        h.update(f"{jax.tree_util.keystr(path)}|{arr.dtype.str}|{arr.shape}".encode())
+        h.update(arr.tobytes())
+    return h.hexdigest()
 
 
 def _open_demos(demos_path: Path, policy: Any) -> tuple[dict[str, Any], Any]:

@@ -38,7 +38,8 @@ class ScoreInputs:
     Attributes:
       lam: λ; eta: η (scalars).
       low: (A,) lower clipping bound of ``member-average``; high: (A,) upper bound.
-      weight: (A,) action scaling (1/std, 0 for dims left out), or None (paper).
+      weight: (A,) action scaling (1/std; a dim constant in training: 1/median std of the
+        others), or None (paper).
       seed: MC-dropout seed (int32 scalar).
     """
 
@@ -48,6 +49,10 @@ class ScoreInputs:
     high: Any
     weight: Any
     seed: Any
+
+
+STILL_STD = 1e-6
+"""An action dim whose training actions' std is below this never moved (:func:`still_dims`)."""
 
 
 def static_config(config: ScoreConfig) -> ScoreConfig:
@@ -61,6 +66,7 @@ def static_config(config: ScoreConfig) -> ScoreConfig:
       λ, η or chunk size share one compile.
     """
     return ScoreConfig(
+        thresholds=None,
         likelihood=config.likelihood,
         ddof=config.ddof,
         action_scale=config.action_scale,
@@ -131,9 +137,23 @@ def score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, con
     return jax.vmap(one)(obs, action)
 
 
+def still_dims(policy: Any) -> list[int]:
+    """The action dims the base policy's training actions never moved (std < 1e-6); empty
+    when the checkpoint records no action std."""
+    std = getattr(policy, "action_std", None)
+    if std is None:
+        return []
+    return [int(i) for i in np.flatnonzero(np.asarray(std, np.float64) < STILL_STD)]
+
+
 def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") -> Any:
-    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions, 0 for
-    dims that were constant there; None for ``action_scale='none'``."""
+    """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions; None for
+    ``action_scale='none'``.
+
+    A dim the training actions never moved (:func:`still_dims`) has no std to divide by; it is
+    scored in units of the median std of the dims that moved (a floor on its scale), so an
+    operator who drives it differs from one who does not, as much as a typical dim's worth.
+    """
     if config.action_scale == "none":
         return None
     std = getattr(policy, "action_std", None)
@@ -144,10 +164,11 @@ def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") ->
             source,
         )
     std = np.asarray(std, np.float64)
-    weight = np.where(std >= 1e-6, 1.0 / np.maximum(std, 1e-6), 0.0)
-    if not weight.any():
+    moved = std >= STILL_STD
+    if not moved.any():
         raise ElicitError("every action dim was constant in the training data", source)
-    return weight.astype(np.float32)
+    floor = float(np.median(std[moved]))
+    return (1.0 / np.where(moved, std, floor)).astype(np.float32)
 
 
 def score_inputs(
@@ -157,6 +178,8 @@ def score_inputs(
     else the demonstrations' recorded ``bounds``, else ±1), action weights, dropout seed."""
     import jax.numpy as jnp
 
+    if config.thresholds is None:
+        raise ElicitError("scoring needs thresholds: the config holds none")
     a = int(policy_spec(policy, "action_dim", 1))
     if config.clip is not None:
         low, high = -config.clip, config.clip
@@ -166,8 +189,8 @@ def score_inputs(
         low, high = -1.0, 1.0
     weight = action_weight(policy, config, source)
     return ScoreInputs(
-        lam=jnp.float32(config.lambda_),
-        eta=jnp.float32(config.eta),
+        lam=jnp.float32(config.thresholds.lam),
+        eta=jnp.float32(config.thresholds.eta),
         low=jnp.broadcast_to(jnp.asarray(low, jnp.float32), (a,)),
         high=jnp.broadcast_to(jnp.asarray(high, jnp.float32), (a,)),
         weight=None if weight is None else jnp.asarray(weight),

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from elicit_jax.compat.thresholds import ETA_KEY, LAMBDA_KEY
 from elicit_jax.compat.trust import Verdict
 
 
@@ -26,8 +27,8 @@ def print_report(header: dict[str, Any], console: Any) -> None:
     t = Table(title=f"thresholds ({header['method']})")
     t.add_column("quantity")
     t.add_column("value", justify="right")
-    t.add_row("lambda", f"{header['lambda']:.4g}")
-    t.add_row("eta", f"{header['eta']:.4g}")
+    t.add_row("lambda", f"{header[LAMBDA_KEY]:.4g}")
+    t.add_row("eta", f"{header[ETA_KEY]:.4g}")
     if rep.get("balanced_accuracy") is not None:
         t.add_row("balanced accuracy", f"{rep['balanced_accuracy']:.3f}")
     if "margin_steps" in rep:

@@ -1,48 +1,27 @@
-"""The thresholds (λ, η) a command runs with, and where they came from.
+"""The thresholds (λ, η) a command runs with, where they came from, and whether they apply.
 
 Every command that takes thresholds (``score``, ``filter``, ``map``, ``elicit``, ``serve``,
 ``watch``) resolves them here, from exactly one of a thresholds file, an explicit pair, or a
-paper preset, so each validates them the same way and can show the user how far to trust them.
+paper preset, so each validates them the same way and can show the user how far to trust them;
+the commands that apply them to scores check here that they fit those scores: the same units
+(:func:`check_units`), the same policy (:func:`check_policy`), and not a stand-in
+(:func:`applied_thresholds`).
 """
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
-from elicit_jax.compat.trust import Verdict
+from elicit_jax.compat.thresholds import (
+    STAND_IN,
+    Thresholds,
+    read_thresholds,
+    scores_policy,
+    scores_thresholds,
+)
 from elicit_jax.errors import ElicitError
-
-
-@dataclasses.dataclass(frozen=True)
-class Thresholds:
-    """Resolved thresholds.
-
-    Attributes:
-      lam: likelihood-error threshold λ (finite, > 0).
-      eta: novelty threshold η (finite, > 0).
-      source: where they came from: ``"file PATH"``, ``"preset NAME"`` or ``"given"``.
-      file: the thresholds file, when they came from one.
-      verdict: the trust verdict recorded when the file was fitted (None unless from a file).
-    """
-
-    lam: float
-    eta: float
-    source: str
-    file: Path | None = None
-    verdict: Verdict | None = None
-
-    @property
-    def pair(self) -> tuple[float, float]:
-        """``(λ, η)``."""
-        return self.lam, self.eta
-
-    def verdict_line(self) -> str | None:
-        """The line to show the user about the file's recorded verdict, or None when clean."""
-        if self.verdict is None or self.verdict.clean:
-            return None
-        what = "warning" if self.verdict.problems else "note"
-        return f"{what}: {self.file}: judged when fitted: {self.verdict.summary()}"
 
 
 def resolve_thresholds(
@@ -77,18 +56,12 @@ def resolve_thresholds(
     if (lam is None) != (eta is None):
         raise ElicitError("--lambda and --eta go together")
     if file is not None:
-        from elicit_jax.compat.thresholds import check_units, read_thresholds
-        from elicit_jax.compat.trust import thresholds_verdict
-
-        lam_, eta_, header = read_thresholds(file)
+        read = read_thresholds(file)
         if action_scale is not None:
-            check_units(file, action_scale)
-        verdict = thresholds_verdict(header)
-        return Thresholds(lam_, eta_, f"file {file}", file=file, verdict=verdict)
+            check_units(read, action_scale)
+        return read
     if lam is not None and eta is not None:
-        from elicit_jax.compat.measures import check_thresholds
-
-        return Thresholds(*check_thresholds(lam, eta), "given")
+        return Thresholds(lam, eta, "given", action_scale=action_scale or "none")
     if preset is not None:
         from elicit_jax.compat.measures import PRESETS
 
@@ -142,5 +115,96 @@ def task_thresholds(task: str, action_scale: str = "none") -> tuple[Thresholds, 
         "Fit thresholds on these scores (elicit-jax fit-thresholds) and pass --thresholds to "
         "filter and map."
     )
-    source = f"raw-unit preset, not valid for --action-scale std scores: {source}"
-    return Thresholds(lam, eta, source), [note]
+    source = f"{STAND_IN}, not valid for --action-scale std scores: {source}"
+    return Thresholds(lam, eta, source, action_scale="std", stand_in=True), [note]
+
+
+def check_units(t: Thresholds, action_scale: str) -> None:
+    """Raise unless ``t`` is in the units of scores of ``action_scale`` (``none``: raw action
+    units; ``std``: per-dim scaled). λ and η of one scale mean nothing on the other, and no
+    exact conversion exists."""
+    if t.action_scale != action_scale:
+        raise ElicitError(
+            f"these thresholds were fitted on --action-scale {t.action_scale} scores and do "
+            f"not apply to --action-scale {action_scale} scores: fit thresholds on scores of "
+            "the same scale (docs/thresholds.md)",
+            t.file,
+        )
+
+
+def check_policy(t: Thresholds, policy: str | None, what: str, force: bool = False) -> str | None:
+    """Refuse thresholds fitted for another policy than the one ``what`` comes from.
+
+    Args:
+      t: the thresholds (from a file: they record their policy).
+      policy: the content hash of the policy of ``what`` (None: not recorded).
+      what: the scores file or checkpoint they are applied to (named in the message).
+      force: apply them anyway (the refusal becomes a warning).
+
+    Returns:
+      A warning line, or None when the policies match or ``t`` is not from a file.
+
+    Raises:
+      ElicitError: the two policies differ and ``force`` is false.
+    """
+    if t.file is None:
+        return None
+    if t.policy is None or policy is None:
+        which = t.file if t.policy is None else what
+        return (
+            f"warning: {which} does not record its policy (written by an older elicit-jax): "
+            f"cannot check that {t.file} was fitted for the policy of {what}"
+        )
+    if t.policy == policy:
+        return None
+    message = (
+        f"{t.file} was fitted for another policy (params {t.policy[:12]}) than {what} "
+        f"(params {policy[:12]}); refit on scores of that policy, or --force"
+    )
+    if force:
+        return f"warning: {message} given: applied anyway"
+    raise ElicitError(message)
+
+
+def applied_thresholds(
+    header: Mapping[str, Any],
+    scores_path: str | Path,
+    given: Thresholds | None,
+    force: bool = False,
+) -> tuple[Thresholds, list[str]]:
+    """The thresholds a command applies to a scores file, and the lines to tell the user.
+
+    ``given`` (from ``--thresholds``, ``--lambda``/``--eta``) must have been fitted for the
+    policy the scores came from (:func:`check_policy`); without them, the values the scores
+    file was judged under are used, and said so — unless those are a raw-unit preset standing
+    in on std-scaled scores (not a verdict), which is refused.
+
+    Args:
+      header: the scores file's header.
+      scores_path: the scores file (named in messages).
+      given: thresholds from the command line, or None.
+      force: apply them anyway: another policy's thresholds, or a stand-in preset.
+
+    Returns:
+      The thresholds, and the lines for stderr (which λ, η and where from; warnings).
+
+    Raises:
+      ElicitError: another policy's thresholds or stand-in values, without ``force``.
+    """
+    if given is not None:
+        warning = check_policy(given, scores_policy(header), str(scores_path), force)
+        return given, [f"thresholds: {given.describe()}", *([warning] if warning else [])]
+    stored = scores_thresholds(header, scores_path)
+    lines = [
+        f"thresholds: {stored.describe()}; pass --thresholds to apply a fitted thresholds.json"
+    ]
+    if stored.stand_in:
+        message = (
+            f"{scores_path} was scored with --action-scale std: its λ, η are a raw-unit preset "
+            "standing in, not a verdict; give --thresholds fitted on these scores (or "
+            "--lambda/--eta in std-scaled units), or --force"
+        )
+        if not force:
+            raise ElicitError(message)
+        lines.append(f"warning: {message} given: applied anyway")
+    return stored, lines

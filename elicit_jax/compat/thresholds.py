@@ -1,380 +1,203 @@
-"""Fit the thresholds (λ, η) from labelled contrast sets of demonstrations.
+"""The thresholds (λ, η): one value from the file (or flag, or preset) to the scoring kernel.
 
-The paper assumes a few trajectories labelled *a priori* as compatible and incompatible and
-"regresses" (λ, η) from the 2-D map without saying how. Our objective works on the decisions
-that matter, one per demonstration: a demonstration is rejected when more than
-``accept_fraction`` (5%) of its pairs are incompatible (``ℓ > λ`` and ``ν < η``). Candidate
-thresholds form a grid (:func:`candidates`): for the ``(i + ½)/G`` quantiles of the contrast
-pairs' ℓ values (``G = grid_size``) λ takes the midpoint between the observed values on either
-side of the quantile, never an observed value itself (pairs repeated by a paused operator would
-otherwise flip at once with the tie rule); η the same on the ν values; duplicates removed. For
-each candidate we compute the **balanced
-accuracy** of the decisions — the mean of the fraction of compatible demonstrations accepted
-and the fraction of incompatible ones rejected — and keep the candidates that maximise it.
-Among those, we pick the one with the **widest margin**: the largest ``r`` such that every
-candidate within ``r`` grid steps in both λ and η (a ``(2r+1) × (2r+1)`` block, in quantile
-space, inside the grid) also reaches the maximum — the thresholds can move ``r/G`` in quantile
-in any direction without changing a single contrast decision's contribution to the score.
-Remaining ties go to the larger λ, then the smaller η (the fewest rejections). The fit is
-deterministic: no randomness, a fixed grid, a fixed tie order. It fails with a clear error when
-a set is empty, the sets overlap, or no candidate does better than chance (balanced accuracy
-0.5). With more than one demonstration in a set we also report leave-one-out accuracy: each
-such demonstration is held out, the thresholds refitted on the rest, and the held-out decision
-checked. Whether the result can be trusted at all is judged in :mod:`elicit_jax.compat.trust`.
+:class:`Thresholds` is the only carrier of (λ, η) along the data path: ``read_thresholds``
+returns it, configs hold it, commands and pipeline stages pass it whole. It keeps where the
+values came from (``source``), the trust verdict recorded when they were fitted, the units
+they are in (``action_scale``) and the policy they were fitted for (a content hash of its
+parameters, ``policy``). Only the kernels (:mod:`elicit_jax.compat.measures`,
+:mod:`elicit_jax.compat.scorer`) take the two floats.
+
+This module is also the one place that knows how thresholds are spelled in JSON: the
+``thresholds`` artifact ``fit-thresholds`` writes (:func:`write_thresholds`,
+:func:`read_thresholds`), the ``thresholds`` block of a scores header
+(:func:`scores_thresholds`), a score config's and a filter config's fields
+(:func:`config_fields`, :func:`from_config_fields`) and a session header's
+(:func:`session_fields`, :func:`from_session_fields`). The fit itself is in
+:mod:`elicit_jax.compat.threshold_fit`.
 
 Example:
-    >>> fit = fit_thresholds(ell, nu, episode, labels)   # labels: episode id -> True/False
-    >>> fit.lambda_, fit.eta, fit.balanced_accuracy
+    >>> t = read_thresholds("thresholds.json")
+    >>> t.pair, t.source, t.policy
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from elicit_jax.artifact import make_header, read_json, write_json
-from elicit_jax.compat.measures import check_accept_fraction, check_thresholds, is_incompatible
+from elicit_jax.compat.trust import Verdict, thresholds_verdict
 from elicit_jax.errors import ElicitError
 
 THRESHOLDS_KIND = "thresholds"
 SCHEMA_VERSION = 1
+LAMBDA_KEY = "lambda"
+ETA_KEY = "eta"
+POLICY_KEY = "policy_sha256"
+"""Where a thresholds file and a scores header's ``policy`` block keep the content hash of
+the policy's parameters (:func:`elicit_jax.compat.score_file.policy_sha256`)."""
+STAND_IN = "raw-unit preset"
+"""How the recorded source of a raw-unit preset standing in on std-scaled scores begins."""
 
 
-@dataclasses.dataclass(frozen=True)
-class FitConfig:
-    """Threshold fitting settings.
-
-    Attributes:
-      accept_fraction: the accept/reject rule's fraction (paper: 5%).
-      grid_size: quantile levels per axis of the candidate grid.
-    """
-
-    accept_fraction: float = 0.05
-    grid_size: int = 64
-
-    def __post_init__(self) -> None:
-        if self.grid_size < 2:
-            raise ElicitError(f"grid size must be >= 2, got {self.grid_size}")
-        check_accept_fraction(self.accept_fraction)
-
-
-@dataclasses.dataclass(frozen=True)
-class FitResult:
-    """Fitted thresholds and how well they separate the contrast sets.
-
-    Attributes:
-      lambda_: fitted λ.
-      eta: fitted η.
-      balanced_accuracy: on the contrast demonstrations.
-      margin_steps: the margin r in grid steps (see module docstring).
-      margin_quantile: r / grid_size.
-      lambda_range: λ values spanned by the margin block.
-      eta_range: η values spanned by the margin block.
-      loo_accuracy: leave-one-out accuracy, or None when both sets hold one demonstration.
-      n_loo: demonstrations held out.
-      episodes: per contrast demonstration: episode, label, fraction incompatible, rejected.
-    """
-
-    lambda_: float
-    eta: float
-    balanced_accuracy: float
-    margin_steps: int
-    margin_quantile: float
-    lambda_range: tuple[float, float]
-    eta_range: tuple[float, float]
-    loo_accuracy: float | None
-    n_loo: int
-    episodes: Mapping[str, np.ndarray]
-
-
-def candidates(values: np.ndarray, size: int, upper: bool = False) -> np.ndarray:
-    """Sorted candidate thresholds between the observed ``values`` (N,), about ``size`` of them.
-
-    For each ``(i + ½)/size`` quantile ``q`` with observed neighbours ``a ≤ q < b`` the
-    candidate is the midpoint of ``a`` and ``b`` (above the largest value when ``q`` is the
-    maximum). Candidates are float32-representable, so scores stored as float32 compare with
-    them exactly as here; when ``a`` and ``b`` are adjacent float32 numbers and no midpoint
-    exists, the candidate is ``a`` for a ``>`` test (``upper=False``, λ) or ``b`` for a ``<``
-    test (``upper=True``, η), which decides every pair the same way as a midpoint would.
-    """
-    v = np.asarray(values, np.float32)
-    u = np.unique(v)
-    q = np.quantile(v.astype(np.float64), (np.arange(size) + 0.5) / size)
-    k = np.searchsorted(u.astype(np.float64), q, side="right")  # u[k-1] <= q < u[k]
-    a = u[k - 1]
-    top = np.nextafter(u[-1], np.float32(np.inf))
-    b = np.where(k < len(u), u[np.minimum(k, len(u) - 1)], top)
-    mid = ((a.astype(np.float64) + b.astype(np.float64)) / 2).astype(np.float32)
-    mid = np.where((mid > a) & (mid < b), mid, b if upper else a)
-    return np.unique(np.where(k < len(u), mid, top)).astype(np.float64)
-
-
-def incompatible_counts(
-    ell: np.ndarray,
-    nu: np.ndarray,
-    index: np.ndarray,
-    n_ep: int,
-    lams: np.ndarray,
-    etas: np.ndarray,
-) -> np.ndarray:
-    """Incompatible pairs per episode for every candidate: ``(E, len(lams), len(etas))``.
-
-    A pair counts for ``(λ_i, η_j)`` when ``ℓ > λ_i`` and ``ν < η_j``.
-    """
-    li = np.searchsorted(lams, ell, side="left")  # pair counts for λ indices < li
-    ej = np.searchsorted(etas, nu, side="right")  # pair familiar for η indices >= ej
-    hist = np.zeros((n_ep, len(lams) + 1, len(etas) + 1), np.int32)
-    np.add.at(hist, (index, li, ej), 1)
-    cum = np.cumsum(hist, axis=2)
-    rev = np.cumsum(cum[:, ::-1, :], axis=1)[:, ::-1, :]
-    return rev[:, 1:, : len(etas)]
-
-
-def _margins(mask: np.ndarray) -> np.ndarray:
-    """Chebyshev radius of the largest all-true block centred at each cell (-1 where false)."""
-    out = np.full(mask.shape, -1, np.int32)
-    cur, r = mask.copy(), 0
-    while cur.any():
-        out[cur] = r
-        pad = np.pad(cur, 1, constant_values=False)
-        nxt = np.ones_like(cur)
-        for di in (0, 1, 2):
-            for dj in (0, 1, 2):
-                nxt &= pad[di : di + cur.shape[0], dj : dj + cur.shape[1]]
-        cur, r = nxt, r + 1
-    return out
-
-
-def _prepare(
-    ell: np.ndarray, nu: np.ndarray, episode: np.ndarray, labels: Mapping[int, bool]
-) -> tuple[np.ndarray, ...]:
-    keep = np.isin(episode, np.array(list(labels), dtype=np.int64))
-    ids, index = np.unique(episode[keep], return_inverse=True)
-    y = np.array([bool(labels[int(i)]) for i in ids])
-    lengths = np.bincount(index, minlength=len(ids))
-    # scores are stored as float32; candidates are float32 numbers, so compare in float32
-    return ell[keep].astype(np.float32), nu[keep].astype(np.float32), index, ids, y, lengths
-
-
-def _check_sets(y: np.ndarray) -> None:
-    if not y.any():
-        raise ElicitError("the compatible set holds no demonstrations in these scores")
-    if y.all():
-        raise ElicitError("the incompatible set holds no demonstrations in these scores")
-
-
-def _balanced_accuracy(reject: np.ndarray, y: np.ndarray) -> np.ndarray:
-    acc = ~reject[y]
-    rej = reject[~y]
-    return 0.5 * (acc.mean(axis=0) + rej.mean(axis=0))
-
-
-def fit_thresholds(
-    ell: np.ndarray,
-    nu: np.ndarray,
-    episode: np.ndarray,
-    labels: Mapping[int, bool],
-    config: FitConfig = FitConfig(),
-    leave_one_out: bool = True,
-) -> FitResult:
-    """Fit (λ, η) to accept the compatible and reject the incompatible demonstrations.
-
-    Args:
-      ell: (N,) likelihood errors of all pairs (pairs outside the sets are ignored).
-      nu: (N,) novelties.
-      episode: (N,) episode id of each pair.
-      labels: episode id -> True (compatible) / False (incompatible).
-      config: fraction and grid size.
-      leave_one_out: also compute leave-one-out accuracy.
+def check_thresholds(lam: Any, eta: Any, source: str | Path | None = None) -> tuple[float, float]:
+    """The one validation of (λ, η) every command applies: both real numbers (not strings or
+    booleans), finite and > 0.
 
     Returns:
-      A :class:`FitResult`.
+      ``(float(lam), float(eta))``.
 
     Raises:
-      ElicitError: an empty set, or no candidate better than chance.
+      ElicitError: naming ``source`` (a thresholds file) when given.
     """
-    ell, nu, index, ids, y, lengths = _prepare(
-        np.asarray(ell), np.asarray(nu), np.asarray(episode), labels
-    )
-    _check_sets(y)
-    lams = candidates(ell, config.grid_size)
-    etas = candidates(nu, config.grid_size, upper=True)
-    counts = incompatible_counts(ell, nu, index, len(ids), lams, etas)
-    reject = counts > config.accept_fraction * lengths[:, None, None]
-    ba = _balanced_accuracy(reject, y)
-    best = float(ba.max())
-    if best <= 0.5 + 1e-12:
-        raise ElicitError(
-            "no (lambda, eta) separates the contrast sets better than chance (balanced "
-            "accuracy 0.5): are the sets mislabelled or indistinguishable under this policy?"
-        )
-    radius = _margins(ba >= best - 1e-12)
-    i_idx, j_idx = np.meshgrid(np.arange(len(lams)), np.arange(len(etas)), indexing="ij")
-    order = np.lexsort((j_idx.ravel(), -i_idx.ravel(), -radius.ravel()))
-    i, j = np.unravel_index(order[0], radius.shape)
-    r = int(radius[i, j])
-    frac = counts[:, i, j] / lengths
-    loo = _leave_one_out(ell, nu, index, ids, y, config) if leave_one_out else (None, 0)
-    return FitResult(
-        lambda_=float(lams[i]),
-        eta=float(etas[j]),
-        balanced_accuracy=best,
-        margin_steps=r,
-        margin_quantile=r / config.grid_size,
-        lambda_range=(float(lams[i - r]), float(lams[i + r])),
-        eta_range=(float(etas[j - r]), float(etas[j + r])),
-        loo_accuracy=loo[0],
-        n_loo=loo[1],
-        episodes={
-            "episode": ids,
-            "compatible": y,
-            "fraction_incompatible": frac,
-            "rejected": reject[:, i, j],
-        },
-    )
+    if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in (lam, eta)):
+        raise ElicitError(f"thresholds must be numbers, got lambda={lam!r}, eta={eta!r}", source)
+    pair = float(lam), float(eta)
+    for name, v in zip((LAMBDA_KEY, ETA_KEY), pair, strict=True):
+        if not (math.isfinite(v) and v > 0):
+            raise ElicitError(f"{name} must be a finite number > 0, got {v:g}", source)
+    return pair
 
 
-def _leave_one_out(
-    ell: np.ndarray,
-    nu: np.ndarray,
-    index: np.ndarray,
-    ids: np.ndarray,
-    y: np.ndarray,
-    config: FitConfig,
-) -> tuple[float | None, int]:
-    """Accuracy of held-out decisions over the demonstrations of sets larger than one."""
-    held = [k for k in range(len(ids)) if (y == y[k]).sum() > 1]
-    if not held:
-        return None, 0
-    correct = 0
-    for k in held:
-        rest = {int(ids[m]): bool(y[m]) for m in range(len(ids)) if m != k}
-        try:
-            fit = fit_thresholds(ell, nu, ids[index], rest, config, leave_one_out=False)
-        except ElicitError:
-            continue
-        sel = index == k
-        n_inc = int(is_incompatible(ell[sel], nu[sel], fit.lambda_, fit.eta).sum())
-        rejected = n_inc > config.accept_fraction * int(sel.sum())
-        correct += int(rejected != y[k])
-    return correct / len(held), len(held)
+@dataclasses.dataclass(frozen=True)
+class Thresholds:
+    """Resolved thresholds.
 
-
-def evaluate_thresholds(
-    ell: np.ndarray,
-    nu: np.ndarray,
-    episode: np.ndarray,
-    labels: Mapping[int, bool],
-    lambda_: float,
-    eta: float,
-    accept_fraction: float = 0.05,
-) -> tuple[float, dict[str, np.ndarray]]:
-    """Balanced accuracy and per-demonstration decisions of given thresholds on the sets."""
-    ell, nu, index, ids, y, lengths = _prepare(
-        np.asarray(ell), np.asarray(nu), np.asarray(episode), labels
-    )
-    _check_sets(y)
-    n_inc = np.bincount(index, weights=is_incompatible(ell, nu, lambda_, eta), minlength=len(ids))
-    reject = n_inc > accept_fraction * lengths
-    ba = float(_balanced_accuracy(reject[:, None], y)[0])
-    return ba, {
-        "episode": ids,
-        "compatible": y,
-        "fraction_incompatible": n_inc / lengths,
-        "rejected": reject,
-    }
-
-
-def operator_rejections(
-    ell: np.ndarray,
-    nu: np.ndarray,
-    episode: np.ndarray,
-    operator: np.ndarray,
-    lambda_: float,
-    eta: float,
-    accept_fraction: float = 0.05,
-) -> dict[str, dict[str, int]]:
-    """Per operator: pairs, incompatible pairs, episodes and rejected episodes under (λ, η)."""
-    inc = is_incompatible(np.asarray(ell), np.asarray(nu), lambda_, eta)
-    ids, index = np.unique(episode, return_inverse=True)
-    n_inc = np.bincount(index, weights=inc, minlength=len(ids))
-    lengths = np.bincount(index, minlength=len(ids))
-    first = np.zeros(len(ids), np.int64)
-    first[index[::-1]] = np.arange(len(index))[::-1]
-    ep_op = np.asarray(operator)[first].astype(str)
-    rejected = n_inc > accept_fraction * lengths
-    ops = np.asarray(operator).astype(str)
-    out = {}
-    for op in sorted(set(ep_op.tolist())):
-        sel = ep_op == op
-        out[op] = {
-            "pairs": int((ops == op).sum()),
-            "incompatible_pairs": int(inc[ops == op].sum()),
-            "episodes": int(sel.sum()),
-            "rejected_episodes": int(rejected[sel].sum()),
-        }
-    return out
-
-
-def write_thresholds(
-    path: str | Path,
-    *,
-    lambda_: float,
-    eta: float,
-    method: str,
-    scores_path: str | Path,
-    config: Mapping[str, Any],
-    report: Mapping[str, Any],
-) -> dict[str, Any]:
-    """Write a ``thresholds`` artifact (JSON) recording the scores file it was fitted on and
-    the units of its λ and η (``action_scale`` of those scores: ``none`` = raw action units,
-    ``std`` = each dim divided by the training actions' std)."""
-    from elicit_jax.artifact import read_header
-
-    try:
-        units = read_header(scores_path).get("config", {}).get("action_scale", "none")
-    except ElicitError:  # not a scores artifact: nothing says its scale, raw units
-        units = "none"
-    header = make_header(
-        THRESHOLDS_KIND,
-        SCHEMA_VERSION,
-        config=config,
-        inputs={"scores": scores_path},
-        method=method,
-        report=dict(report),
-        action_scale=units,
-        **{"lambda": float(lambda_), "eta": float(eta)},
-    )
-    write_json(path, header)
-    return header
-
-
-def check_units(path: str | Path, action_scale: str) -> None:
-    """Raise unless the thresholds file ``path`` was fitted on scores of ``action_scale``
-    (``none``: raw action units; ``std``: per-dim scaled). λ and η of one scale mean nothing
-    on the other, and no exact conversion exists. Files that do not record it are raw units.
+    Attributes:
+      lam: likelihood-error threshold λ (finite, > 0).
+      eta: novelty threshold η (finite, > 0).
+      source: where they came from: ``"file PATH"``, ``"preset NAME"``, ``"given"``, ...
+      file: the thresholds file, when they came from one.
+      verdict: the trust verdict recorded when the file was fitted (None unless from a file).
+      action_scale: the units: ``none`` (raw action units) or ``std`` (per-dim scaled).
+      policy: content hash of the parameters of the policy they were fitted for (None: not
+        recorded).
+      stand_in: a raw-unit preset standing in on std-scaled scores: its M and accept/reject
+        are not verdicts.
     """
-    units = str(read_thresholds(path)[2].get("action_scale", "none"))
-    if units != action_scale:
-        raise ElicitError(
-            f"these thresholds were fitted on --action-scale {units} scores and do not apply "
-            f"to --action-scale {action_scale} scores: fit thresholds on scores of the same "
-            "scale (docs/thresholds.md)",
-            path,
-        )
+
+    lam: float
+    eta: float
+    source: str
+    file: Path | None = None
+    verdict: Verdict | None = None
+    action_scale: str = "none"
+    policy: str | None = None
+    stand_in: bool = False
+
+    def __post_init__(self) -> None:
+        lam, eta = check_thresholds(self.lam, self.eta, self.file)
+        object.__setattr__(self, "lam", lam)
+        object.__setattr__(self, "eta", eta)
+
+    @property
+    def pair(self) -> tuple[float, float]:
+        """``(λ, η)``: what the kernels take."""
+        return self.lam, self.eta
+
+    def to_json(self) -> dict[str, float]:
+        """``{"lambda": λ, "eta": η}``: how every artifact spells them."""
+        return {LAMBDA_KEY: self.lam, ETA_KEY: self.eta}
+
+    def describe(self) -> str:
+        """One line for the user: the values and where they came from."""
+        return f"λ={self.lam:.4g}, η={self.eta:.4g} from {self.source}"
+
+    def verdict_line(self) -> str | None:
+        """The line to show the user about the file's recorded verdict, or None when clean."""
+        if self.verdict is None or self.verdict.clean:
+            return None
+        what = "warning" if self.verdict.problems else "note"
+        return f"{what}: {self.file}: judged when fitted: {self.verdict.summary()}"
 
 
-def read_thresholds(path: str | Path) -> tuple[float, float, dict[str, Any]]:
-    """``(lambda, eta, header)`` of a thresholds artifact (the JSON ``fit-thresholds`` writes).
+def _number(data: Mapping[str, Any], key: str, path: str | Path | None) -> float:
+    """``data[key]`` as a finite float > 0: a JSON number, not a string or a boolean."""
+    if key not in data:
+        raise ElicitError(f"thresholds lack '{key}'", path)
+    v = data[key]
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ElicitError(f"'{key}' must be a number, got {v!r}", path)
+    if not (math.isfinite(v) and v > 0):
+        raise ElicitError(f"'{key}' must be a finite number > 0, got {v!r}", path)
+    return float(v)
+
+
+def pair_from_json(data: Mapping[str, Any], path: str | Path | None = None) -> tuple[float, float]:
+    """``(λ, η)`` of a JSON mapping holding ``lambda`` and ``eta`` (strictly: numbers, finite
+    and > 0).
+
+    Raises:
+      ElicitError: a key missing, a string, a boolean, a non-finite or non-positive value,
+        naming ``path``.
+    """
+    return _number(data, LAMBDA_KEY, path), _number(data, ETA_KEY, path)
+
+
+def config_fields(t: Thresholds | None, key: str = LAMBDA_KEY) -> dict[str, float | None]:
+    """A config's JSON fields for ``t``: ``{key: λ, "eta": η}`` (``None`` values for none).
+    ``key`` is ``lambda`` (score configs) or ``lambda_`` (filter configs, as pipelines store
+    them)."""
+    return {key: None if t is None else t.lam, ETA_KEY: None if t is None else t.eta}
+
+
+def from_config_fields(
+    d: dict[str, Any], source: str, key: str = LAMBDA_KEY, action_scale: str = "none"
+) -> Thresholds | None:
+    """Pop :func:`config_fields` out of ``d``; their :class:`Thresholds` (None when both are
+    None).
+
+    Raises:
+      ElicitError: one given without the other, or values not finite and > 0.
+    """
+    lam, eta = d.pop(key, None), d.pop(ETA_KEY, None)
+    if lam is None and eta is None:
+        return None
+    if lam is None or eta is None:
+        raise ElicitError("give both lambda and eta, or neither")
+    return Thresholds(lam, eta, source, action_scale=action_scale)
+
+
+SESSION_KEYS = (LAMBDA_KEY, ETA_KEY, "thresholds_file")
+"""The keys a session header stores its :class:`Thresholds` under."""
+
+
+def session_fields(t: Thresholds) -> dict[str, Any]:
+    """``t`` as a session header stores it: :data:`SESSION_KEYS`."""
+    return {**t.to_json(), "thresholds_file": None if t.file is None else str(t.file)}
+
+
+def from_session_fields(d: dict[str, Any]) -> Thresholds:
+    """Pop :data:`SESSION_KEYS` (``lambda_`` read as ``lambda``) out of ``d``; their value.
+
+    Raises:
+      ElicitError: λ or η missing, not numbers, or not finite and > 0.
+    """
+    stored = {k: d.pop(k, None) for k in SESSION_KEYS}
+    if "lambda_" in d:
+        stored[LAMBDA_KEY] = d.pop("lambda_")
+    if stored[LAMBDA_KEY] is None or stored[ETA_KEY] is None:
+        raise ElicitError("session config without thresholds (lambda and eta)")
+    lam, eta = check_thresholds(stored[LAMBDA_KEY], stored[ETA_KEY])
+    file = stored["thresholds_file"]
+    if file is None:
+        return Thresholds(lam, eta, "given")
+    return Thresholds(lam, eta, f"file {file}", file=Path(file))
+
+
+def read_thresholds_header(path: str | Path) -> dict[str, Any]:
+    """The header of a thresholds artifact, checked: kind, schema version, λ and η.
 
     Raises:
       ElicitError: a missing file, a file that is not JSON (a Parquet scores file given by
-        mistake, ...), an artifact of another kind, or λ, η that are not finite and > 0.
+        mistake, ...), an artifact of another kind, a newer schema version, or λ, η that are
+        not numbers (strings, booleans), not finite or not > 0; each naming the file.
     """
+    from elicit_jax.artifact import read_json
+
     try:
         data = read_json(path)
     except ElicitError as e:
@@ -388,9 +211,104 @@ def read_thresholds(path: str | Path) -> tuple[float, float, dict[str, Any]]:
     if not isinstance(data, dict) or data.get("kind") != THRESHOLDS_KIND:
         kind = data.get("kind") if isinstance(data, dict) else type(data).__name__
         raise ElicitError(f"is a '{kind}' artifact, expected thresholds", path)
-    try:
-        lam, eta = float(data["lambda"]), float(data["eta"])
-    except (KeyError, TypeError, ValueError) as e:
-        raise ElicitError("thresholds file lacks numeric 'lambda' and 'eta'", path) from e
-    lam, eta = check_thresholds(lam, eta, str(path))
-    return lam, eta, data
+    version = data.get("schema_version", SCHEMA_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or version > SCHEMA_VERSION:
+        raise ElicitError(
+            f"thresholds schema version {version!r} is not one this elicit-jax reads "
+            f"(<= {SCHEMA_VERSION}); upgrade elicit-jax",
+            path,
+        )
+    pair_from_json(data, path)
+    return data
+
+
+def read_thresholds(path: str | Path) -> Thresholds:
+    """The :class:`Thresholds` of a thresholds artifact (the JSON ``fit-thresholds`` writes):
+    values, the file, its recorded verdict, units and policy.
+
+    Raises:
+      ElicitError: as :func:`read_thresholds_header`.
+    """
+    data = read_thresholds_header(path)
+    lam, eta = pair_from_json(data, path)
+    policy = data.get(POLICY_KEY)
+    return Thresholds(
+        lam,
+        eta,
+        f"file {path}",
+        file=Path(path),
+        verdict=thresholds_verdict(data),
+        action_scale=str(data.get("action_scale", "none")),
+        policy=str(policy) if policy else None,
+    )
+
+
+def write_thresholds(
+    path: str | Path,
+    thresholds: Thresholds,
+    *,
+    method: str,
+    inputs: Mapping[str, str | Path],
+    config: Mapping[str, Any],
+    report: Mapping[str, Any],
+) -> dict[str, Any]:
+    """Write a ``thresholds`` artifact (JSON): λ and η, their units (``action_scale``:
+    ``none`` = raw action units, ``std`` = each dim divided by the training actions' std) and
+    the policy they were fitted for (:data:`POLICY_KEY`, null when unknown), with the inputs
+    (the scores file they were fitted on), settings and report.
+
+    Returns:
+      The header written.
+    """
+    from elicit_jax.artifact import make_header, write_json
+
+    header = make_header(
+        THRESHOLDS_KIND,
+        SCHEMA_VERSION,
+        config=config,
+        inputs=inputs,
+        method=method,
+        report=dict(report),
+        action_scale=thresholds.action_scale,
+        **{POLICY_KEY: thresholds.policy},
+        **thresholds.to_json(),
+    )
+    write_json(path, header)
+    return header
+
+
+def fitted_on(t: Thresholds, scores_header: Mapping[str, Any]) -> Thresholds:
+    """``t`` bound to the scores they were fitted on: their units and their policy."""
+    scale = str(dict(scores_header.get("config") or {}).get("action_scale", "none"))
+    return dataclasses.replace(t, action_scale=scale, policy=scores_policy(scores_header))
+
+
+def scores_fields(t: Thresholds) -> dict[str, Any]:
+    """How a scores header records the thresholds it was judged under: ``thresholds``
+    (``{lambda, eta}``) and ``thresholds_source`` (read back by :func:`scores_thresholds`)."""
+    return {"thresholds": t.to_json(), "thresholds_source": t.source}
+
+
+def scores_policy(header: Mapping[str, Any]) -> str | None:
+    """The policy content hash a scores header records (None for files written before)."""
+    value = dict(header.get("policy") or {}).get(POLICY_KEY)
+    return str(value) if value else None
+
+
+def scores_thresholds(header: Mapping[str, Any], path: str | Path) -> Thresholds:
+    """The thresholds a scores file was judged under (its ``thresholds`` block and
+    ``thresholds_source``), as :class:`Thresholds` whose source names the file.
+
+    Raises:
+      ElicitError: the block missing or not valid numbers, naming ``path``.
+    """
+    lam, eta = pair_from_json(dict(header.get("thresholds") or {}), path)
+    recorded = str(header.get("thresholds_source", "given"))
+    return Thresholds(
+        lam,
+        eta,
+        f"the values stored in {path} ({recorded})",
+        action_scale=str(header.get("config", {}).get("action_scale", "none")),
+        policy=scores_policy(header),
+        stand_in=recorded.startswith(STAND_IN),
+    )

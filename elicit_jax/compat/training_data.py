@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.data.demo_set import Demos
 from elicit_jax.data.duplicates import episode_digests
 from elicit_jax.errors import ElicitError
@@ -67,14 +68,14 @@ class TrainingEvidence:
         """Training demos whose scores are known."""
         return 0 if self.episode is None else len(np.unique(self.episode))
 
-    def rejected(self, lambda_: float, eta: float, accept_fraction: float) -> int:
+    def rejected(self, thresholds: Thresholds, accept_fraction: float) -> int:
         """Training demos the 5% rule rejects under (λ, η)."""
         from elicit_jax.compat.measures import is_incompatible
 
         if self.episode is None:
             return 0
         _, index = np.unique(self.episode, return_inverse=True)
-        n_inc = np.bincount(index, weights=is_incompatible(self.ell, self.nu, lambda_, eta))
+        n_inc = np.bincount(index, weights=is_incompatible(self.ell, self.nu, *thresholds.pair))
         return int((n_inc > accept_fraction * np.bincount(index)).sum())
 
 
@@ -183,7 +184,8 @@ def _score_missing(
     chosen = demos.select_episodes([e for e, d in digests.items() if d in missing])
     which = (header.get("policy") or {}).get("which", "best")
     policy = load_policy(seed_dir, int(which) if str(which).isdigit() else which)
-    return score_demos(policy, chosen, config_from_dict(dict(header.get("config") or {})))
+    config = config_from_dict(dict(header.get("config") or {}), "the scores file's config")
+    return score_demos(policy, chosen, config)
 
 
 def gather(

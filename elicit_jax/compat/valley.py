@@ -14,7 +14,7 @@ semi-supervised learning; it never leaves the range the contrast sets allow.
 It is an option (the pipeline method ``filtered-valley``); the fitted λ stays the default.
 
 Example:
-    >>> lam, report = valley_lambda(ell, nu, eta=0.11, low=0.47, high=0.66, fitted=0.56)
+    >>> lam, report = valley_lambda(ell, nu, Thresholds(0.56, 0.11, "fit"), low=0.47, high=0.66)
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 
 
@@ -41,10 +42,9 @@ def log_density(x: np.ndarray, at: np.ndarray) -> np.ndarray:
 def valley_lambda(
     ell: np.ndarray,
     nu: np.ndarray,
-    eta: float,
+    thresholds: Thresholds,
     low: float,
     high: float,
-    fitted: float,
     grid: int = 201,
 ) -> tuple[float, dict[str, Any]]:
     """λ in ``[low, high]`` where the familiar pairs' log ℓ density is lowest.
@@ -52,10 +52,10 @@ def valley_lambda(
     Args:
       ell: (N,) likelihood errors of the new data's pairs (all operators pooled).
       nu: (N,) their novelty.
-      eta: the fitted η (familiar: ν < η).
+      thresholds: the fitted (λ, η): λ is where the search starts from, η says which pairs
+        are familiar (ν < η).
       low: lower end of the margin's λ range.
       high: upper end.
-      fitted: the fitted λ (tie-break: nearest wins).
       grid: log-spaced candidates over the range.
 
     Returns:
@@ -63,6 +63,7 @@ def valley_lambda(
       share of familiar pairs between them.
     """
     ell, nu = np.asarray(ell, np.float64), np.asarray(nu, np.float64)
+    fitted, eta = thresholds.pair
     if not (0 < low <= fitted <= high):
         raise ElicitError(
             f"valley rule needs 0 < low <= fitted <= high, got {low}, {fitted}, {high}"

@@ -23,6 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.curation.cupid import CupidConfig
 from elicit_jax.curation.deminf import DemInfConfig, deminf_scores
 from elicit_jax.curation.demo_score import DemoScoreConfig, demo_score_scores
@@ -114,18 +115,17 @@ def curation_scores(
 def matched_rule(
     scores_path: str | Path,
     level: Literal["pair", "episode"],
-    lambda_: float | None = None,
-    eta: float | None = None,
+    thresholds: Thresholds | None = None,
     accept_fraction: float = 0.05,
 ) -> MatchedRule:
     """The M-filter's budget on a scores file: its incompatible pairs (pair level) or its
-    rejected demonstrations (episode level), under ``(λ, η)`` or the scores' own column."""
+    rejected demonstrations (episode level), under ``thresholds`` or the scores' own column."""
     from elicit_jax.compat.filtering import FilterConfig, drop_mask
     from elicit_jax.compat.score_file import read_scores
 
     _, scores = read_scores(scores_path)
     cfg = FilterConfig(
-        level=level, method="m", lambda_=lambda_, eta=eta, accept_fraction=accept_fraction
+        level=level, method="m", thresholds=thresholds, accept_fraction=accept_fraction
     )
     drop, _ = drop_mask(scores, cfg)
     if level == "pair":
@@ -185,7 +185,7 @@ def curate_demos(
     """
     import pyarrow as pa
 
-    from elicit_jax.artifact import make_header, write_parquet
+    from elicit_jax.artifact import atomic_paths, make_header, write_parquet
     from elicit_jax.compat.filtering import PRE_EPISODE, PRE_STEP, apply_drop, log_path
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
     from elicit_jax.data.duplicates import duplicate_reasons
@@ -223,7 +223,6 @@ def curate_demos(
             return CurateResult(None, None, *counts, reason + "; every demo dropped", dups)
         raise ElicitError(f"{reason}: every demonstration dropped, nothing to write")
     out = parts[0] if len(parts) == 1 else concat_demos(parts, renumber=True)
-    write_demos(out_path, out, config=record, inputs=all_inputs)
     per_step_score = np.asarray(scores.score, float)[index]
     log = pa.table(
         {
@@ -236,7 +235,9 @@ def curate_demos(
     )
     lp = log_path(out_path)
     header = make_header("filter-log", 1, config=record, inputs=all_inputs, n_dropped=counts[1])
-    write_parquet(lp, log, header)
+    with atomic_paths([lp, out_path]) as (log_tmp, out_tmp):  # the pair is replaced together
+        write_demos(out_tmp, out, config=record, inputs=all_inputs)
+        write_parquet(log_tmp, log, header)
     return CurateResult(Path(out_path), lp, *counts, reason, dups)
 
 
@@ -254,8 +255,7 @@ def curate_file(
     rate: Literal["own", "m"] = "own",
     level: Literal["pair", "episode"] = "pair",
     scores_path: str | Path | None = None,
-    lambda_: float | None = None,
-    eta: float | None = None,
+    thresholds: Thresholds | None = None,
     base_path: str | Path | None = None,
     policy_path: str | Path | None = None,
     progress: Callable[[int, float], None] | None = None,
@@ -273,8 +273,7 @@ def curate_file(
       level: the M-filter budget: ``pair`` (its incompatible pairs) or ``episode`` (its
         rejected demonstrations).
       scores_path: the compatibility scores of D_new (``rate="m"``).
-      lambda_: λ of the M-filter (None: the scores' ``incompatible`` column).
-      eta: η of the M-filter (with ``lambda_``).
+      thresholds: (λ, η) of the M-filter (None: the scores' ``incompatible`` column).
       base_path: D_base: in DemInf's estimate, kept whole and placed first in the output.
       policy_path: Demo-SCORE: the training run to roll out.
       progress: Demo-SCORE: ``(epoch, success rate)`` after each checkpoint's rollouts.
@@ -286,7 +285,7 @@ def curate_file(
         raise ElicitError("--rate m drops as much as the M-filter: give --scores of D_new")
     rule: OwnRule | MatchedRule = OwnRule(config.deminf.drop_fraction)
     if rate == "m":
-        rule = matched_rule(scores_path, level, lambda_, eta)  # type: ignore[arg-type]
+        rule = matched_rule(scores_path, level, thresholds)  # type: ignore[arg-type]
     scores = curation_scores(
         config, demos_path, base_path, policy_path, progress, trajectories_path
     )

@@ -112,9 +112,17 @@ class ExportConfig:
 
 
 def is_lerobot_dataset(path: Path) -> bool:
-    """``path`` is a LeRobot dataset folder (``meta/info.json``): an earlier export that
-    ``--overwrite`` may replace, unlike any other directory."""
-    return (Path(path) / "meta" / "info.json").is_file()
+    """``path`` is a LeRobot dataset folder that elicit-jax exported (``meta/info.json`` and
+    an ``artifact.json`` of kind ``export``): an earlier export that ``--overwrite`` may
+    replace, unlike any other directory — a dataset LeRobot recorded or downloaded is never
+    replaced."""
+    path = Path(path)
+    if not (path / "meta" / "info.json").is_file():
+        return False
+    try:
+        return read_header(path).get("kind") == EXPORT_KIND
+    except ElicitError:
+        return False
 
 
 def _check_out(cfg: ExportConfig) -> None:

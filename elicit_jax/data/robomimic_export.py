@@ -12,9 +12,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
-import shutil
+import os
+import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +25,7 @@ import numpy as np
 
 from elicit_jax.artifact import atomic_path, dumps
 from elicit_jax.data.demos import Demos, episode_digest
+from elicit_jax.data.hdf5_write import edit_copy, hdf5_reason, write_new_hdf5
 from elicit_jax.data.robomimic import demo_names, open_hdf5, read_demo
 from elicit_jax.errors import ElicitError
 
@@ -91,23 +94,23 @@ def content_digest(
     return h.hexdigest()
 
 
-def write_mask(
-    path: Path, mask_key: str, names: Sequence[str], header: dict[str, Any] | None
-) -> None:
-    """Write (or replace) ``mask/<mask_key>`` in the file at ``path``."""
-    import h5py
+def mask_dataset(
+    mask_key: str, names: Sequence[str], header: dict[str, Any] | None
+) -> dict[str, tuple[np.ndarray, dict[str, str]]]:
+    """The ``mask/<mask_key>`` dataset to write: HDF5 path -> (names, attributes)."""
+    attrs = {} if header is None else {"elicit_jax": dumps(header)}
+    return {f"mask/{mask_key}": (np.array(names, dtype="S"), attrs)}
 
+
+def _read_back(path: Path, mask_key: str, names: Sequence[str]) -> None:
+    """Error unless the file at ``path`` opens and lists exactly ``names`` in the mask."""
     try:
-        f = h5py.File(path, "r+")
-    except OSError as e:
-        raise ElicitError(f"cannot open for writing ({e})", path) from e
-    with f:
-        group = f.require_group("mask")
-        if mask_key in group:
-            del group[mask_key]
-        dset = group.create_dataset(mask_key, data=np.array(names, dtype="S"))
-        if header is not None:
-            dset.attrs["elicit_jax"] = dumps(header)
+        with open_hdf5(path) as f:
+            listed = [x.decode() for x in f["mask"][mask_key][:]]
+    except (ElicitError, OSError, KeyError, RuntimeError, ValueError) as e:
+        raise ElicitError(f"the written copy does not read back ({hdf5_reason(e)})") from e
+    if listed != list(names):
+        raise ElicitError(f"the written copy's mask/{mask_key} does not read back as written")
 
 
 def add_mask(
@@ -122,10 +125,15 @@ def add_mask(
 ) -> list[str]:
     """Add ``mask/<mask_key>`` listing ``demos`` to a copy of ``source`` (or to ``source``).
 
+    Either way the mask is written into a copy (:func:`elicit_jax.data.hdf5_write.edit_copy`)
+    that is flushed to disk and read back before it is renamed into place, so a full disk,
+    a file-size limit or a kill leaves ``source`` as it was.
+
     Args:
       source: the robomimic file.
-      out: the copy to write (atomically); ``None`` writes into ``source`` itself and checks
-        that nothing but the new mask changed (a full read of the file before and after).
+      out: the copy to write (atomically); ``None`` replaces ``source`` itself with its
+        masked copy (same path, same permissions; a symlink's target is the file replaced)
+        after checking that nothing but the new mask differs (a full read of both files).
       mask_key: the new filter key.
       demos: demo names, e.g. ``["demo_0", "demo_12"]``.
       overwrite: replace an existing ``mask/<mask_key>``.
@@ -135,6 +143,10 @@ def add_mask(
 
     Returns:
       The demo names written, in robomimic's numeric order.
+
+    Raises:
+      ElicitError: a bad key or demo, or the write failed; in place, the message says the
+        source file was not changed.
     """
     source = Path(source)
     if not mask_key or "/" in mask_key:
@@ -154,22 +166,61 @@ def add_mask(
                 f"already has mask/{mask_key}; pick another --mask-key or pass --overwrite",
                 source,
             )
-
+    edit = mask_dataset(mask_key, chosen, header)
+    needs = sum(len(n) + 1 for n in chosen) + (len(dumps(header)) if header else 0)
     if out is not None:
         with atomic_path(out) as tmp:
-            shutil.copyfile(source, tmp)
-            write_mask(tmp, mask_key, chosen, header)
+            try:
+                edit_copy(source, tmp, edit, needs)
+                _read_back(tmp, mask_key, chosen)
+            except ElicitError as e:
+                text = f"cannot write the masked copy ({e}); nothing written"
+                raise ElicitError(text, out) from e
         return chosen
-    skip = f"mask/{mask_key}"
-    before = content_digest(source, skip, progress)
-    write_mask(source, mask_key, chosen, header)
-    if content_digest(source, skip, progress) != before:
-        raise ElicitError(
-            f"content other than mask/{mask_key} changed while writing it in place; "
-            "restore the file from a backup",
-            source,
-        )
+    _replace_with_masked_copy(source, mask_key, chosen, edit, needs, progress)
     return chosen
+
+
+def _replace_with_masked_copy(
+    source: Path,
+    mask_key: str,
+    chosen: list[str],
+    edit: dict[str, tuple[np.ndarray, dict[str, str]]],
+    needs: int,
+    progress: Callable[[int], None] | None,
+) -> None:
+    """``--in-place``: write the mask into a copy beside ``source``, check the copy (nothing
+    but the mask differs, the mask reads back, ``source`` did not change meanwhile), then
+    rename it over ``source``; on any failure ``source`` is left exactly as it was."""
+    target = source.resolve()
+    if not os.access(target, os.W_OK):
+        raise ElicitError("is read-only; the source file was not changed", source)
+    skip = f"mask/{mask_key}"
+    was = target.stat()
+    try:
+        before = content_digest(target, skip, progress)
+        with atomic_path(target) as tmp:
+            edit_copy(target, tmp, edit, needs)
+            if content_digest(tmp, skip, progress) != before:
+                raise ElicitError(f"content other than mask/{mask_key} changed in the copy")
+            _read_back(tmp, mask_key, chosen)
+            now = target.stat()
+            if (now.st_ino, now.st_size, now.st_mtime_ns) != (
+                was.st_ino,
+                was.st_size,
+                was.st_mtime_ns,
+            ):
+                raise ElicitError("another program changed the file while the mask was added")
+            os.chmod(tmp, stat.S_IMODE(was.st_mode))
+            if (was.st_uid, was.st_gid) != (os.geteuid(), os.getegid()):
+                with contextlib.suppress(OSError):
+                    os.chown(tmp, was.st_uid, was.st_gid)
+    except ElicitError as e:
+        why = str(e).removeprefix(f"{e.path}: ") if e.path else str(e)
+        raise ElicitError(
+            f"cannot add mask/{mask_key} in place ({why}); the source file was not changed",
+            source,
+        ) from e
 
 
 def _obs_layout(demos: Demos) -> list[tuple[str, int, int]]:
@@ -247,8 +298,6 @@ def write_fresh(
       ``demos`` (names), ``obs_keys``, ``masks`` (key -> count) and ``notes`` (what robomimic
       has no place for, and where it went).
     """
-    import h5py
-
     bounds = demos.episode_bounds()
     names = [f"demo_{i}" for i in range(len(bounds))]
     layout = _obs_layout(demos)
@@ -256,7 +305,8 @@ def write_fresh(
     kinds, where = _extras(demos, bounds)
     notes = _fresh_notes(demos, bounds, layout, env_args, where)
     env = env_args or {"env_name": demos.task, "type": 2, "env_kwargs": {}}
-    with atomic_path(out) as tmp, h5py.File(tmp, "w") as f:
+
+    def build(f: Any) -> None:
         data = f.create_group("data")
         data.attrs["env_args"] = json.dumps(env)
         data.attrs["total"] = demos.n_steps
@@ -287,6 +337,8 @@ def write_fresh(
                     g.create_dataset(f"extras/{k}", data=v.astype("S") if v.dtype == object else v)
         for key, listed in masks.items():
             f.create_dataset(f"mask/{key}", data=np.array(listed, dtype="S"))
+
+    write_new_hdf5(out, build)
     return {
         "demos": names,
         "obs_keys": [k for k, _, _ in layout],

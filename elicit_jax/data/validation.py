@@ -139,8 +139,8 @@ def action_dim_warnings(action: np.ndarray, ratio: float = 5.0) -> list[str]:
         values = ", ".join(f"{int(d)}: {action[0, d]:.3g}" for d in const)
         out.append(
             f"action dims {const.tolist()} are constant ({values}): they add nothing to the "
-            "likelihood error but dilute its mean over dims; `score --action-scale std` leaves "
-            "them out"
+            "likelihood error but dilute its mean over dims; `score --action-scale std` scores "
+            "them in units of the other dims' median std"
         )
     varying = np.flatnonzero(std >= 1e-6)
     if len(varying) >= 2:

@@ -16,8 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.compat.measures import check_thresholds
-from elicit_jax.compat.threshold_source import Thresholds
+from elicit_jax.compat.thresholds import (
+    SESSION_KEYS,
+    Thresholds,
+    from_session_fields,
+    session_fields,
+)
 from elicit_jax.errors import ElicitError
 
 MODES = ("informed", "naive")
@@ -26,7 +30,7 @@ SHOW_PARTS = ("prompt", "indicator", "feedback")
 RETRIEVALS = ("l2", "dtw")
 PATH_FIELDS = ("policy", "base_demos", "thresholds_file")
 """Settings naming input files: a resumed session compares the files' hashes, not the paths."""
-STORED_THRESHOLDS = ("lambda", "eta", "thresholds_file")
+STORED_THRESHOLDS = SESSION_KEYS
 """The keys a session header stores its :class:`Thresholds` under (see ``to_dict``)."""
 EXTENDABLE = ("demos", "max_episodes")
 """Settings a resumed session may change (ask for more demonstrations or episodes)."""
@@ -124,7 +128,6 @@ class SessionConfig:
                 raise ElicitError(msg)
         if not isinstance(self.thresholds, Thresholds):
             raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
-        check_thresholds(self.thresholds.lam, self.thresholds.eta)
         self.rule()  # validates the fraction and the count
         self.score_config()
 
@@ -150,8 +153,7 @@ class SessionConfig:
         return ScoreConfig(
             likelihood=self.likelihood,  # type: ignore[arg-type]
             ddof=self.ddof,
-            lambda_=self.thresholds.lam,
-            eta=self.thresholds.eta,
+            thresholds=self.thresholds,
             accept_fraction=self.accept_fraction,
         )
 
@@ -179,9 +181,7 @@ class SessionConfig:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         t = d.pop("thresholds")
         d["show"] = list(self.show)
-        d |= {"lambda": t.lam, "eta": t.eta}
-        d["thresholds_file"] = None if t.file is None else str(t.file)
-        return d
+        return d | session_fields(t)
 
     @classmethod
     def from_dict(
@@ -195,13 +195,11 @@ class SessionConfig:
           thresholds: thresholds resolved by the caller; they replace those in ``data``.
         """
         d = dict(data)
-        stored = {k: d.pop(k, None) for k in STORED_THRESHOLDS}
-        if "lambda_" in d:
-            stored["lambda"] = d.pop("lambda_")
+        stored = dict(d)
+        for k in (*STORED_THRESHOLDS, "lambda_"):
+            d.pop(k, None)
         if thresholds is None:
-            thresholds = stored_thresholds(
-                stored["lambda"], stored["eta"], stored["thresholds_file"]
-            )
+            thresholds = from_session_fields(stored)
         settings = {f.name for f in dataclasses.fields(cls)} - {"thresholds"}
         unknown = set(d) - settings
         if unknown:
@@ -213,20 +211,6 @@ class SessionConfig:
         a, b = self.to_dict(), other.to_dict()
         skip = (*PATH_FIELDS, *EXTENDABLE)
         return sorted(k for k in a if k not in skip and a[k] != b.get(k))
-
-
-def stored_thresholds(lam: Any, eta: Any, file: str | None) -> Thresholds:
-    """The :class:`Thresholds` a session header records (λ, η and the file they came from).
-
-    Raises:
-      ElicitError: λ or η missing, not numbers, or not finite and > 0.
-    """
-    if lam is None or eta is None:
-        raise ElicitError("session config without thresholds (lambda and eta)")
-    lam, eta = check_thresholds(lam, eta)
-    if file is None:
-        return Thresholds(lam, eta, "given")
-    return Thresholds(lam, eta, f"file {file}", file=Path(file))
 
 
 PERSON_MARGIN = 4.0

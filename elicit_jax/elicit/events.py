@@ -35,6 +35,8 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from elicit_jax.elicit.light import LiveState
+
 PRACTICE = "practice"
 DEMONSTRATION = "demonstration"
 
@@ -162,6 +164,10 @@ class IndicatorEvent:
       incompatible: M == 0 (red).
       incompatible_so_far: incompatible pairs of this episode so far.
       allowed: most incompatible pairs the rule allows for the episode so far.
+      live: the live state shown to the operator — the step's light (red, idle, unfamiliar,
+        fits), the red steps allowed at the horizon, whether the episode can still be
+        accepted and the verdict if it ended now (:mod:`elicit_jax.elicit.light`); it never
+        contradicts the episode's verdict.
     """
 
     kind: ClassVar[str] = "indicator"
@@ -172,6 +178,7 @@ class IndicatorEvent:
     incompatible: bool
     incompatible_so_far: int
     allowed: float
+    live: LiveState | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -234,7 +241,9 @@ class WindowFeedback:
       distance: retrieval distance (normalised states; L2 or DTW cost per step).
       fields: observation fields that differ most, largest first.
       actions: action dimensions that differ most, largest first.
-      operator_motion: mean per-step change of the operator's normalised state.
+      operator_motion: the operator's gripper speed in the window (m per step) where the
+        states follow the simulated tasks' layout; else the mean per-step change of the
+        normalised state.
       base_motion: the same for the base segment.
       motion: ``still`` (you hold still where the base moves), ``moving`` (you move where the
         base holds still) or empty.

@@ -13,10 +13,13 @@ an even grid) and compared:
   difference in units of the base data's per-dim standard deviation (RMS over the field's
   dims), so a field measured in radians and one in metres compare fairly;
 * **action dimensions**: mean absolute difference per dimension, ranked;
-* **motion**: the mean per-step change of the normalised state (RMS over dims) of the window
-  and of the base segment. The operator *holds still where the base moves* when theirs is
-  below a quarter of the base's (and the base moves at all), and *moves where the base holds
-  still* in the opposite case.
+* **motion**, in the task's own terms where the states follow the simulated tasks' layout
+  (the gripper's position first): the gripper's speed in metres per step, its paused steps,
+  its direction (:func:`elicit_jax.elicit.plain.gripper_motion`). The operator *holds still
+  where the base moves* when their gripper is still in at least half of the window's steps
+  and the base's moves; *moves where the base holds still* in the opposite case. Other
+  layouts (no known gripper) fall back to the mean per-step change of the normalised state
+  (RMS over dims), with the same quarter-of-the-base rule.
 
 :func:`explain_episode` returns one :class:`~elicit_jax.elicit.events.WindowFeedback` per
 window, with a structured part (for a browser or a simulated person) and one line of text,
@@ -35,7 +38,7 @@ import numpy as np
 
 from elicit_jax.compat.feedback import episode_feedback, normalizer
 from elicit_jax.elicit.events import FieldDifference, WindowFeedback
-from elicit_jax.elicit.plain import plain_words
+from elicit_jax.elicit.plain import gripper_motion, motion_kind, plain_words, sim_layout
 
 STILL_RATIO = 0.25
 MOTION_FLOOR = 0.01
@@ -190,8 +193,13 @@ def explain_episode(
         b_act = np.asarray(base.action[s0 + f.base_start : s0 + f.base_stop], np.float64)
         o_obs, o_act = obs[w.start : w.stop], action[w.start : w.stop]
         n = len(o_obs)
-        op_motion, base_motion = motion(o_obs, std), motion(b_obs, std)
-        kind = _motion_kind(op_motion, base_motion)
+        if sim_layout(base.obs_fields, obs.shape[1]):  # the gripper's own motion, in m
+            gm_op, gm_base = gripper_motion(o_obs), gripper_motion(b_obs)
+            op_motion, base_motion = gm_op.speed, gm_base.speed
+            kind = motion_kind(gm_op, gm_base)
+        else:
+            op_motion, base_motion = motion(o_obs, std), motion(b_obs, std)
+            kind = _motion_kind(op_motion, base_motion)
         b_aligned = _align(b_obs, n)
         fb = WindowFeedback(
             start=w.start,
@@ -207,7 +215,9 @@ def explain_episode(
             base_motion=base_motion,
             motion=kind,
             text="",
-            plain=plain_words(task, base.obs_fields, o_obs, b_aligned, obs, base.obs[s0:s1], kind),
+            plain=plain_words(
+                task, base.obs_fields, o_obs, b_aligned, obs, base.obs[s0:s1], kind, b_obs
+            ),
         )
         out.append(_with_text(fb))
     return out

@@ -15,7 +15,7 @@ Only feed-forward policies (``mlp``, ``mdn``) can be scored one state at a time;
 score depends on the whole history and is refused with a clear error.
 
 Example:
-    >>> scorer = LiveScorer(ScoreConfig(lambda_=0.4, eta=0.05), policy)
+    >>> scorer = LiveScorer(ScoreConfig(thresholds=Thresholds(0.4, 0.05, "given")), policy)
     >>> s = scorer.score(policy, obs, action)     # StepScore(likelihood, novelty, ...)
 """
 
@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.compat.measures import ScoreConfig, check_thresholds
+from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 
 
@@ -112,8 +113,7 @@ class LiveScorer:
         policy: Any,
         obs: np.ndarray,
         action: np.ndarray,
-        lambda_: float | None = None,
-        eta: float | None = None,
+        thresholds: Thresholds | None = None,
         step: int = 0,
     ) -> StepScore:
         """Score ``action (A,)`` at state ``obs (O,)`` under ``policy``.
@@ -123,8 +123,7 @@ class LiveScorer:
           obs: (O,) state.
           action: (A,) action (for the policy's action alone, pass zeros and read
             ``policy_action``).
-          lambda_: λ (default the config's).
-          eta: η (default the config's).
+          thresholds: (λ, η) for this call (default the config's).
           step: the pair's index (keys the MC-dropout masks, as a row index does in
             ``score``).
 
@@ -134,11 +133,8 @@ class LiveScorer:
         import jax.numpy as jnp
 
         inputs = self.inputs
-        if lambda_ is not None or eta is not None:
-            lam, et = check_thresholds(
-                self.config.lambda_ if lambda_ is None else lambda_,
-                self.config.eta if eta is None else eta,
-            )
+        if thresholds is not None:
+            lam, et = thresholds.pair
             inputs = inputs.replace(lam=jnp.float32(lam), eta=jnp.float32(et))
         out = np.asarray(
             self._fn(

@@ -15,14 +15,20 @@ and says the difference the way a person would act on it, naming the keys that f
   running along the nut's ``+x``);
 * **every task with the gripper's position** (``robot0_eef_pos``): where the gripper is
   against the base's (forward/back, left/right, up/down, in cm, with the keys; when no
-  sentence above applies), the gripper
-  closed where the base's is open or the reverse, and holding still where the base moves.
+  sentence above applies), the gripper closed where the base's is open or the reverse;
+* **how the gripper moves** (:func:`gripper_motion`, in the task's own terms: metres per
+  step of the gripper along each axis, its turn and its fingers — never a normalised blend
+  of every state dimension, which reads fast motion along one axis as standing still):
+  holding still (paused in most steps) where the base moves, moving where the base holds
+  still, moving another way (``you move right (D) where the base moves forward (W)``), and
+  moving much faster or slower than the base.
 
 :func:`plain_words` returns the sentences, most specific first.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -37,6 +43,15 @@ BESIDE_PILLAR_M = 0.06
 CLOSED_Q = 0.02
 """Fingers (each 0.04 open) below this are closed."""
 TURNED_RAD = np.pi / 2
+PAUSE_M = 0.001
+"""The gripper moves under 1 mm in a step (and neither turns nor opens): a paused step."""
+TURN_RAD = 0.01
+MOVING_M = 0.0015
+"""A gripper moving at least 1.5 mm a step on average is moving (a held key: 2.4 mm with
+Shift, 8 mm without)."""
+NET_M = 0.01
+"""A window's net displacement under 1 cm has no direction worth naming."""
+SPEED_RATIO = 2.0
 AXES = (
     ("forward", "back", "W", "S"),
     ("left", "right", "A", "D"),
@@ -44,9 +59,9 @@ AXES = (
 )
 
 
-def _sim_layout(fields: Sequence[Any]) -> bool:
+def sim_layout(fields: Sequence[Any], obs_dim: int = 23) -> bool:
     """The states follow the simulated tasks' layout (gripper pose, fingers, object)."""
-    return [f.name for f in fields] == list(LAYOUT)
+    return [f.name for f in fields] == list(LAYOUT) and obs_dim >= 23
 
 
 def _yaw(q: np.ndarray) -> np.ndarray:
@@ -166,6 +181,110 @@ def gripper_sentence(op: np.ndarray, base: np.ndarray) -> str:
     return ""
 
 
+@dataclasses.dataclass(frozen=True)
+class GripperMotion:
+    """How the gripper moves over a window, in the task's own units.
+
+    Attributes:
+      speed: mean distance the gripper moves per step (m).
+      paused: fraction of steps it is still (under :data:`PAUSE_M`, not turning, the
+        fingers not moving).
+      net: (3,) its displacement over the window (m; x forward, y left, z up).
+    """
+
+    speed: float
+    paused: float
+    net: tuple[float, float, float]
+
+    @property
+    def still(self) -> bool:
+        """Paused in at least half of its steps."""
+        return self.paused >= 0.5
+
+    @property
+    def moving(self) -> bool:
+        return not self.still and self.speed >= MOVING_M
+
+
+def gripper_motion(states: np.ndarray) -> GripperMotion:
+    """The gripper's motion over ``states (T, O)`` of the simulated layout (T < 2: still)."""
+    x = np.asarray(states, np.float64)
+    if len(x) < 2:
+        return GripperMotion(0.0, 1.0, (0.0, 0.0, 0.0))
+    step = np.linalg.norm(np.diff(x[:, EEF], axis=0), axis=1)
+    turn = np.abs(_wrap(np.diff(_yaw(x[:, QUAT]))))
+    fingers = np.abs(np.diff(x[:, FINGERS].mean(axis=1)))
+    still = (step < PAUSE_M) & (turn < TURN_RAD) & (fingers < PAUSE_M / 2)
+    net = x[-1, EEF] - x[0, EEF]
+    return GripperMotion(float(step.mean()), float(still.mean()), tuple(float(v) for v in net))
+
+
+def motion_kind(op: GripperMotion, base: GripperMotion) -> str:
+    """``still`` (the operator holds still where the base moves), ``moving`` (the reverse)
+    or ``""``."""
+    if op.still and base.moving:
+        return "still"
+    if base.still and op.moving:
+        return "moving"
+    return ""
+
+
+def _direction(net: Sequence[float]) -> str:
+    """The main directions of a displacement, with their keys: ``forward and right (W, D)``."""
+    v = np.asarray(net, np.float64)
+    big = np.abs(v).max()
+    words, keys = [], []
+    for axis in np.argsort(-np.abs(v)):
+        if abs(v[axis]) >= 0.5 * big:
+            pos, neg, kpos, kneg = AXES[axis]
+            if axis == 2:
+                words.append("up" if v[axis] > 0 else "down")
+            else:
+                words.append(pos if v[axis] > 0 else neg)
+            keys.append(kpos if v[axis] > 0 else kneg)
+    return f"{' and '.join(words)} ({', '.join(keys)})"
+
+
+def motion_sentences(op: np.ndarray, base: np.ndarray) -> list[str]:
+    """How the operator's gripper moves against the base's over the window: holding still,
+    moving, another direction, another speed (the base segment at its own steps)."""
+    if len(op) < 2 or len(base) < 2:  # a single step has no motion to speak of
+        return []
+    mine, theirs = gripper_motion(op), gripper_motion(base)
+    mm = (1000 * mine.speed, 1000 * theirs.speed)
+    kind = motion_kind(mine, theirs)
+    n = len(op) - 1
+    if kind == "still":
+        return [
+            f"you hold still where the base moves (your gripper still in "
+            f"{round(mine.paused * n)} of {n} steps; the base's moves {mm[1]:.0f} mm a step)"
+        ]
+    if kind == "moving":
+        return [
+            f"you move where the base holds still (your gripper {mm[0]:.0f} mm a step; the "
+            "base's pauses here)"
+        ]
+    if not (mine.moving and theirs.moving):
+        return []
+    a, b = np.asarray(mine.net), np.asarray(theirs.net)
+    if min(np.linalg.norm(a), np.linalg.norm(b)) >= NET_M:
+        cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+        if cos < 0.5:  # more than 60° apart
+            return [f"you move {_direction(a)} where the base moves {_direction(b)}"]
+    ratio = mine.speed / theirs.speed
+    if ratio >= SPEED_RATIO:
+        return [
+            f"you move about {ratio:.0f}× as fast as the base here ({mm[0]:.0f} vs "
+            f"{mm[1]:.0f} mm a step; Shift slows you down)"
+        ]
+    if ratio <= 1 / SPEED_RATIO:
+        return [
+            f"you move at about {100 * ratio:.0f}% of the base's speed here ({mm[0]:.0f} vs "
+            f"{mm[1]:.0f} mm a step)"
+        ]
+    return []
+
+
 def plain_words(
     task: str,
     fields: Sequence[Any],
@@ -174,6 +293,7 @@ def plain_words(
     op_episode: np.ndarray,
     base_episode: np.ndarray,
     motion: str = "",
+    base_steps: np.ndarray | None = None,
 ) -> tuple[str, ...]:
     """The window's differences from its base segment in plain words, most specific first.
 
@@ -184,14 +304,18 @@ def plain_words(
       base_segment: (W, O) the base segment's states, aligned to the window's length.
       op_episode: (T, O) the operator's whole episode (the route around an obstacle).
       base_episode: (T', O) the whole retrieved base demonstration.
-      motion: ``still``, ``moving`` or ``""`` (:func:`elicit_jax.elicit.explain.motion`).
+      motion: ``still``, ``moving`` or ``""`` (:func:`elicit_jax.elicit.explain.motion`),
+        used for other layouts only: the simulated layout's motion is read from the gripper
+        (:func:`motion_sentences`).
+      base_steps: (S, O) the base segment at its own steps (its speed), default
+        ``base_segment``.
 
     Returns:
       Sentences (possibly none).
     """
     out: list[str] = []
     op, base = np.asarray(op_window, np.float64), np.asarray(base_segment, np.float64)
-    if _sim_layout(fields) and op.shape[1] >= 23:
+    if sim_layout(fields, op.shape[1]):
         if task == "reach-pillar":
             out.append(pillar_sentence(op, base, op_episode, base_episode))
         elif task in ("square-nut", "round-nut"):
@@ -201,7 +325,9 @@ def plain_words(
         if not any(out):  # the route or the grip says it better than an offset
             out.append(offset_sentence(op, base))
         out.append(gripper_sentence(op, base))
-    if motion == "still":
+        steps = base if base_steps is None else np.asarray(base_steps, np.float64)
+        out += motion_sentences(op, steps)
+    elif motion == "still":
         out.append("you hold still where the base moves")
     elif motion == "moving":
         out.append("you move where the base holds still")

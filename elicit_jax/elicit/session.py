@@ -45,6 +45,7 @@ from elicit_jax.elicit.events import (
     ReviewEvent,
     SessionEndEvent,
 )
+from elicit_jax.elicit.light import is_idle, live_state
 from elicit_jax.elicit.progress import Progress, operator_seed
 from elicit_jax.elicit.store import EpisodeRecord
 from elicit_jax.errors import ElicitError
@@ -130,7 +131,7 @@ class Session:
         buf["action"].append(applied)
         buf["operator"].append(by_operator)
         if by_operator:
-            self._score(obs, applied)
+            self._score(obs, applied, buf["action"][-2] if len(buf["action"]) > 1 else None)
         else:
             buf["score"].append((np.nan, np.nan, np.nan, False, np.nan))
         self._sim.step(applied[None].astype(np.float64))
@@ -214,7 +215,7 @@ class Session:
             self._robot_action = (step, a.astype(np.float32))
         return self._robot_action[1]
 
-    def _score(self, obs: np.ndarray, action: np.ndarray) -> None:
+    def _score(self, obs: np.ndarray, action: np.ndarray, previous: np.ndarray | None) -> None:
         t = time.perf_counter()
         step = len(self._buf["obs"]) - 1
         s = self.setup.scorer.score(self.setup.policy, obs, action, step=step)
@@ -224,6 +225,15 @@ class Session:
         self._n_scored += 1
         self._n_incompatible += int(s.incompatible)
         if self._indicator:
+            live = live_state(
+                self.setup.rule,
+                int(self.setup.task.config.horizon),
+                self._n_incompatible,
+                self._n_scored,
+                incompatible=s.incompatible,
+                unfamiliar=bool(np.float32(s.novelty) >= np.float32(self.setup.scorer.config.eta)),
+                idle=is_idle(action, previous, self.setup.action_names),
+            )
             self._emit(
                 IndicatorEvent(
                     step=len(buf["obs"]) - 1,
@@ -233,6 +243,7 @@ class Session:
                     incompatible=s.incompatible,
                     incompatible_so_far=self._n_incompatible,
                     allowed=self.setup.rule.allowed(self._n_scored),
+                    live=live,
                 )
             )
 
@@ -366,8 +377,7 @@ class Session:
                 "seconds": time.perf_counter() - self._t0,
                 "unstable": bool(self._sim.unstable[0]),
                 "gave_up": gave_up,
-                "lambda": self.config.thresholds.lam,
-                "eta": self.config.thresholds.eta,
+                **self.config.thresholds.to_json(),
             },
         )
 

@@ -39,11 +39,13 @@ from elicit_jax.artifact import (
     clean_stale_temporaries,
     make_header,
     read_header,
+    refuse_foreign_files,
     write_json,
     write_parquet,
 )
 from elicit_jax.elicit.events import FieldDifference, WindowFeedback, to_jsonable
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.checkpoint import run_owns
 
 SESSION_KIND = "elicit-session"
 EPISODE_KIND = "session-episode"
@@ -169,6 +171,20 @@ def record_table(rec: EpisodeRecord) -> Any:
     return pa.table(cols)
 
 
+_SESSION_FILE = re.compile(
+    r"^(artifact\.json|manifest\.json|demos\.parquet|episodes/e\d+\.parquet"
+    r"|report/(artifact\.json|report\.md|report\.html|session\.png))$"
+)
+"""The files of a session (see the module docstring), its report's included; each batch
+policy under ``policies/batch<b>/`` is a training run (:func:`run_owns`)."""
+
+
+def session_owns(relative: str) -> bool:
+    """Whether a session writes the file at ``relative`` (a POSIX path in its folder)."""
+    batch = re.match(r"^policies/batch\d+/(.+)$", relative)
+    return bool(_SESSION_FILE.match(relative)) or bool(batch and run_owns(batch.group(1)))
+
+
 class SessionStore:
     """The files of one session directory (see the module docstring)."""
 
@@ -202,8 +218,11 @@ class SessionStore:
         write_json(self.root / DIR_HEADER, header)
 
     def wipe(self) -> None:
-        """Remove a session directory (``--overwrite``)."""
-        self.header()  # only ever a session
+        """Remove a session directory (``--overwrite``): only ever a session, and only when
+        it holds nothing but a session's files (:func:`session_owns`); the user's own files
+        in it are named instead."""
+        self.header()
+        refuse_foreign_files(self.root, session_owns, "an elicitation session")
         shutil.rmtree(self.root)
 
     def clean_temporaries(self) -> list[Path]:

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.compat.threshold_source import Thresholds
+from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
 
 IGNORED_SUFFIXES = (".tmp", ".part", ".partial", ".crdownload", ".lock")
@@ -289,8 +289,7 @@ class Watcher:
         config = ScoreConfig(
             likelihood=c.likelihood,  # type: ignore[arg-type]
             ddof=c.ddof,
-            lambda_=c.thresholds.lam,
-            eta=c.thresholds.eta,
+            thresholds=c.thresholds,
             accept_fraction=c.accept_fraction,
         )
         todo = []

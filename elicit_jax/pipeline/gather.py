@@ -18,6 +18,13 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
+from elicit_jax.compat.thresholds import (
+    Thresholds,
+    config_fields,
+    pair_from_json,
+    read_thresholds,
+    read_thresholds_header,
+)
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import (
@@ -79,8 +86,13 @@ def _shown(value: Any, run_dir: Path) -> Any:
     return value
 
 
+def _row_fields(t: Thresholds) -> dict[str, float]:
+    """A report row's ``lambda_`` and ``eta`` (the field names committed report data keeps)."""
+    return config_fields(t, key="lambda_")  # type: ignore[return-value]
+
+
 def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
-    data = read_json(path)
+    data = read_thresholds_header(path)
     run_dir = path.parents[len(Path(stage["output"]).parts) - 1]
     report = _shown(dict(data.get("report", {})), run_dir)
     cfg = stage["config"]
@@ -89,8 +101,7 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.Threshol
     return report_rows.ThresholdRow(
         task=cfg["task"],
         model=cfg["model"],
-        lambda_=float(data["lambda"]),
-        eta=float(data["eta"]),
+        **_row_fields(read_thresholds(path)),
         compatible=f"{report.get('n_compatible', '?')} held-out demos of "
         f"'{cfg['compatible_operator']}' (collect seed {cfg['holdout_seed']})",
         incompatible=f"{report.get('n_incompatible', '?')} demos of "
@@ -101,8 +112,7 @@ def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.Threshol
 
 
 def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
-    data = read_json(path)
-    rep = dict(data.get("report", {}))
+    rep = dict(read_thresholds_header(path).get("report", {}))
     lo, hi = rep.get("lambda_range", (math.nan, math.nan))
     note = rep.get("note") or (
         f"density of familiar new pairs {rep.get('density_ratio_chosen_to_fitted', math.nan):.2g}"
@@ -112,8 +122,7 @@ def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRo
     return report_rows.ThresholdRow(
         task=stage["config"]["task"],
         model=stage["config"]["model"],
-        lambda_=float(data["lambda"]),
-        eta=float(data["eta"]),
+        **_row_fields(read_thresholds(path)),
         compatible=f"valley rule: λ moved from the fitted {rep.get('fitted_lambda', math.nan):.4g} "
         f"to the sparsest point of D_new's familiar pairs inside the margin {lo:.4g} .. {hi:.4g}",
         incompatible=note,
@@ -138,7 +147,8 @@ def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
     cfg = stage["config"]
     method = cfg["method"]
     if "/heldout/" in stage["id"]:  # the λ-sensitivity study's filters
-        method = f"M-Filtered at λ = {h['thresholds']['lambda']:.4g} (sensitivity)"
+        applied = pair_from_json(h["thresholds"], path)[0]
+        method = f"M-Filtered at λ = {applied:.4g} (sensitivity)"
     return report_rows.FilterRow(
         task=cfg["task"],
         model=cfg["model"],
@@ -170,15 +180,14 @@ def _curation_row(stage: Mapping[str, Any], path: Path) -> report_rows.CurationR
 
 
 def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoint:
-    data = read_json(path)
-    rep = data.get("report", {})
+    rep = read_thresholds_header(path).get("report", {})
     lo, hi = rep["lambda_range"]
     cfg = stage["config"]
     return report_rows.LambdaPoint(
         task=cfg["task"],
         model=cfg["model"],
         point=int(rep["point"]),
-        lambda_=float(data["lambda"]),
+        lambda_=read_thresholds(path).lam,
         fitted=float(rep["fitted_lambda"]),
         low=float(lo),
         high=float(hi),

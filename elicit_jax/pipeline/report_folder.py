@@ -8,11 +8,20 @@ atomically).
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import atomic_path, dumps, make_header, provenance_line
+from elicit_jax.artifact import (
+    atomic_path,
+    dumps,
+    make_header,
+    provenance_line,
+    read_header,
+    refuse_foreign_files,
+)
+from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.evidence import DATA_FILE, ROLLOUTS_FILE, write_rollouts_table
 from elicit_jax.pipeline.findings import write_beside
 from elicit_jax.pipeline.report_rows import RunReport
@@ -23,6 +32,42 @@ CPU_NOTE = (
 )
 RAW_FILES = (ROLLOUTS_FILE, DATA_FILE)
 """The raw results a report folder keeps, so that it can be rebuilt."""
+REPORT_KINDS = ("pipeline-report", "study-report", "session-report")
+"""The artifact kinds of report folders (a pipeline's, a study's, a session's)."""
+_REPORT_FIGURE = re.compile(r"^((maps|figures)/([^/]+\.(png|svg))?|session\.png)$")
+"""The figures a report folder holds besides the files its header lists (and their folders,
+empty when there is nothing to draw)."""
+
+
+def check_report_folder(folder: str | Path) -> None:
+    """Refuse to replace ``folder`` unless it is missing, empty, or a report folder holding
+    only what a report writes (its header's ``files``, ``artifact.json``, its figures): a
+    folder of the user's, or a report with the user's files added, is never replaced.
+
+    Raises:
+      ElicitError: naming the folder (and the files in the way).
+    """
+    folder = Path(folder)
+    if not (folder.exists() or folder.is_symlink()):
+        return
+    if not folder.is_dir():
+        raise ElicitError("is a file, not a report folder; choose another output", folder)
+    if not any(folder.iterdir()):
+        return
+    try:
+        header = read_header(folder)
+    except ElicitError:
+        header = {}
+    if header.get("kind") not in REPORT_KINDS:
+        raise ElicitError(
+            "is an existing directory holding no report written by elicit-jax; it is never "
+            "replaced: move it away, or choose another output",
+            folder,
+        )
+    listed = {"artifact.json", *header.get("files", [])}
+    refuse_foreign_files(
+        folder, lambda rel: rel in listed or bool(_REPORT_FIGURE.match(rel)), "a report"
+    )
 
 
 def training_seeds(data: RunReport) -> list[int]:
@@ -105,6 +150,7 @@ def write_report_folder(
       **fields: further fields of the header (counts of the kind's own rows).
     """
     out_dir = Path(out_dir)
+    check_report_folder(out_dir)
     with atomic_path(out_dir) as tmp:
         tmp.mkdir(parents=True)
         if rebuilt_from is not None:

@@ -99,6 +99,40 @@ def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
     write_json(run_dir / MANIFEST, header)
 
 
+def check_run_dir(run_dir: Path) -> None:
+    """Refuse a run directory that holds anything but a pipeline run (the rule of ``train
+    --out`` and ``elicit -o``): a missing or empty folder starts a run, one with a pipeline's
+    ``run.json`` resumes it, anything else is the user's and is never written into. Its
+    report folder, replaced at the end of every run, must be a report holding only what a
+    report writes (:func:`elicit_jax.pipeline.report_folder.check_report_folder`).
+
+    Raises:
+      ElicitError: naming the folder and what is in it.
+    """
+    from elicit_jax.artifact import foreign_files
+    from elicit_jax.errors import ElicitError
+    from elicit_jax.pipeline.gather import read_manifest
+    from elicit_jax.pipeline.report_folder import check_report_folder
+
+    if not (run_dir.exists() or run_dir.is_symlink()):
+        return
+    if not run_dir.is_dir():
+        raise ElicitError("is a file, not a run directory; choose another --out", run_dir)
+    if not any(run_dir.iterdir()):
+        return
+    try:
+        read_manifest(run_dir)
+    except ElicitError as e:
+        found = foreign_files(run_dir, lambda rel: False)
+        shown = ", ".join(found[:4]) + (f" and {len(found) - 4} more" if len(found) > 4 else "")
+        raise ElicitError(
+            f"holds files not made by a pipeline run ({shown or 'empty folders'}); elicit-jax "
+            "writes only into a new folder or an earlier run's: choose another --out",
+            run_dir,
+        ) from e
+    check_report_folder(run_dir / REPORT_DIR)
+
+
 def run_pipeline(
     config: PipelineRunConfig,
     *,
@@ -120,6 +154,7 @@ def run_pipeline(
         f"{len(spec.tasks)} task(s) × {len(spec.models)} model(s) × {len(spec.seeds)} seed(s)"
         f"{_collections_note(spec)} → {run_dir}"
     )
+    check_run_dir(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     if config.ray is not None:
         from elicit_jax.pipeline.ray_runner import import_ray, run_graph_ray

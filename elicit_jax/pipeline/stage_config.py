@@ -16,6 +16,10 @@ from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.curation_stages import resolve_cupid, resolve_quality
 from elicit_jax.pipeline.definition import section_fields
 
+PROVISIONAL_PRESET = "square-nut"
+"""The preset the contrast-set scores are judged under before the fit (see ``_resolve_score``);
+the same values the pipelines have always recorded in their [score] stage configs."""
+
 FILTER_METHODS = {
     "filtered": ("m", "pair"),
     "filtered-valley": ("m", "pair"),
@@ -62,11 +66,18 @@ def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
 
     meta, over = _split(raw, ("task", "model", "policy_seed", "set", "checkpoint"))
     meta.setdefault("checkpoint", "best")
-    return {**meta, "score": config_dict(ScoreConfig(**section_fields(ScoreConfig, over, "score")))}
+    if "thresholds" in over:
+        raise ElicitError("[score] takes no thresholds: the pipeline fits them ([thresholds])")
+    # The contrast sets are scored before (λ, η) are fitted on them: their M and incompatible
+    # column use square-nut's preset, named as provisional in every scores file (the stage
+    # reads a fit, when it has one, and judges each D_new under it).
+    fields = section_fields(ScoreConfig, over, "score")
+    return {**meta, "score": config_dict(ScoreConfig.from_preset(PROVISIONAL_PRESET, **fields))}
 
 
 def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
-    from elicit_jax.compat.thresholds import FitConfig
+    from elicit_jax.compat.threshold_fit import FitConfig
+    from elicit_jax.compat.thresholds import ETA_KEY, LAMBDA_KEY, from_config_fields
 
     keys = (
         "task",
@@ -75,13 +86,17 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
         "incompatible_operator",
         "holdout_seed",
         "incompatible_seed",
-        "lambda",
-        "eta",
+        LAMBDA_KEY,
+        ETA_KEY,
         "force",
     )
     meta, over = _split(raw, keys)
-    if ("lambda" in meta) != ("eta" in meta):
-        raise ElicitError("[thresholds] give both lambda and eta (manual), or neither (fit)")
+    try:  # manual thresholds: both or neither, numbers, finite and > 0
+        from_config_fields(dict(meta), "[thresholds]")
+    except ElicitError as e:
+        raise ElicitError(
+            f"[thresholds] {e}: both lambda and eta (manual), or neither (fit)"
+        ) from None
     if meta["compatible_operator"] == meta["incompatible_operator"]:
         raise ElicitError("incompatible_operator must differ from the base operator")
     fit = FitConfig(**section_fields(FitConfig, over, "thresholds"))
@@ -94,10 +109,10 @@ def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
     meta, over = _split(raw, ("task", "model", "method", "operator"))
     method, level = FILTER_METHODS[meta["method"]]
     over = {**over, "method": method, **({"level": level} if level else {})}
-    cfg = FilterConfig(**section_fields(FilterConfig, over, "filter"))
-    if cfg.lambda_ is not None:
+    if {"thresholds", "lambda_", "lambda", "eta"} & set(over):
         raise ElicitError("[filter] takes its thresholds from the fit stage; set [thresholds]")
-    return {**meta, "filter": dataclasses.asdict(cfg)}
+    cfg = FilterConfig(**section_fields(FilterConfig, over, "filter"))
+    return {**meta, "filter": cfg.to_dict()}
 
 
 def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:

@@ -87,11 +87,11 @@ def curate_stage(ctx: StageContext) -> None:
     from elicit_jax.curation.select import curate_demos, matched_rule
 
     cfg = ctx.config
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    thresholds = read_thresholds(ctx.inputs["thresholds"])
     scores = read_episode_scores(ctx.inputs["episode_scores"])
     if cfg["rate"] == "m":
         rule = matched_rule(
-            ctx.inputs["scores"] / SCORES_FILE, cfg["level"], lam, eta, cfg["accept_fraction"]
+            ctx.inputs["scores"] / SCORES_FILE, cfg["level"], thresholds, cfg["accept_fraction"]
         )
     else:
         rule = OwnRule(cfg["drop_fraction"])
@@ -110,7 +110,7 @@ def curate_stage(ctx: StageContext) -> None:
         reason = result.reason if files else result.reason + "; the retraining uses D_base alone"
         counts = {"pairs_in": result.pairs_in, "pairs_dropped": result.pairs_dropped}
         counts |= {"episodes_in": result.episodes_in, "episodes_out": result.episodes_out}
-        write_filter_header(ctx, tmp, (lam, eta), reason, files, counts, trusted=scores.trusted)
+        write_filter_header(ctx, tmp, thresholds, reason, files, counts, trusted=scores.trusted)
 
 
 def report_stage(ctx: StageContext) -> None:

@@ -7,19 +7,21 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from elicit_jax.artifact import atomic_path, make_header, write_json
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.runner import StageContext
 from elicit_jax.pipeline.stages_policy import DEMOS_FILE, SCORES_FILE
 
+if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
+
 
 def score_stage(ctx: StageContext) -> None:
     """Score the ``demos*`` inputs (concatenated) with the base policy of ``policy_seed``;
     with a ``thresholds`` input (each D_new, scored after the fit), its pairs are judged under
     the fitted (λ, η), otherwise (the contrast sets the fit needs) under the [score] settings'."""
-    from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score_file import score_file
     from elicit_jax.compat.show import scoring_bar
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
@@ -30,7 +32,7 @@ def score_stage(ctx: StageContext) -> None:
     policy = load_policy(
         ctx.inputs["policy"], int(which) if str(which).isdigit() else which, seed=cfg["policy_seed"]
     )
-    config, source = _score_thresholds(ctx, config_from_dict(cfg["score"]))
+    config = _score_config(ctx, cfg["score"])
     names = sorted(n for n in ctx.inputs if n.startswith("demos"))
     with atomic_path(ctx.output) as tmp:
         tmp.mkdir()
@@ -47,7 +49,6 @@ def score_stage(ctx: StageContext) -> None:
             policy_path=ctx.inputs["policy"],
             policy_info={"which": which, "seed": cfg["policy_seed"]},
             progress=scoring_bar,
-            thresholds_source=source,
         )
         header = make_header(
             "pipeline-scores",
@@ -60,34 +61,37 @@ def score_stage(ctx: StageContext) -> None:
         write_json(tmp / "artifact.json", header)
 
 
-def _score_thresholds(ctx: StageContext, config: Any) -> tuple[Any, str]:
-    """The scoring config with the fitted (λ, η) when the stage reads a fit, and where the
-    thresholds came from."""
+def _score_config(ctx: StageContext, stored: dict[str, Any]) -> Any:
+    """The scoring config of the stage: with the fitted thresholds when the stage reads a
+    fit, else the [score] settings' (provisional), each saying where they came from."""
+    from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.thresholds import read_thresholds
 
     if "thresholds" not in ctx.inputs:
-        return config, (
+        return config_from_dict(
+            stored,
             "provisional: the [score] settings' λ and η; the pipeline fits (λ, η) on these "
-            "contrast-set scores, and its filters and maps use the fitted values"
+            "contrast-set scores, and its filters and maps use the fitted values",
         )
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
-    fitted = dataclasses.replace(config, lambda_=float(lam), eta=float(eta))
-    return fitted, f"the pipeline's threshold fit ({ctx.inputs['thresholds']})"
+    fitted = read_thresholds(ctx.inputs["thresholds"])
+    source = f"the pipeline's threshold fit ({ctx.inputs['thresholds']})"
+    config = config_from_dict(stored, source)
+    return dataclasses.replace(config, thresholds=dataclasses.replace(fitted, source=source))
 
 
 def fit_stage(ctx: StageContext) -> None:
     """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
-    from elicit_jax.compat.thresholds import FitConfig
+    from elicit_jax.compat.threshold_fit import FitConfig
+    from elicit_jax.compat.thresholds import from_config_fields
 
     cfg = ctx.config
     job = FitJob(
         compatible=f"operator:{cfg['compatible_operator']}",
         incompatible=f"operator:{cfg['incompatible_operator']}",
         fit=FitConfig(**cfg["fit"]),
-        lambda_=cfg.get("lambda"),
-        eta=cfg.get("eta"),
+        manual=from_config_fields(dict(cfg), "the pipeline's [thresholds] (manual)"),
         force=bool(cfg.get("force", False)),
     )
     scores = ctx.inputs["scores"] / SCORES_FILE
@@ -106,8 +110,7 @@ def filter_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.thresholds import read_thresholds
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
-    cfg = FilterConfig(**{**ctx.config["filter"], "lambda_": lam, "eta": eta})
+    cfg = FilterConfig.from_dict(ctx.config["filter"], read_thresholds(ctx.inputs["thresholds"]))
     scores_path = ctx.inputs["scores"] / SCORES_FILE
     _, scores = read_scores(scores_path)
     drop, reason = drop_mask(scores, cfg)
@@ -156,13 +159,13 @@ def write_filter_output(
         files = [DEMOS_FILE, *keep, result.log_path.name]
     elif drop is not None:
         reason += "; every pair dropped, so the retraining uses D_base alone"
-    write_filter_header(ctx, tmp, (cfg.lambda_, cfg.eta), reason, files, counts)
+    write_filter_header(ctx, tmp, cfg.thresholds, reason, files, counts)
 
 
 def write_filter_header(
     ctx: StageContext,
     tmp: Path,
-    thresholds: tuple[float, float],
+    thresholds: Thresholds,
     reason: str,
     files: list[str],
     counts: dict[str, int],
@@ -185,7 +188,7 @@ def write_filter_header(
         1,
         config=dict(ctx.config),
         inputs=dict(ctx.inputs),
-        thresholds={"lambda": thresholds[0], "eta": thresholds[1]},
+        thresholds=thresholds.to_json(),
         reason=reason,
         files=files,
         **extra,
@@ -202,7 +205,7 @@ def map_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.score_file import read_scores
     from elicit_jax.compat.thresholds import read_thresholds
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    thresholds = read_thresholds(ctx.inputs["thresholds"])
     cols = ("likelihood", "novelty", "operator", "incompatible")
     _, ref = read_scores(ctx.inputs["scores:contrast"] / SCORES_FILE, cols)
     keep = np.asarray(ref["operator"]).astype(str) == ctx.config["base_operator"]
@@ -211,41 +214,39 @@ def map_stage(ctx: StageContext) -> None:
     for op in ctx.config["operators"]:
         parts.append(read_scores(ctx.inputs[f"scores:{op}"] / SCORES_FILE, cols)[1])
     scores = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in cols}
-    write_png(scores, lam, eta, ctx.output, axis=ctx.config.get("axis", "likelihood-error"))
+    write_png(scores, thresholds, ctx.output, axis=ctx.config.get("axis", "likelihood-error"))
 
 
-def _fitted_margin(ctx: StageContext, refusal: str) -> tuple[float, float, tuple[float, float]]:
-    """The fitted (λ, η) of the stage's ``thresholds`` input and the λ range of the fit's
+def _fitted_margin(ctx: StageContext, refusal: str) -> tuple[Thresholds, tuple[float, float]]:
+    """The fitted thresholds of the stage's ``thresholds`` input and the λ range of the fit's
     margin; thresholds set by hand, or without a margin, are refused with ``refusal``."""
-    from elicit_jax.compat.thresholds import read_thresholds
+    from elicit_jax.compat.thresholds import read_thresholds, read_thresholds_header
 
-    lam, eta, fit = read_thresholds(ctx.inputs["thresholds"])
+    fit = read_thresholds_header(ctx.inputs["thresholds"])
     lo, hi = fit.get("report", {}).get("lambda_range", (None, None))
     if fit.get("method", "fit") != "fit" or lo is None:
         raise ElicitError(refusal, ctx.inputs["thresholds"])
-    return lam, eta, (lo, hi)
+    return read_thresholds(ctx.inputs["thresholds"]), (lo, hi)
 
 
 def lambda_point_stage(ctx: StageContext) -> None:
     """Thresholds with λ at point k of ``points`` evenly spaced over the fit's margin range
     (η as fitted), for the sensitivity study."""
-    from elicit_jax.compat.thresholds import THRESHOLDS_KIND
+    from elicit_jax.compat.thresholds import write_thresholds
 
-    lam, eta, (lo, hi) = _fitted_margin(
+    fitted, (lo, hi) = _fitted_margin(
         ctx, "the λ-sensitivity study needs fitted thresholds with a margin, not manual ones"
     )
     k, n = int(ctx.config["point"]), int(ctx.config["points"])
     point = float(lo + (hi - lo) * k / (n - 1))
-    header = make_header(
-        THRESHOLDS_KIND,
-        1,
+    write_thresholds(
+        ctx.output,
+        dataclasses.replace(fitted, lam=point, source=f"sensitivity point {k} of {n}"),
         config=dict(ctx.config),
         inputs={"fit": ctx.inputs["thresholds"]},
         method="sensitivity-point",
-        report={"point": k, "points": n, "lambda_range": [lo, hi], "fitted_lambda": lam},
-        **{"lambda": point, "eta": eta},
+        report={"point": k, "points": n, "lambda_range": [lo, hi], "fitted_lambda": fitted.lam},
     )
-    write_json(ctx.output, header)
 
 
 def lambda_valley_stage(ctx: StageContext) -> None:
@@ -254,10 +255,10 @@ def lambda_valley_stage(ctx: StageContext) -> None:
     import numpy as np
 
     from elicit_jax.compat.score_file import read_scores
-    from elicit_jax.compat.thresholds import THRESHOLDS_KIND
+    from elicit_jax.compat.thresholds import write_thresholds
     from elicit_jax.compat.valley import valley_lambda
 
-    lam, eta, (lo, hi) = _fitted_margin(
+    fitted, (lo, hi) = _fitted_margin(
         ctx, "the valley rule moves a fitted λ inside its margin; these thresholds were not fitted"
     )
     cols = ("likelihood", "novelty")
@@ -266,14 +267,12 @@ def lambda_valley_stage(ctx: StageContext) -> None:
     ]
     ell = np.concatenate([p["likelihood"] for p in parts])
     nu = np.concatenate([p["novelty"] for p in parts])
-    new_lam, report = valley_lambda(ell, nu, eta, lo, hi, lam)
-    header = make_header(
-        THRESHOLDS_KIND,
-        1,
+    new_lam, report = valley_lambda(ell, nu, fitted, lo, hi)
+    write_thresholds(
+        ctx.output,
+        dataclasses.replace(fitted, lam=new_lam, source="the new-data valley rule"),
         config=dict(ctx.config),
         inputs=dict(ctx.inputs),
         method="new-data-valley",
         report=report,
-        **{"lambda": new_lam, "eta": eta},
     )
-    write_json(ctx.output, header)

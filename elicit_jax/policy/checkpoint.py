@@ -48,6 +48,18 @@ SPEC_KEYS = (
 _EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
 
 
+_RUN_FILE = re.compile(
+    r"^(artifact\.json|seed\d+/(artifact\.json|loss\.parquet|normalization\.npz"
+    r"|params/(best|epoch_\d+)\.npz))$"
+)
+"""The files a training run writes (the layout above)."""
+
+
+def run_owns(relative: str) -> bool:
+    """Whether a training run writes the file at ``relative`` (a POSIX path in the run)."""
+    return bool(_RUN_FILE.match(relative))
+
+
 def epoch_file(epoch: int) -> str:
     """File name of the parameters after ``epoch`` epochs."""
     return f"epoch_{epoch:04d}.npz"

@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import dumps, make_header, read_header, write_json, write_parquet
+from elicit_jax.artifact import (
+    dumps,
+    make_header,
+    read_header,
+    refuse_foreign_files,
+    write_json,
+    write_parquet,
+)
 from elicit_jax.data.demos import Demos
 from elicit_jax.data.duplicates import episode_digests
 from elicit_jax.errors import ElicitError
@@ -27,7 +34,8 @@ def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwr
     """Refuse to replace ``out_dir`` unless it is empty, or it holds a training run and either
     ``overwrite`` is set or that run is of this very config on these very data (training is
     deterministic: nothing is lost). Anything else (a file, a folder of notes) is never
-    replaced, ``overwrite`` or not."""
+    replaced, ``overwrite`` or not; nor is a run holding files a run does not write (a
+    user's ``NOTES.md``, ``eval/``, ``seed0/mine.txt``): they are named instead."""
     if not out_dir.exists():
         return
     if out_dir.is_dir() and not any(out_dir.iterdir()):
@@ -37,6 +45,7 @@ def check_destination(out_dir: Path, config: TrainConfig, data_hash: str, overwr
     except ElicitError:
         header = {}
     if header.get("kind") == ckpt.RUN_KIND:
+        refuse_foreign_files(out_dir, ckpt.run_owns, "a training run")
         if overwrite:
             return
         same = header.get("config") == json.loads(dumps(config.to_dict()))

@@ -4,11 +4,18 @@ An :class:`OperatorDriver` owns a :class:`~elicit_jax.elicit.session.Session` (t
 C MuJoCo or a robosuite environment — and the live scorer run here, on the server) and drives
 it from its thread, the way :func:`~elicit_jax.elicit.run.run_session` does but paced: one
 control step per control period (50 ms on every shipped task), with the browser operator's
-latest command. Each episode waits for the page's ``start`` (the operator reads the
-instructions, the prompt or the feedback first); a lost connection pauses the episode until
-the page is back. Everything the page needs to redraw itself after a reload — the scene,
-the prompt, the current episode's indicator history, a pending verdict — is kept, and sent
-again to whichever connection attaches next (:meth:`OperatorDriver.attach`).
+latest command. A command that changes (a key pressed or let go) pulls the next step forward
+by up to half a period (:data:`EARLIEST`): the key's effect reaches the screen sooner, the
+steps stay on their grid (the step after is due a period after the pulled one was due, so
+an episode never runs faster than the control rate), and every step still simulates one
+control period (the episode's steps and states are the same; only the wall-clock gaps
+between its steps, ``time_s``, vary by up to half a period). Each step's pose frame is
+sent before its indicator event. Each episode waits for the page's ``start`` (the operator
+reads the instructions, the prompt or the feedback first); a lost connection pauses the
+episode until the page is back. Everything the page needs to redraw itself after a
+reload — the scene, the prompt, the current episode's indicator history and live state, a
+pending verdict — is kept, and sent again to whichever connection attaches next
+(:meth:`OperatorDriver.attach`).
 """
 
 from __future__ import annotations
@@ -43,6 +50,10 @@ from elicit_jax.web.protocol import Message, pack_frame
 from elicit_jax.web.scene import body_poses, scene_origin
 
 OPENING, READY, RUNNING, BUSY, DONE, ERROR = "opening", "ready", "running", "busy", "done", "error"
+EARLIEST = 0.5
+"""A new command pulls the next step forward by at most this fraction of a control period
+(the key's effect is on screen sooner). The steps stay on their grid: the next one is due a
+period after the one pulled was, so the episode never runs faster than the control rate."""
 
 
 class Outbox(Protocol):
@@ -81,7 +92,11 @@ class OperatorDriver:
         self.period = 0.05
         self._lock = threading.RLock()
         self._wake = threading.Event()
+        self._command = threading.Event()  # a new command: step soon
         self._stop = threading.Event()
+        self._command_seen: Any = None
+        self._in_step = False
+        self._after_frame: list[str] = []
         self._outbox: Outbox | None = None
         self._go = self._give_up = False
         self._prompt_pending = self._review_pending = False
@@ -92,6 +107,7 @@ class OperatorDriver:
         self._phase: list[str] = []
         self._episode: list[str | bytes] = []
         self._indicators: list[list[float]] = []
+        self._last_indicator: IndicatorEvent | None = None
         self._frame: bytes | None = None
         self._review: list[str | bytes] = []
         self._clips: Any = None
@@ -106,6 +122,7 @@ class OperatorDriver:
         """Stop stepping (the episode in progress is not recorded) and release the simulator."""
         self._stop.set()
         self._wake.set()
+        self._command.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout)
 
@@ -175,8 +192,12 @@ class OperatorDriver:
         op = self.operator
         if msg.type == "action" and op is not None:
             op.set_action(np.asarray(msg.action, np.float32))
+            if msg.action != self._command_seen:
+                self._command_seen = msg.action
+                self._command.set()
         elif msg.type == "control" and op is not None:
             op.set_control(msg.operator)
+            self._command.set()
         elif msg.type == "start":
             with self._lock:
                 if self.state == READY:
@@ -264,12 +285,27 @@ class OperatorDriver:
                 self._wake.wait(0.25)
                 self._wake.clear()
                 continue
-            now = time.perf_counter()
-            next_t = now if next_t is None else next_t
-            if next_t > now and self._stop.wait(next_t - now):
+            next_t = time.perf_counter() if next_t is None else next_t
+            if self._wait_until(next_t) is None:
                 return
             next_t = max(next_t + self.period, time.perf_counter() - self.period)
+            self._command.clear()  # commands from here on are news to the next step
             self._tick()
+
+    def _wait_until(self, due: float) -> float | None:
+        """Sleep until the step ``due``; a new command pulls it forward to
+        :data:`EARLIEST` of a period before ``due`` (or now, if that has passed). Returns
+        the time the step was let go at, or None once stopped."""
+        at = due
+        while True:
+            now = time.perf_counter()
+            if at <= now:
+                return None if self._stop.is_set() else at
+            if self._command.wait(at - now):
+                self._command.clear()
+                if self._stop.is_set():
+                    return None
+                at = min(at, max(due - EARLIEST * self.period, now))
 
     def _tick(self) -> None:
         s = self.session
@@ -280,7 +316,11 @@ class OperatorDriver:
             obs = s.observation()
             action = self.operator.act(obs)
             self._m = math.nan
-            s.step(action, finish=False)
+            self._in_step = True
+            try:
+                s.step(action, finish=False)
+            finally:
+                self._in_step = False
             self.steps += 1
             self._step = obs.step + 1
             poses = body_poses(s.sim_data, self._origin)
@@ -288,6 +328,9 @@ class OperatorDriver:
             with self._lock:
                 self._frame = frame
                 self._send(frame, droppable=not s.episode_over)
+                after, self._after_frame = self._after_frame, []
+                for msg in after:  # the step's indicator: after its pose, off the key's path
+                    self._send(msg)
             s.finish_episode()  # after the last frame is out: judging and writing take a while
         if self._review_pending and not s.done:
             with self._lock:
@@ -301,9 +344,18 @@ class OperatorDriver:
             if isinstance(event, IndicatorEvent):
                 self._m = event.compatibility
                 self._indicators.append(
-                    [event.step, event.compatibility, float(event.incompatible)]
+                    [
+                        event.step,
+                        event.compatibility,
+                        float(event.incompatible),
+                        event.live.light if event.live else "",
+                    ]
                 )
-                self._send(messages.event(event))
+                self._last_indicator = event
+                if self._in_step:
+                    self._after_frame.append(messages.event(event))
+                else:
+                    self._send(messages.event(event))
             elif isinstance(event, EpisodeStartEvent):
                 self._on_episode_start(event)
             elif isinstance(event, EpisodeEndEvent):
@@ -336,7 +388,7 @@ class OperatorDriver:
         self._index, self._kind, self._step = event.episode, event.episode_kind, 0
         self._give_up = False
         self.operator.reset(self.config.dagger)
-        self._indicators = []
+        self._indicators, self._last_indicator = [], None
         frame = pack_frame(body_poses(self.session.sim_data, self._origin), event.episode, 0)
         self._episode = [messages.event(event)]
         self._frame = frame
@@ -389,7 +441,7 @@ class OperatorDriver:
     def _snapshot(self) -> list[str | bytes]:
         out: list[str | bytes] = [*self._static, *self._prompt, *self._phase, *self._episode]
         if self._indicators:
-            out.append(messages.indicators(self._indicators))
+            out.append(messages.indicators(self._indicators, self._last_indicator))
         if self._frame is not None:
             out.append(self._frame)
         if self._review_pending:

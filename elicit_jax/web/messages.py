@@ -36,9 +36,12 @@ def dump(kind: str, **fields: Any) -> str:
 
 def welcome(name: str, setup: Any, resumed: bool, period: float) -> str:
     """Who the page is and what the session is (sent first, and again on every reattach)."""
+    from elicit_jax.elicit.light import rule_words, whole
     from elicit_jax.elicit.setup import task_action_names
 
     c, task = setup.config, setup.task
+    informed = c.mode == "informed"
+    horizon = int(task.config.horizon)
     return dump(
         "welcome",
         protocol=PROTOCOL_VERSION,
@@ -47,13 +50,15 @@ def welcome(name: str, setup: Any, resumed: bool, period: float) -> str:
         mode=c.mode,
         dagger=c.dagger,
         control_hz=round(1.0 / period, 6),
-        horizon=int(task.config.horizon),
+        horizon=horizon,
         action_names=list(task_action_names(task)),
         practice=c.practice,
         prompt=c.prompt if c.mode == "informed" else 0,
         demos=c.demos,
         max_episodes=c.episode_limit,
-        rule=setup.rule.describe() if c.mode == "informed" else "",
+        rule=setup.rule.describe() if informed else "",
+        rule_words=rule_words(setup.rule, horizon) if informed else "",
+        allowed_at_horizon=whole(setup.rule.allowed(horizon)) if informed else None,
         resumed=resumed,
     )
 
@@ -118,9 +123,11 @@ def review(e: ReviewEvent, record: Any, allowed: float | None = None) -> str:
     )
 
 
-def indicators(items: list[list[float]]) -> str:
-    """The current episode's indicator history ``[[step, M, incompatible], ...]`` (reattach)."""
-    return dump("indicators", items=items)
+def indicators(items: list[list[Any]], last: Event | None = None) -> str:
+    """The current episode's indicator history ``[[step, M, incompatible, light], ...]`` and its
+    last indicator event (its live state: red steps, allowance), sent on a reattach so a
+    reloaded page shows what it showed before."""
+    return dump("indicators", items=items, last=None if last is None else event_to_dict(last))
 
 
 def state(**fields: Any) -> str:

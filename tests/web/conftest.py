@@ -8,7 +8,6 @@ import os
 import pytest
 from chromium import CHROMIUM_NAMES, FLAGS, find_chromium
 
-from elicit_jax.compat.threshold_source import Thresholds
 from elicit_jax.elicit.config import SessionConfig
 
 
@@ -52,8 +51,7 @@ def template(demo) -> SessionConfig:
     """A session config over the demo inputs: 1 practice episode, a prompt of 2, 1 demo."""
     from elicit_jax.compat.thresholds import read_thresholds
 
-    lam, eta, _ = read_thresholds(demo.thresholds)
-    thresholds = Thresholds(lam, eta, f"file {demo.thresholds}", file=demo.thresholds)
+    thresholds = read_thresholds(demo.thresholds)
     return SessionConfig(
         task="reach-pillar",
         policy=str(demo.policy),

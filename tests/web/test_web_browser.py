@@ -19,6 +19,7 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
 from chromium import page_with_errors, sign_in
 from cli_server import CliServer
 
@@ -147,8 +148,12 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
             timeout=60_000,
         )
         assert red.json_value() == ["0.000", "✗", "does not fit"]  # red means M = 0
-        count = page.inner_text("#inc-count")  # whole steps against whole steps
-        assert re.fullmatch(r"[✓✗] \d+ red steps? of \d+ allowed so far", count), count
+        count = page.inner_text("#inc-count")  # whole steps against a full episode's (fixed)
+        assert re.fullmatch(
+            r"\d+ red steps? of 10 allowed · \d+ more allowed in a full 200-step episode"
+            r"|✗ \d+ red steps, more than the 10 allowed: this try can no longer be accepted\.",
+            count,
+        ), count
         page.wait_for_function(  # the countdown runs while the episode does
             "() => /^[0-9] s left$/.test(document.getElementById('countdown-text').textContent)"
         )
@@ -162,6 +167,20 @@ def test_an_operator_is_accepted_by_keyboard_in_chromium(browser, demo, tmp_path
         words = page.inner_text("#review-windows")
         assert "you went right of the pillar; the base goes left of it" in words, words
         assert "robot0_" not in words and "1−M" not in words
+        # motion in the task's terms: "hold still" only where the recorded gripper did
+        flagged = page.evaluate(
+            "() => elicit.state.review.windows.map((w) => [w.episode_steps, w.plain.join('; ')])"
+        )
+        rejected = SessionStore(sessions / "ana").read_episode(
+            page.evaluate("elicit.state.review.episode")
+        )
+        for steps, plain in flagged:
+            xyz = rejected.obs[steps[0] : steps[-1] + 1, 0:3]
+            mm = 1000 * np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+            if "hold still" in plain:
+                assert np.mean(mm < 1.0) >= 0.5, (plain, mm)
+            if np.mean(mm < 1.0) < 0.25:  # moving in most steps: never called still
+                assert "hold still" not in plain, (plain, mm)
         assert re.match(r"\d+ red steps? of \d+ allowed", page.inner_text("#review-text"))
         assert page.get_attribute("#announce", "aria-live") == "polite"
         assert page.inner_text("#announce").startswith("Not accepted.")

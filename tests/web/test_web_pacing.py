@@ -112,3 +112,55 @@ def _is_end(m: dict) -> bool:
 
 def _is_frame(m: dict, episode: int) -> bool:
     return m["type"] == "frame" and m["episode"] == episode
+
+
+def test_a_new_command_pulls_the_next_step_forward_by_at_most_half_a_period(template, tmp_path):
+    from elicit_jax.web.driver import EARLIEST
+
+    driver = OperatorDriver("x", template, tmp_path / "x", log=lambda _: None)
+    driver.period = 1.0  # long against any scheduling delay of a loaded machine
+    t = time.perf_counter()
+    assert driver._wait_until(t + 0.05) == t + 0.05  # no command: on the grid
+    driver.handle(Message("start"))  # not a command: no early step
+    driver.operator = type("Op", (), {"set_action": lambda self, a: None})()
+    driver.handle(Message("action", action=(1.0, 0, 0, 0, 0, 0, -1.0)))
+    due = time.perf_counter() + driver.period
+    assert driver._wait_until(due) == due - EARLIEST * driver.period  # half a period early
+    driver._command.clear()
+    driver.handle(Message("action", action=(1.0, 0, 0, 0, 0, 0, -1.0)))  # the same: no news
+    due = time.perf_counter() + 0.2
+    assert driver._wait_until(due) == due
+    driver.stop()
+    assert driver._wait_until(time.perf_counter() + 5) is None
+
+
+def test_changing_commands_never_run_an_episode_faster_than_the_control_rate(template, tmp_path):
+    """A command changing at every step (a gamepad's stick) pulls steps forward, but the
+    steps stay on their grid: the episode keeps the control rate."""
+    config = dataclasses.replace(
+        template, practice=0, prompt=0, demos=1, max_episodes=2, horizon=40, operator="browser:x"
+    )
+    out = tmp_path / "x"
+    driver = OperatorDriver("x", config, out, log=lambda _: None)
+    driver.start()
+    try:
+        deadline = time.monotonic() + 120
+        while driver.state == "opening" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert driver.state == "ready", (driver.state, driver.message)
+        driver.handle(Message("action", action=(0.5, 0, 0, 0, 0, 0, -1.0)))
+        driver.handle(Message("start"))
+        t0, i = time.perf_counter(), 0
+        while driver.steps < 30 and time.perf_counter() - t0 < 60:
+            i += 1
+            driver.handle(Message("action", action=(0.5 + 0.01 * (i % 2), 0, 0, 0, 0, 0, -1.0)))
+            time.sleep(0.01)  # a changed command every 10 ms
+        elapsed = time.perf_counter() - t0
+    finally:
+        driver.stop()
+    assert driver.steps >= 30
+    # 30 steps at 20 Hz take 29 periods at least, less the first step's half period early
+    assert elapsed >= (29 - EARLIEST_SLACK) * driver.period, elapsed
+
+
+EARLIEST_SLACK = 0.5

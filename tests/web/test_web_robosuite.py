@@ -61,7 +61,7 @@ def server(inputs, tmp_path):
     """``serve``'s app for robosuite-square on a free port, in this process."""
     import uvicorn
 
-    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.elicit.config import SessionConfig
     from elicit_jax.web.access import access_policy
     from elicit_jax.web.hub import OperatorHub
@@ -108,7 +108,8 @@ def test_robosuite_scene_and_indicator_in_chromium(browser, server):
         assert abs(before[2]) < 0.4  # the gripper starts just above the table top (height 0)
         page.keyboard.down("KeyR")  # up: a real key press starts the episode
         page.wait_for_function(
-            "() => ['green', 'red'].includes(document.getElementById('indicator').dataset.state)",
+            "() => ['green', 'red', 'unfamiliar']"  # a lit state (no data there: its own)
+            ".includes(document.getElementById('indicator').dataset.state)",
             timeout=60_000,
         )
         page.wait_for_function(

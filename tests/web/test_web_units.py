@@ -193,6 +193,27 @@ def test_serve_refuses_bad_settings_in_one_line():
         assert result.exit_code != 0 and message in str(result.exception), args
 
 
+def test_serve_keeps_the_thresholds_whole(monkeypatch, tmp_path):
+    """Their source, file and recorded trust verdict reach the sessions (serve took them
+    apart into λ and η and rebuilt them, losing the verdict)."""
+    from elicit_jax.cli import app
+    from elicit_jax.compat.thresholds import Thresholds, read_thresholds, write_thresholds
+    from elicit_jax.web import serve
+
+    t = tmp_path / "t.json"
+    given = Thresholds(0.3, 0.07, "given")
+    write_thresholds(t, given, method="manual", inputs={}, config={}, report={})
+    seen = []
+    monkeypatch.setattr(serve, "serve", lambda config, **_: seen.append(config))
+    args = ["serve", "--task", "reach-pillar", "--policy", "p", "--base-demos", "b.parquet"]
+    result = CliRunner().invoke(app, [*args, "--thresholds", str(t), "--horizon", "50"])
+    assert result.exit_code == 0, (result.output, result.exception)
+    kept = seen[0].session.thresholds
+    assert kept == read_thresholds(t)
+    assert kept.verdict is not None and not kept.verdict.clean and kept.source == f"file {t}"
+    assert f"thresholds: λ=0.3, η=0.07 from file {t}" in result.output  # said which
+
+
 def test_the_demo_cache_key_covers_the_version_and_the_training_config(monkeypatch):
     """An upgrade or a changed training default builds the `serve --demo` inputs anew."""
     import dataclasses

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
+from elicit_jax.compat.thresholds import read_thresholds, read_thresholds_header
 from elicit_jax.pipeline.gather import kept_counts, walk_run
 from elicit_jax.pipeline.report_rows import RunReport
 
@@ -174,11 +175,10 @@ def gather_study(run_dir: str | Path) -> StudyData:
 
 def _thresholds(path: Path) -> dict[str, Any]:
     """The fitted (λ, η) a study's sessions and M-filter ran under, and how far to trust it."""
-    data = read_json(path)
+    data = read_thresholds_header(path)
     report = dict(data.get("report", {}))
     return {
-        "lambda": float(data["lambda"]),
-        "eta": float(data["eta"]),
+        **read_thresholds(path).to_json(),
         "method": data.get("method", "fit"),
         "trust": report.get("trust"),
         "balanced_accuracy": report.get("balanced_accuracy"),

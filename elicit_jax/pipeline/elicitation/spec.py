@@ -30,6 +30,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from elicit_jax.compat.thresholds import SESSION_KEYS
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.definition import (
     HEAD_KEYS,
@@ -74,8 +75,8 @@ _TASK = {
     "profiles",
     "people_ranges",
 }
-_SESSION_FIXED = {"task", "policy", "base_demos", "lambda", "lambda_", "eta", "operator", "mode"}
-_SESSION_FIXED |= {"show", "dagger", "thresholds_file", "policy_seed", "seed"}
+_SESSION_FIXED = {"task", "policy", "base_demos", *SESSION_KEYS, "lambda_", "operator", "mode"}
+_SESSION_FIXED |= {"show", "dagger", "policy_seed", "seed"}
 
 
 @dataclasses.dataclass(frozen=True)

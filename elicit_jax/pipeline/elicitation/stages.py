@@ -19,21 +19,23 @@ from elicit_jax.pipeline.runner import StageContext, StageFn
 
 # Session fields only known when the stage runs: stand-ins while the settings are validated,
 # removed again before they are recorded.
-_SET_AT_RUN_TIME = {"policy": "-", "base_demos": "-", "lambda": 1.0, "eta": 1.0}
+_SET_AT_RUN_TIME = {"policy": "-", "base_demos": "-"}
 _META = ("task", "model", "person", "condition")
 
 
 def _resolve_session(raw: dict[str, Any]) -> dict[str, Any]:
+    from elicit_jax.compat.thresholds import SESSION_KEYS, Thresholds
     from elicit_jax.elicit.config import SessionConfig
 
     meta = {k: raw[k] for k in _META if k in raw}
     fields = {k: v for k, v in raw.items() if k not in ("model", "person", "condition")}
     try:
-        config = SessionConfig.from_dict({**fields, **_SET_AT_RUN_TIME})
+        stand_in = Thresholds(1.0, 1.0, "set when the stage runs: the fitted thresholds")
+        config = SessionConfig.from_dict({**fields, **_SET_AT_RUN_TIME}, thresholds=stand_in)
     except ElicitError as e:
         raise ElicitError(f"[session] {e}") from None
     settings = config.to_dict()
-    for key in ("policy", "base_demos", "lambda", "eta", "thresholds_file"):
+    for key in (*_SET_AT_RUN_TIME, *SESSION_KEYS):
         settings.pop(key)
     return {**meta, "session": settings}
 
@@ -75,16 +77,13 @@ def session_stage(ctx: StageContext) -> None:
     from elicit_jax.elicit.setup import open_session
     from elicit_jax.pipeline.stages import demos_file
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
     config = SessionConfig.from_dict(
         {
             **ctx.config["session"],
             "policy": str(ctx.inputs["policy"]),
             "base_demos": str(demos_file(ctx.inputs["base"])),
-            "lambda": lam,
-            "eta": eta,
-            "thresholds_file": str(ctx.inputs["thresholds"]),
-        }
+        },
+        thresholds=read_thresholds(ctx.inputs["thresholds"]),
     )
     try:
         setup, operator, _ = open_session(config, ctx.output)
@@ -147,10 +146,10 @@ def filter_session_stage(ctx: StageContext) -> None:
     from elicit_jax.pipeline.stages_compat import write_filter_output
     from elicit_jax.policy.checkpoint import load_policy
 
-    lam, eta, _ = read_thresholds(ctx.inputs["thresholds"])
+    thresholds = read_thresholds(ctx.inputs["thresholds"])
     source = ctx.inputs["session"] / DEMOS_FILE
     score_cfg = ctx.config["score"]
-    cfg = FilterConfig(**{**ctx.config["filter"]["filter"], "lambda_": lam, "eta": eta})
+    cfg = FilterConfig.from_dict(ctx.config["filter"]["filter"], thresholds)
     counts = {"pairs_in": 0, "pairs_dropped": 0, "episodes_in": 0, "episodes_out": 0}
     with atomic_path(ctx.output) as tmp:
         tmp.mkdir()
@@ -163,7 +162,7 @@ def filter_session_stage(ctx: StageContext) -> None:
                 policy,
                 source,
                 tmp / SCORES_FILE,
-                config_from_dict(score_cfg["score"]),
+                config_from_dict(score_cfg["score"], "the session filter's [score] settings"),
                 policy_path=ctx.inputs["policy"],
                 progress=scoring_bar,
             )

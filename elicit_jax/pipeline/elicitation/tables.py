@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from elicit_jax.compat.thresholds import pair_from_json
 from elicit_jax.pipeline.elicitation.gather import DISTANCE_KEY, SessionData, StudyData
 from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
@@ -343,8 +344,7 @@ def threshold_table(data: StudyData) -> Table:
         [
             task,
             model,
-            f"{t['lambda']:.4g}",
-            f"{t['eta']:.4g}",
+            *(f"{v:.4g}" for v in pair_from_json(t)),
             "fitted on contrast sets" if t["method"] == "fit" else "set by hand",
             "–" if t.get("balanced_accuracy") is None else f"{t['balanced_accuracy']:.3g}",
             trust_text(t.get("trust")),

@@ -8,7 +8,7 @@ pillar). Success: the end effector within ``goal_tol`` of the goal.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -45,6 +45,12 @@ class ReachPillar(Task):
 
     name = "reach-pillar"
     config_cls = ReachPillarConfig
+    scene_hints: ClassVar[dict[str, Any]] = {
+        # the browser's camera starts beside the route, not behind its start: the pillar
+        # stands between start (left) and goal (right), and the final approach to the goal
+        # is in plain sight instead of behind the pillar
+        "home": {"position": (0.02, -0.6, 0.36), "target": (0.0, 0.0, 0.05)},
+    }
 
     def xml(self) -> str:
         pillar = mjcf.vertical_capsule(

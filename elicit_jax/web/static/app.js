@@ -145,8 +145,9 @@ function onText(msg) {
       break;
     case 'scene': view.build(msg); break;
     case 'event': onEvent(msg.event); break;
-    case 'indicators':
+    case 'indicators':  // a reattach: the episode's steps so far and its live state
       S.indicators = msg.items;
+      S.lastIndicator = msg.last;
       break;
     case 'prompt':
       S.prompt = msg; S.promptClips = []; S.promptIndex = 0; S.promptDismissed = false;
@@ -177,7 +178,10 @@ function onEvent(ev) {
       teleop.emit(true);
       break;
     case 'indicator':
-      S.indicators.push([ev.step, ev.compatibility, ev.incompatible ? 1 : 0]);
+      S.indicators.push([ev.step, ev.compatibility, ev.incompatible ? 1 : 0, ev.live ? ev.live.light : '']);
+      if (ev.live && ev.live.doomed && !(S.lastIndicator && S.lastIndicator.live && S.lastIndicator.live.doomed)) {
+        announce(`This try can no longer be accepted: ${ev.live.red} red steps, ${ev.live.allowed} allowed. Backspace stops it.`);
+      }
       S.lastIndicator = ev;
       soon(updateIndicator, 100);
       return;
@@ -271,7 +275,7 @@ function render() {
     const goal = GOALS[w.task] || 'Solve the task.';
     $('task-goal').textContent = goal;
     $('demo-goal').textContent = goal;
-    $('rule-text').textContent = w.rule ? `A demonstration is accepted unless ${ruleWords(w.rule)}.` : '';
+    $('rule-text').textContent = w.rule_words || '';
     for (const el of document.querySelectorAll('.horizon')) el.textContent = `${w.horizon} steps (${(w.horizon / w.control_hz).toFixed(0)} s)`;
   }
   if (st && counts) {
@@ -288,11 +292,6 @@ function render() {
   applyView(screen);
   updateIndicator();
   updateHud();
-}
-
-function ruleWords(rule) {
-  const m = /reject when (.*)/.exec(rule);
-  return m ? m[1] : rule;
 }
 
 function renderPrompt() {
@@ -451,27 +450,48 @@ function updateReplayBar(p) {
   $('replay-step').textContent = p.length ? `step ${p.t + 1} / ${p.length}` : '';
 }
 
-// The light shows the last step (green ✓ circle: it fits; red ✗ square: it does not — the
-// rule counts the red steps), the count shows red steps against the whole steps the rule
-// allows so far, in red once over it.
+// One live state from the server (elicit_jax/elicit/light.py), never contradicting the verdict:
+// the light is this step's (green ✓ disc: fits; red ✗ square: does not — the rule counts it;
+// grey ‖: you are not moving; grey ?: the robot has no data here), the count is the red steps
+// against the allowance of a full-length episode (fixed), the line under it the verdict if
+// the episode ended now, and once the red steps exceed the allowance the try can no longer
+// be accepted: the box turns red and offers to stop.
+const LIGHT_WORDS = {
+  green: ['✓', 'fits'], red: ['✗', 'does not fit'],
+  idle: ['‖', 'idle: you are not moving'], unfamiliar: ['?', 'no data here: the robot has never been here'],
+  none: ['', 'waiting'],
+};
 function updateIndicator() {
   const ind = $('indicator');
+  const li = S.lastIndicator, live = li && li.live;
   const last = S.indicators.length ? S.indicators[S.indicators.length - 1] : null;
-  const state = last ? (last[2] ? 'red' : 'green') : 'none';
+  const light = live ? live.light : last ? (last[2] ? 'red' : 'fits') : 'none';
+  const state = light === 'fits' ? 'green' : light;
   ind.dataset.state = state;
-  ind.dataset.m = last && last[1] !== null ? last[1].toFixed(3) : '';
-  ind.textContent = state === 'red' ? '✗' : state === 'green' ? '✓' : '';
-  $('m-value').textContent = state === 'red' ? 'does not fit' : state === 'green' ? 'fits' : 'waiting';
-  const li = S.lastIndicator;
-  const count = $('inc-count');
-  if (li) {
-    const allowed = allowedSteps(li.allowed), over = li.incompatible_so_far > allowed;
-    count.textContent = `${over ? '✗' : '✓'} ${plural(li.incompatible_so_far, 'red step')} of ${allowed} allowed so far`;
-    count.dataset.over = String(over);
+  ind.dataset.m = li && li.compatibility !== null ? li.compatibility.toFixed(3) : '';
+  const [symbol, words] = LIGHT_WORDS[state] || LIGHT_WORDS.none;
+  ind.textContent = symbol;
+  $('m-value').textContent = words;
+  const count = $('inc-count'), now = $('now-verdict'), stop = $('stop-try');
+  const doomed = Boolean(live && live.doomed);
+  $('indicator-box').dataset.doomed = String(doomed);
+  stop.hidden = !doomed;
+  if (live && doomed) {
+    count.textContent = `✗ ${plural(live.red, 'red step')}, more than the ${live.allowed} allowed: this try can no longer be accepted.`;
+    now.textContent = '';  // the stop button takes its place (the box keeps its height)
+  } else if (live) {
+    count.textContent = `${plural(live.red, 'red step')} of ${live.allowed} allowed · ${live.left} more allowed in a full ${live.horizon}-step episode`;
+    now.textContent = live.accept_now
+      ? `Solved now, it would be accepted (${live.red} of ${live.allowed_now} allowed at ${live.scored} steps).`
+      : `Solved now, it would not be accepted (${live.red} red, ${live.allowed_now} allowed at ${live.scored} steps): more fitting steps raise it.`;
   } else {
-    count.textContent = 'no steps yet';
-    count.dataset.over = 'false';
+    const w = S.welcome;
+    count.textContent = w && w.allowed_at_horizon !== null && w.allowed_at_horizon !== undefined
+      ? `no steps yet · ${w.allowed_at_horizon} red steps allowed in a full ${w.horizon}-step episode`
+      : 'no steps yet';
+    now.textContent = '';
   }
+  count.dataset.over = String(doomed);
   drawStrip($('strip'), S.indicators, S.welcome ? S.welcome.horizon : 100, []);
 }
 
@@ -483,10 +503,11 @@ function updateHud() {
   const cd = $('countdown');
   cd.hidden = !(live && w && (S.screen === 'practice' || S.screen === 'demonstrate'));
   if (!cd.hidden) {
-    const step = running && f && S.episode && f.episode === S.episode.episode ? f.step : 0;
+    // the episode's own step, also while paused (a reload mid-episode keeps its progress)
+    const step = f && S.episode && f.episode === S.episode.episode && (running || f.step > 0) ? f.step : 0;
     const left = Math.max(0, (w.horizon - step) / w.control_hz);
     const sec = Math.ceil(left);
-    $('countdown-text').textContent = running ? `${sec} s left` : `${sec} s once you start`;
+    $('countdown-text').textContent = running ? `${sec} s left` : step > 0 ? `${sec} s left (paused: move to go on)` : `${sec} s once you start`;
     $('countdown-bar').style.transform = `scaleX(${(w.horizon - step) / w.horizon})`;
     cd.dataset.low = String(running && left <= 3);
     if (running && sec !== S.spokenSecond && (sec === 5 || sec === 0)) { S.spokenSecond = sec; announce(`${sec} seconds left`); }
@@ -513,10 +534,11 @@ function drawStrip(canvas, items, horizon, windows) {
   for (const steps of windows) {
     if (steps.length) ctx.fillRect(steps[0] * bw, 0, (steps[steps.length - 1] - steps[0] + 1) * bw, h);
   }
-  for (const [step, m, inc] of items) {
+  for (const [step, m, inc, light] of items) {
     if (m === null) continue;
-    ctx.fillStyle = inc ? '#d64545' : '#1f9d55';
-    const bh = inc ? h - 4 : Math.max(3, m * (h - 4));
+    const grey = light === 'idle' || light === 'unfamiliar';  // neither fits nor counts
+    ctx.fillStyle = inc ? '#d64545' : grey ? '#9aa3ae' : '#1f9d55';
+    const bh = inc ? h - 4 : grey ? (h - 4) / 3 : Math.max(3, m * (h - 4));
     ctx.fillRect(step * bw, h - bh, Math.max(1, bw - 0.5), bh);
   }
 }
@@ -593,7 +615,8 @@ document.addEventListener('keydown', (e) => {
   }
   if (e.code === 'Backspace') {
     e.preventDefault();
-    if (S.state && S.state.state === 'running') send({ type: 'give-up' });
+    // running, or paused mid-episode after a reload (the server ends only a started episode)
+    if (S.state && (S.state.state === 'running' || S.state.state === 'ready')) send({ type: 'give-up' });
     return;
   }
   if (e.code === 'KeyC') { view.resetCamera(); return; }
@@ -648,6 +671,7 @@ $('prompt-done').onclick = () => dismissPrompt();
 $('prompt-again').onclick = () => { if (S.prompt) { S.promptDismissed = false; S.promptRequested = true; render(); } };
 $('review-done').onclick = () => { S.reviewStep = 'progress'; render(); };
 $('next').onclick = () => onEnter();
+$('stop-try').onclick = () => send({ type: 'give-up' });  // the server ends only a started episode
 $('reconnect').onclick = () => reconnect();
 $('replay-play').onclick = () => player.toggle();
 $('replay-scrub').addEventListener('input', (e) => {
