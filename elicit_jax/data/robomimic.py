@@ -109,8 +109,15 @@ def _operator_labels(
     if not keys:
         raise ElicitError(f"no mask key matches '{pattern}'", path)
     label: dict[str, str] = {}
+    present = set(demo_names(f, path))
     for key in keys:
         for demo in read_mask(f, key, path):
+            if demo not in present:
+                raise ElicitError(
+                    f"mask/{key} lists {demo}, which is not in the file (no data/{demo}): "
+                    "a stale mask would label the wrong demos; fix or delete the mask",
+                    path,
+                )
             if demo in label:
                 raise ElicitError(
                     f"{demo} is listed by both mask/{label[demo]} and mask/{key}", path

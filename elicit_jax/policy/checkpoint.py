@@ -110,6 +110,49 @@ def load_params(path: Path) -> dict[str, Any]:
     return unflatten_params(flat)
 
 
+FILE_HASHES = "file_sha256"
+"""Seed header key: relative path -> sha256 of each parameter and normalisation file, recorded
+when the run is written, so parameters copied in from another run are detected."""
+
+
+def file_hashes(seed_dir: Path) -> dict[str, str]:
+    """Relative path -> sha256 of a seed directory's ``normalization.npz`` and
+    ``params/*.npz`` (recorded in its header as :data:`FILE_HASHES`)."""
+    from elicit_jax.hashing import file_sha256
+
+    files = [seed_dir / "normalization.npz", *sorted((seed_dir / "params").glob("*.npz"))]
+    return {f.relative_to(seed_dir).as_posix(): file_sha256(f) for f in files if f.is_file()}
+
+
+def check_file_hash(seed_dir: Path, header: Mapping[str, Any], file: Path) -> None:
+    """Refuse a parameter or normalisation file whose bytes are not the ones the seed's
+    header recorded when the run was written (checkpoints written before the hashes were
+    recorded are not checked).
+
+    Raises:
+      ElicitError: the file differs from, or is missing in, the recorded hashes.
+    """
+    from elicit_jax.hashing import file_sha256
+
+    recorded = header.get(FILE_HASHES)
+    if not isinstance(recorded, Mapping):
+        return
+    name = file.relative_to(seed_dir).as_posix()
+    if name not in recorded:
+        raise ElicitError(
+            "is not one of the files this checkpoint was written with (its artifact.json "
+            "records no hash for it): copied in from elsewhere?",
+            file,
+        )
+    if file_sha256(file) != recorded[name]:
+        raise ElicitError(
+            "does not match the sha256 its checkpoint's artifact.json recorded when the run "
+            "was written: copied from another run or changed since; retrain, or copy the "
+            "whole run directory",
+            file,
+        )
+
+
 def write_seed_header(seed_dir: Path, header: Mapping[str, Any]) -> None:
     """Write the seed directory's ``artifact.json`` (kind ``checkpoint``)."""
     write_json(seed_dir / "artifact.json", dict(header))
@@ -227,6 +270,8 @@ def load_checkpoint(
     params = load_params(file)
     norm = load_params(seed_dir / "normalization.npz")
     check_param_shapes(params, spec, file)
+    for f in (file, seed_dir / "normalization.npz"):
+        check_file_hash(seed_dir, header, f)
     optional = {k: spec[k] for k in ("layer_norm_eps", "dropout_last", "mdn_min_std") if k in spec}
     policy = Policy(
         params=jax.tree.map(jnp.asarray, params),
@@ -311,14 +356,16 @@ def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file:
 def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
     """Seed -> problems found in its checkpoint directory (empty list: healthy).
 
-    Reads every parameter file and the normalisation statistics, checking that each opens,
-    holds only finite numbers and matches the model spec; used by ``elicit-jax info``.
+    Reads every parameter file and the normalisation statistics, checking that each is the
+    file the run was written with (:func:`check_file_hash`), opens, holds only finite numbers
+    and matches the model spec; used by ``elicit-jax info``.
     """
     out: dict[int, list[str]] = {}
     for seed, d in sorted(seed_dirs(path).items()):
         problems: list[str] = []
         try:
-            spec = read_header(d)["model"]
+            header = read_header(d)
+            spec = header["model"]
         except (ElicitError, KeyError) as e:
             out[seed] = [f"{d}: unreadable header ({e})"]
             continue
@@ -332,6 +379,7 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
                 params = load_params(file)
                 if file.name != "normalization.npz":
                     check_param_shapes(params, spec, file)
+                check_file_hash(d, header, file)
             except ElicitError as e:
                 problems.append(str(e))
         out[seed] = problems
