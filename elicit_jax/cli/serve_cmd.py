@@ -53,6 +53,7 @@ def serve_cmd(
     lambda_: float | None = LAMBDA,
     eta: float | None = ETA,
     preset: str | None = so.PRESET,
+    force: bool = so.FORCE_TASK,
     **flags: Any,
 ) -> None:
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
@@ -76,6 +77,8 @@ def serve_cmd(
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
         thresholds, chosen = _demo_inputs(given, demo_dir, policy, base_demos, chosen)
+    else:
+        so.recorded_task(given, force)
     server = {"sessions": str(sessions), "host": host, "port": port, "token": token}
     server |= {"max_operators": max_operators, "admin_token": admin_token}
     config = _serve_config(given, chosen, thresholds, allow_hosts=tuple(allow_host), **server)

@@ -209,7 +209,12 @@ def write_demos(
         n_steps=demos.n_steps,
         extra_columns=sorted(demos.extra),
     )
-    write_parquet(path, demos_to_table(demos), header)
+    try:
+        write_parquet(path, demos_to_table(demos), header)
+    except OSError as e:  # e.g. a full disk: pyarrow's error names no file
+        raise ElicitError(
+            f"cannot write ({e}); nothing was written (a full disk or a file size limit?)", path
+        ) from e
     return demos
 
 
