@@ -151,3 +151,31 @@ def test_many_dropout_passes_score_in_smaller_chunks_with_the_same_scores(run, m
     assert chunks and max(chunks) <= 16
     np.testing.assert_allclose(wide["likelihood"], narrow["likelihood"], rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(wide["novelty"], narrow["novelty"], rtol=1e-5, atol=1e-7)
+
+
+def test_a_policy_trained_on_absurd_observations_is_named_as_such(run, tmp_path):
+    """A run an older elicit-jax trained on an obs of 1e30 (its std about 2e28): score says
+    what is wrong with it, not "the checkpoint is corrupt"; info says so too."""
+    import shutil
+
+    shutil.copytree(run / "run", tmp_path / "run")
+    norm = tmp_path / "run" / "seed0" / "normalization.npz"
+    stats = dict(np.load(norm))
+    stats["obs_std"] = stats["obs_std"].copy()
+    stats["obs_std"][2] = 2e28
+    with open(norm, "wb") as f:
+        np.savez(f, **stats)
+    out = tmp_path / "s.parquet"
+    r = invoke("score", "--policy", tmp_path / "run", "--demos", run / "demos.parquet", "-o", out)
+    msg = _one_line(r, norm, "obs_std[2] = 2e+28: the policy was trained on observations with "
+                    "absurd values")  # fmt: skip
+    assert "corrupt" not in msg and not out.exists()
+    r = invoke("info", tmp_path / "run")
+    assert "obs_std[2] = 2e+28" in " ".join(r.output.split()) and "check: ok" not in r.output
+    # statistics that overflowed float32 say so
+    stats["obs_std"][2] = np.inf
+    with open(norm, "wb") as f:
+        np.savez(f, **stats)
+    r = invoke("score", "--policy", tmp_path / "run", "--demos", run / "demos.parquet", "-o", out)
+    _one_line(r, norm, "statistics hold non-finite values (1 NaN/inf entries in 'obs_std'): the "
+              "training data held values too large for float32")  # fmt: skip

@@ -3,6 +3,7 @@
 `evaluate`, `elicit` and `serve` default to the recorded task and refuse another without
 --force (robosuite tasks too)."""
 
+import numpy as np
 import pandas as pd
 import pytest
 from fixtures_data import invoke, tiny_train_config
@@ -108,3 +109,43 @@ def test_sessions_default_to_the_recorded_task(reach):
     given = {"policy": str(reach / "run"), "base_demos": str(reach / "base.parquet")}
     session_task(given, force=False)
     assert given["task"] == "reach-pillar"
+
+
+def test_watch_refuses_demonstrations_of_another_task(tmp_path):
+    """A square-nut policy judging an inbox file recorded on NutAssemblyRound: an error line
+    naming the file; `--task` (the import's task override) names the demos' task."""
+    from fixtures_data import tiny_episodes, write_robomimic
+
+    from elicit_jax.compat.threshold_source import Thresholds
+    from elicit_jax.data.demos import from_episodes, write_demos
+    from elicit_jax.elicit.watch import WatchConfig, Watcher
+    from elicit_jax.policy.train import train_policy
+
+    demos = from_episodes(tiny_episodes(), operators="base", task="square-nut")
+    write_demos(tmp_path / "base.parquet", demos)
+    train_policy(demos, tiny_train_config(), tmp_path / "run", quiet=True)
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    ep = tiny_episodes(n=1, seed=5)[0]
+    demo = {"actions": ep["action"], "obs/a": ep["obs"], "rewards": np.r_[np.zeros(19), 1]}
+    item = write_robomimic(inbox / "round.hdf5", {"demo_0": demo}, env_name="NutAssemblyRound")
+
+    def judge(**options):
+        lines = []
+        config = WatchConfig(
+            inbox=str(inbox),
+            policy=str(tmp_path / "run"),
+            base_demos=str(tmp_path / "base.parquet"),
+            thresholds=Thresholds(0.4, 0.05, "given"),
+            import_options=(("obs_keys", ("a",)), *options.items()),
+            settle=0.0,
+        )
+        Watcher(config, echo=lines.append).scan(now=1e9)
+        return lines
+
+    (line,) = judge()
+    assert line.startswith(f"error: {item}: holds demonstrations of task 'NutAssemblyRound', "
+                           "but the policy")  # fmt: skip
+    assert "trained on 'square-nut'" in line
+    lines = judge(task="square-nut")
+    assert len(lines) == 1 and lines[0].startswith("round.hdf5 / demo_0: "), lines

@@ -277,6 +277,7 @@ class Watcher:
         from elicit_jax.compat.score import check_dims
         from elicit_jax.data.convert import ImportConfig, load_dataset
         from elicit_jax.data.demos import DemosWarning, validate
+        from elicit_jax.sim.task_match import check_same_task
 
         cfg = ImportConfig(source=str(item), out="", **dict(self.config.import_options))
         try:
@@ -288,6 +289,7 @@ class Watcher:
             demos = validate(demos, str(item), bounds=cfg.bounds)
         names = tuple(f.name for f in demos.obs_fields)
         check_dims(self.policy, demos.obs_dim, demos.action_dim, str(item), names)
+        check_same_task(demos.task, self.config.policy, item)
         return demos
 
     def judge_item(self, item: Path) -> int:

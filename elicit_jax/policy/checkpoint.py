@@ -46,6 +46,7 @@ SPEC_KEYS = (
     "mdn_min_std",
 )
 _EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
+NORMALIZATION = "normalization.npz"
 
 
 def epoch_file(epoch: int) -> str:
@@ -102,12 +103,39 @@ def load_params(path: Path) -> dict[str, Any]:
     for name, value in flat.items():
         if value.dtype.kind == "f" and not np.isfinite(value).all():
             bad = int((~np.isfinite(value)).sum())
+            why = (
+                "the training data held values too large for float32, or the file is corrupt"
+                if path.name == NORMALIZATION
+                else "the checkpoint is corrupt or its training diverged"
+            )
+            what = "statistics" if path.name == NORMALIZATION else "parameters"
             raise ElicitError(
-                f"parameters hold non-finite values ({bad} NaN/inf entries in '{name}'): the "
-                "checkpoint is corrupt or its training diverged",
+                f"{what} hold non-finite values ({bad} NaN/inf entries in '{name}'): {why}",
                 path,
             )
     return unflatten_params(flat)
+
+
+def check_normalization(norm: Mapping[str, np.ndarray], path: Path) -> None:
+    """Refuse observation statistics beyond :data:`~elicit_jax.data.validation.MAX_MAGNITUDE`:
+    the policy was trained on absurd observations (one value of 1e30 gives its column a std of
+    about 2e28, which erases the feature), so its predictions mean nothing.
+
+    Raises:
+      ElicitError: naming ``path``, the statistic and the column.
+    """
+    from elicit_jax.data.validation import MAX_MAGNITUDE
+
+    for key in ("obs_mean", "obs_std"):
+        values = np.abs(np.asarray(norm.get(key, ()), np.float64)).reshape(-1)
+        if (values > MAX_MAGNITUDE).any():
+            col = int(np.argmax(values > MAX_MAGNITUDE))
+            raise ElicitError(
+                f"{key}[{col}] = {values[col]:.3g}: the policy was trained on observations with "
+                f"absurd values (beyond ±{MAX_MAGNITUDE:.0e}) that erase that feature; fix the "
+                "data (import and train now refuse it) and train again",
+                path,
+            )
 
 
 FILE_HASHES = "file_sha256"
@@ -268,7 +296,8 @@ def load_checkpoint(
     kind = _kind_of(spec, seed_dir)
     file = _params_file(seed_dir, header, which)
     params = load_params(file)
-    norm = load_params(seed_dir / "normalization.npz")
+    norm = load_params(seed_dir / NORMALIZATION)
+    check_normalization(norm, seed_dir / NORMALIZATION)
     check_param_shapes(params, spec, file)
     for f in (file, seed_dir / "normalization.npz"):
         check_file_hash(seed_dir, header, f)
@@ -377,7 +406,9 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
         for file in [d / "normalization.npz", *files]:
             try:
                 params = load_params(file)
-                if file.name != "normalization.npz":
+                if file.name == NORMALIZATION:
+                    check_normalization(params, file)
+                else:
                     check_param_shapes(params, spec, file)
                 check_file_hash(d, header, file)
             except ElicitError as e:

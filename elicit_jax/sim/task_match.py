@@ -108,3 +108,29 @@ def resolve_task(
             path,
         )
     return options.pop(), []
+
+
+def check_same_task(data_task: str, policy: str | Path, source: str | Path) -> None:
+    """Refuse demonstrations of one simulated task judged by a policy trained on another
+    (``watch``); names that are no simulated task's (LeRobot instructions, ``unknown``)
+    cannot be compared and pass.
+
+    Args:
+      data_task: the task the demonstrations record.
+      policy: the policy's run or seed directory.
+      source: the demonstrations' file, named in the error.
+
+    Raises:
+      ElicitError: both name simulated tasks, and no task plays both.
+    """
+    trained = recorded_task(policy)
+    if trained is None or data_task.strip().lower() in UNKNOWN:
+        return
+    ours, theirs = set(tasks_accepting(data_task)), set(tasks_accepting(trained))
+    if ours and theirs and not ours & theirs:
+        raise ElicitError(
+            f"holds demonstrations of task '{data_task}', but the policy ({policy}) was "
+            f"trained on '{trained}': its verdicts would mean nothing (--task names the "
+            "demonstrations' task if the file's is wrong)",
+            source,
+        )
