@@ -139,8 +139,6 @@ def test_files_whose_names_sanitise_alike_get_pages_of_their_own(setup, tmp_path
                                                                  capsys):  # fmt: skip
     """`a b.hdf5` and `a_b.hdf5` once shared one page: the log linked a rejection to a page
     showing the other file's acceptance (#45 item 12)."""
-    from elicit_jax.elicit.watch import page_stem
-
     rng = np.random.default_rng(2)
     inbox = tmp_path / "inbox"
     inbox.mkdir()
@@ -158,6 +156,8 @@ def test_files_whose_names_sanitise_alike_get_pages_of_their_own(setup, tmp_path
         text = (inbox / "verdicts" / page).read_text()
         assert item in text and ("rejected" if item == "a b.hdf5" else "accepted") in text
     # one-to-one also where the separator hides in a name, or a long name is cut
+    from elicit_jax.elicit.watch import page_stem
+
     stems = {page_stem(i, e) for i, e in [("a__b", "c"), ("a", "b__c"), ("x" * 90, "0"),
                                          ("x" * 91, "0"), ("a b", "0"), ("a_b", "0")]}  # fmt: skip
     assert len(stems) == 6

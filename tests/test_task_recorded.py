@@ -10,7 +10,6 @@ from fixtures_data import invoke, tiny_train_config
 
 from elicit_jax.artifact import make_header, read_header, write_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.sim.task_match import recorded_task, resolve_task
 
 
 @pytest.fixture(scope="module")
@@ -33,8 +32,6 @@ def _evaluate(reach, out, *extra):
 
 
 def test_evaluate_runs_the_recorded_task_and_refuses_another(reach, tmp_path):
-    assert recorded_task(reach / "run") == "reach-pillar"
-    assert recorded_task(reach / "run" / "seed0") == "reach-pillar"  # from its run
     out = tmp_path / "e.parquet"
     r = _evaluate(reach, out)
     assert r.exit_code == 0, (r.output, r.exception)
@@ -53,6 +50,10 @@ def test_evaluate_runs_the_recorded_task_and_refuses_another(reach, tmp_path):
     assert "--force: running on 'square-nut' anyway" in " ".join(r.output.split())
     assert read_header(wrong)["task"] == "square-nut"
     assert len(pd.read_parquet(wrong)) == 2
+    from elicit_jax.sim.task_match import recorded_task
+
+    assert recorded_task(reach / "run") == "reach-pillar"
+    assert recorded_task(reach / "run" / "seed0") == "reach-pillar"  # from its run
 
 
 def _run_recording(tmp_path, name, task):
@@ -67,6 +68,8 @@ def test_robosuite_tasks_and_imported_environment_names(tmp_path):
     r = invoke("evaluate", "--policy", square, "--task", "square-nut", "--rollouts", "1")
     assert isinstance(r.exception, ElicitError)
     assert "records task 'robosuite-square', not 'square-nut'" in str(r.exception)
+    from elicit_jax.sim.task_match import resolve_task
+
     assert resolve_task(None, [square]) == ("robosuite-square", [])
     # a robomimic import records robosuite's environment name: both square tasks play it
     imported = _run_recording(tmp_path, "rm", "NutAssemblySquare")
