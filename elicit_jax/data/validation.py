@@ -185,9 +185,9 @@ def check_magnitudes(
       ElicitError: one line naming the file, episode, step and column of the first such value.
     """
     for name, values in arrays.items():
+        if not values.size or -MAX_MAGNITUDE <= values.min() <= values.max() <= MAX_MAGNITUDE:
+            continue  # (no |values| copy of a large array in the common case)
         big = np.abs(values) > MAX_MAGNITUDE
-        if not big.any():
-            continue
         row, col = (int(x) for x in np.argwhere(big.reshape(len(values), -1))[0])
         field = next((f for f in obs_fields if f.start <= col < f.stop), None)
         named = f" ('{field.name}'[{col - field.start}])" if name == "obs" and field else ""
