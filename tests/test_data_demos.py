@@ -244,10 +244,11 @@ def test_failing_write_leaves_nothing_behind(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(pq, "write_table", boom)
-    with pytest.raises(OSError, match="disk full"):
+    # one line naming the output (pyarrow's own error names no file)
+    with pytest.raises(ElicitError, match=r"d\.parquet: cannot write \(disk full\); nothing"):
         write_demos(path, make_demos(seed=1))
     assert path.read_bytes() == before  # the old artifact is untouched
-    with pytest.raises(OSError):
+    with pytest.raises(ElicitError, match=r"new\.parquet: cannot write"):
         write_demos(tmp_path / "new.parquet", demos)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.parquet"]  # no temp files
 

@@ -135,6 +135,34 @@ def test_watch_a_robomimic_inbox(setup, tmp_path, monkeypatch, capsys):
     assert code == 0 and "judged 0 demonstrations" in out
 
 
+def test_files_whose_names_sanitise_alike_get_pages_of_their_own(setup, tmp_path, monkeypatch,
+                                                                 capsys):  # fmt: skip
+    """`a b.hdf5` and `a_b.hdf5` once shared one page: the log linked a rejection to a page
+    showing the other file's acceptance (#45 item 12)."""
+    rng = np.random.default_rng(2)
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    good, bad = _episode(rng), _episode(rng, style="other")
+    write_robomimic(inbox / "a b.hdf5", {"demo_0": _robomimic_demo(*bad)})
+    write_robomimic(inbox / "a_b.hdf5", {"demo_0": _robomimic_demo(*good)})
+    code, out, err = run_cli(monkeypatch, capsys, *_watch_args(inbox, setup / "rm"))
+    assert code == 0, err
+    verdicts, _ = _verdicts(out)
+    assert verdicts == {"a b.hdf5 / demo_0": "rejected", "a_b.hdf5 / demo_0": "accepted"}
+    log = [json.loads(x) for x in (inbox / "verdicts" / "verdicts.jsonl").read_text().splitlines()]
+    pages = {r["item"]: r["page"] for r in log}
+    assert len(set(pages.values())) == 2 and pages["a_b.hdf5"] == "a_b.hdf5__demo_0.html"
+    for item, page in pages.items():
+        text = (inbox / "verdicts" / page).read_text()
+        assert item in text and ("rejected" if item == "a b.hdf5" else "accepted") in text
+    # one-to-one also where the separator hides in a name, or a long name is cut
+    from elicit_jax.elicit.watch import page_stem
+
+    stems = {page_stem(i, e) for i, e in [("a__b", "c"), ("a", "b__c"), ("x" * 90, "0"),
+                                         ("x" * 91, "0"), ("a b", "0"), ("a_b", "0")]}  # fmt: skip
+    assert len(stems) == 6
+
+
 def test_watch_a_lerobot_folder_that_grows(setup, tmp_path, monkeypatch, capsys):
     def episodes(n):
         rng = np.random.default_rng(1)

@@ -100,7 +100,8 @@ def test_watch_errors_name_the_item(run, tmp_path):
     Watcher(config, echo=lines.append).scan(now=1e9)  # judges both items again
     assert sorted(lines) == [
         f"error: {item}: --obs-keys does not apply to .npz files (one 'obs' array)",
-        f"error: {bad}: ValueError: could not convert string to float: np.bytes_(b'a')",
+        f"error: {bad}: data/demo_0/actions holds |S1 values, not numbers (bytes or text "
+        "where a robomimic file has floats)",
     ]
 
 
@@ -210,3 +211,70 @@ def test_info_on_an_empty_sessions_folder_says_what_it_looked_for(tmp_path):
     folder.mkdir()
     msg = _one_line(invoke("info", folder), folder, "no elicit-jax artifact")
     assert "operator session" in msg and "until an operator starts" in msg
+
+
+def test_byte_actions_in_an_hdf5_name_the_file_and_dataset(tmp_path):
+    """#45 Also: numpy's "could not convert string to float" named neither."""
+    import h5py
+
+    bad = tmp_path / "bytes.hdf5"
+    with h5py.File(bad, "w") as f:
+        f.create_dataset("data/demo_0/actions", data=np.array([b"a", b"b"]))
+        f.create_dataset("data/demo_0/obs/robot0_eef_pos", data=np.zeros((2, 3)))
+    r = invoke("import", bad, "-o", tmp_path / "d.parquet", "--obs-keys", "robot0_eef_pos")
+    _one_line(r, bad, "data/demo_0/actions holds |S1 values, not numbers")
+    with h5py.File(bad, "a") as f:
+        del f["data/demo_0/actions"]
+        f.create_dataset("data/demo_0/actions", data=np.zeros((2, 2)))
+        del f["data/demo_0/obs/robot0_eef_pos"]
+        f.create_dataset("data/demo_0/obs/robot0_eef_pos", data=np.array(["x", "y"], "S"))
+    r = invoke("import", bad, "-o", tmp_path / "d.parquet", "--obs-keys", "robot0_eef_pos")
+    _one_line(r, bad, "data/demo_0/obs/robot0_eef_pos holds |S1 values, not numbers")
+
+
+def test_a_full_disk_in_demos_select_names_the_output(run, tmp_path):
+    """A file size limit (as `ulimit -f`) stands in for a full disk: pyarrow's error names no
+    file; the command's names the output, and nothing is left behind."""
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "out" / "sel.parquet"
+    out.parent.mkdir()
+    code = (
+        "import resource, signal, sys\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000))\n"
+        f"sys.argv = ['elicit-jax', 'demos', 'select', {str(run / 'demos.parquet')!r},"
+        f" '--episodes', '0-5', '-o', {str(out)!r}]\n"
+        "from elicit_jax.cli import main\n"
+        "main()\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env=dict(os.environ), timeout=300)  # fmt: skip
+    assert p.returncode == 1, p.stderr
+    line = p.stderr.strip().splitlines()[-1]
+    assert line.startswith(f"error: {out}: cannot write (") and "nothing was written" in line
+    assert list(out.parent.iterdir()) == []
+
+
+def test_a_malformed_review_state_names_the_file(run, tmp_path):
+    import json
+
+    from elicit_jax.artifact import file_sha256
+
+    demos = run / "demos.parquet"
+    folder = tmp_path / "review"
+    folder.mkdir()
+    state = folder / "review.json"
+    good = {"kind": "review", "demos": str(demos), "demos_sha256": file_sha256(demos)}
+    for content, text in [
+        ([1, 2], "malformed review state: not a JSON object"),
+        ({**good, "flags": ["0"]}, "malformed review state: 'flags' is not an object"),
+        ({**good, "flags": {"x": "why"}}, "flag 'x' names no episode of the demos"),
+        ({**good, "flags": {"99": "why"}}, "flag '99' names no episode of the demos"),
+        ({**good, "flags": {"0": 7}}, "the reason for episode 0 is not a one-line text"),
+    ]:
+        state.write_text(json.dumps(content))
+        r = invoke("review", demos, "-o", folder)
+        _one_line(r, state, text)

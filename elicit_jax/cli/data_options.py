@@ -55,6 +55,11 @@ SKIP_BAD = typer.Option(
     "--skip-bad-episodes",
     help="Leave out episodes with NaN/inf values (listed) instead of failing.",
 )
+ALLOW_DUPLICATES = typer.Option(
+    False,
+    "--allow-duplicates",
+    help="Keep episodes that repeat an earlier one step for step (refused otherwise).",
+)
 
 
 IMPORT_FLAGS = (
@@ -68,6 +73,7 @@ IMPORT_FLAGS = (
     ("warn_actions", bool, WARN),
     ("action_bounds", str, ACTION_BOUNDS),
     ("skip_bad_episodes", bool, SKIP_BAD),
+    ("allow_duplicates", bool, ALLOW_DUPLICATES),
 )
 """The import flags as (parameter name, type, option), in the order ``--help`` lists them
 (a command adds them with :func:`elicit_jax.cli.params.with_flags`)."""
@@ -109,6 +115,7 @@ def import_config(source: Path, out: Path | str, flags: Mapping[str, Any]) -> Im
         bounds=bounds,
         action_bounds=f["action_bounds"],
         skip_bad_episodes=f["skip_bad_episodes"],
+        allow_duplicates=f["allow_duplicates"],
     )
 
 

@@ -45,6 +45,7 @@ def elicit_cmd(
         False, "--resume", help="Continue the session in OUT with its recorded settings."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Start the session in OUT again."),
+    force: bool = so.FORCE_TASK,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress output."),
     **flags: Any,
 ) -> None:
@@ -66,6 +67,7 @@ def elicit_cmd(
     if resume:
         config_dict = {**_stored_config(out), **given}
     else:
+        so.recorded_task(given, force)
         missing = [
             f"--{k.replace('_', '-')}"
             for k in ("task", "policy", "base_demos", "operator")

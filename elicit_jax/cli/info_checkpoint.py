@@ -90,7 +90,8 @@ def describe_run(path: Path, header: dict[str, Any]) -> None:
     n_bad = sum(bool(p) for p in problems.values())
     if not n_bad:
         console.print(
-            "  [green]check: ok[/] (every parameter file opens, is finite and fits the model)"
+            "  [green]check: ok[/] (every parameter file opens, is finite, fits the model and "
+            "is the file training wrote)"
         )
         return
     console.print(f"  [bold red]check: {n_bad} of {len(problems)} seeds have problems[/]")

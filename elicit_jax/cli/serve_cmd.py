@@ -50,6 +50,7 @@ def serve_cmd(
     task: str = so.TASK,
     policy: Path = so.POLICY,
     base_demos: Path = so.BASE_DEMOS,
+    force: bool = so.FORCE_TASK,
     **flags: Any,
 ) -> None:
     """Serve elicitation sessions in the browser: each operator opens the printed URL, enters
@@ -73,6 +74,8 @@ def serve_cmd(
         raise ElicitError("--demo-dir goes with --demo")
     if demo:
         chosen = _demo_inputs(given, demo_dir, policy, base_demos, chosen)
+    else:
+        so.recorded_task(given, force)
     server = {"sessions": str(sessions), "host": host, "port": port, "token": token}
     server |= {"max_operators": max_operators, "admin_token": admin_token}
     config = _serve_config(given, chosen, allow_hosts=tuple(allow_host), **server)

@@ -14,9 +14,16 @@ import typer
 from elicit_jax.cli.app import check_seed
 from elicit_jax.cli.threshold_options import PRESET  # noqa: F401  (serve spells it so.PRESET)
 
-TASK = typer.Option(None, "--task", help="Simulated task (see `elicit-jax tasks`).")
+TASK = typer.Option(
+    None,
+    "--task",
+    help="Simulated task (see `elicit-jax tasks`; default: the one the policy records).",
+)
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
+FORCE_TASK = typer.Option(
+    False, "--force", help="Run --task although the policy or D_base records another task."
+)
 
 
 def _flag(name: str, kind: type, text: str, **extra: Any) -> tuple[str, type, Any]:
@@ -72,3 +79,20 @@ def given(params: dict[str, Any]) -> dict[str, Any]:
     if isinstance(out.get("show"), str):
         out["show"] = tuple(p.strip() for p in out["show"].split(",") if p.strip())
     return out
+
+
+def recorded_task(given: dict[str, Any], force: bool) -> None:
+    """Set ``given['task']`` to the task the policy and D_base record when ``--task`` is not
+    given, and refuse another one without ``--force`` (printing what was chosen or forced);
+    nothing to check without a policy."""
+    from elicit_jax.sim.task_match import resolve_task
+
+    inputs = [given[k] for k in ("policy", "base_demos") if k in given]
+    if "policy" not in given:
+        return
+    task, notes = resolve_task(given.get("task"), inputs, force)
+    if "task" not in given:
+        notes.insert(0, f"task: {task} (recorded by {given['policy']})")
+    for note in notes:
+        typer.echo(note, err=True)
+    given["task"] = task

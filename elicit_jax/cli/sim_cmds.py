@@ -104,7 +104,15 @@ def evaluate(
     policy: list[str] = typer.Option(
         ..., "--policy", help="Run directory, or LABEL=DIR (same label = seeds); repeatable."
     ),
-    task: str = typer.Option("square-nut", "--task", help="Task name."),
+    task: str | None = typer.Option(
+        None,
+        "--task",
+        help="Task name (default: the task the policies were trained on; another one is "
+        "refused without --force).",
+    ),
+    force: bool = typer.Option(
+        False, "--force", help="Evaluate on --task although the policies record another task."
+    ),
     rollouts: int = typer.Option(50, "--rollouts", help="Rollouts per policy."),
     seed: int = typer.Option(
         0, "--seed", help="Seed of the set of initial states.", callback=check_seed
@@ -153,19 +161,43 @@ def evaluate(
     from elicit_jax.sim.evaluate import EvalConfig
 
     check_outputs([out, trajectories], policy_dirs(policy), overwrite=overwrite)
+    task, notes = _eval_task(task, policy, env_from, force)
     config = from_params(
-        EvalConfig, ctx.params, checkpoints=tuple(checkpoint), env_from=str(env_from or "")
+        EvalConfig,
+        ctx.params,
+        task=task,
+        checkpoints=tuple(checkpoint),
+        env_from=str(env_from or ""),
     )
     traj = _trajectory_config(trajectories, action_noise)
     console = Console()
+    for note in notes:
+        console.print(note, soft_wrap=True)
     console.print(_backend_line(config))
-    label = task if env_from is None else f"{env_from.name}'s env"
+    label = config.task if env_from is None else f"{env_from.name}'s env"
     t0 = time.perf_counter()
     n, summary = _evaluate_with_bar(policy, config, out, traj, label)
     print_summary(console, summary)
     console.print(f"{n} policies evaluated in {time.perf_counter() - t0:.1f} s")
     for note in _evaluation_notes(config, summary):
         console.print(note)
+
+
+def _eval_task(
+    task: str | None, policy: list[str], env_from: Path | None, force: bool
+) -> tuple[str, list[str]]:
+    """The task to evaluate on (the policies' recorded one by default; another only with
+    ``--force``) and the notes to print; with ``--env-from`` the file names the
+    environment and ``--task`` is not used."""
+    from elicit_jax.sim.evaluate import EvalConfig
+    from elicit_jax.sim.task_match import resolve_task
+
+    if env_from is not None:
+        return task or EvalConfig.task, []
+    chosen, notes = resolve_task(task, policy_dirs(policy), force)
+    if task is None:
+        notes.insert(0, f"task: {chosen} (recorded by the policies' training run)")
+    return chosen, notes
 
 
 def _evaluate_with_bar(

@@ -71,6 +71,14 @@ def is_incompatible(ell: Any, nu: Any, lambda_: Any, eta: Any) -> Any:
     return (ell > lambda_) & (nu < eta)
 
 
+MAX_DROPOUT_SAMPLES = 1000
+"""Most MC-dropout passes per member a :class:`ScoreConfig` accepts."""
+MC_ROWS_BUDGET = 1 << 16
+"""Member passes x rows scored in one compiled MC-dropout call at most: the chunk shrinks to
+fit (the masks do not depend on the chunk; the scores change only by float32 rounding), so
+many passes cost time, not memory."""
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class ScoreConfig:
     """How pairs are scored and judged.
@@ -123,8 +131,12 @@ class ScoreConfig:
             raise ElicitError(
                 f"unknown action scale '{self.action_scale}' (choose {', '.join(ACTION_SCALES)})"
             )
-        if self.dropout_samples < 0:
-            raise ElicitError(f"dropout samples must be >= 0, got {self.dropout_samples}")
+        if not 0 <= self.dropout_samples <= MAX_DROPOUT_SAMPLES:
+            raise ElicitError(
+                f"dropout samples must be in 0..{MAX_DROPOUT_SAMPLES}, got "
+                f"{self.dropout_samples} (passes per member; the spread of a few dozen is "
+                "already stable)"
+            )
 
     @classmethod
     def from_preset(cls, name: str, **overrides: object) -> ScoreConfig:

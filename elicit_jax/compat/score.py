@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from elicit_jax.compat.chunks import balanced_chunk, concat, episode_groups, pad, row_chunks
-from elicit_jax.compat.measures import ScoreConfig
+from elicit_jax.compat.measures import MC_ROWS_BUDGET, ScoreConfig
 from elicit_jax.compat.scorer import (
     ScoreInputs,
     policy_spec,
@@ -44,6 +44,7 @@ from elicit_jax.compat.scorer import (
     score_sequences,
     static_config,
 )
+from elicit_jax.data.validation import check_magnitudes
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.kinds import model_kind
 from elicit_jax.sharding import device_count, round_up, row_placer
@@ -70,14 +71,19 @@ def _to_numpy(scores: Any, n: int) -> dict[str, np.ndarray]:
 
 
 def _check_finite(rows: dict[str, np.ndarray], source: str) -> None:
+    """The checks :func:`~elicit_jax.data.validation.validate` makes of obs and actions, on
+    one streamed chunk: finite, and within :data:`~elicit_jax.data.validation.MAX_MAGNITUDE`
+    (so a bad value in the demos is named as such, not taken for a broken checkpoint)."""
+
+    def where(r: int) -> str:
+        return f"episode {rows['episode'][r]}, step {rows['step'][r]}"
+
     for name in ("obs", "action"):
         bad = ~np.isfinite(rows[name])
         if bad.any():
-            r = int(np.argwhere(bad)[0][0])
-            raise ElicitError(
-                f"non-finite {name} value at episode {rows['episode'][r]}, step {rows['step'][r]}",
-                source,
-            )
+            r, c = (int(x) for x in np.argwhere(bad.reshape(len(bad), -1))[0])
+            raise ElicitError(f"non-finite {name}[{c}] value at {where(r)}", source)
+    check_magnitudes({"obs": rows["obs"], "action": rows["action"]}, where, source)
 
 
 def _check_scores(scores: dict[str, np.ndarray], rows: dict[str, np.ndarray], policy: str) -> None:
@@ -140,6 +146,9 @@ def score_batches(
             policy_source,
         )
     chunk = config.chunk_size
+    if config.dropout_samples:  # (K * N, chunk, ...) predictions at once: bound the memory
+        passes = config.dropout_samples * int(policy_spec(policy, "n_members", 1))
+        chunk = max(1, min(chunk, MC_ROWS_BUDGET // passes))
     if n_rows is not None and not recurrent:
         chunk = balanced_chunk(n_rows, chunk)
     devices = device_count(n_devices)

@@ -44,6 +44,7 @@ from elicit_jax.compat.score import (
     score_batches,
 )
 from elicit_jax.compat.thresholds import POLICY_KEY, scores_fields
+from elicit_jax.data.demos import check_demos_layout
 from elicit_jax.errors import ElicitError
 
 _CORE = ("episode", "operator", "step", "obs", "action")
@@ -254,16 +255,14 @@ def policy_sha256(policy: Any) -> str:
 
 
 def _open_demos(demos_path: Path, policy: Any) -> tuple[dict[str, Any], Any]:
-    """The header and Parquet file of a demonstrations artifact the policy can score: the
-    right kind, the core columns, fixed-size obs/action lists of the policy's dimensions."""
+    """The header and Parquet file of a demonstrations artifact the policy can score: checked
+    as every reader checks it (:func:`~elicit_jax.data.demos.check_demos_layout`: kind,
+    schema version, core columns, episode layout), with fixed-size obs/action lists of the
+    policy's dimensions (the values are checked per chunk as they are scored)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    header = read_header(demos_path)
-    if header.get("kind") != "demos":
-        raise ElicitError(
-            f"is a '{header.get('kind')}' artifact, expected demonstrations", demos_path
-        )
+    header = check_demos_layout(demos_path)
     pf = pq.ParquetFile(demos_path)
     missing = [c for c in (*_CORE, "success") if c not in pf.schema_arrow.names]
     if missing:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -24,6 +25,7 @@ import optax
 from flax import struct
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.config import MAX_BATCH_SIZE, MAX_LR
 from elicit_jax.policy.loop import keep_best
 
 
@@ -67,6 +69,13 @@ class ClassifierConfig:
         for name in ("lr", "batch_size", "success_weight"):
             if not getattr(self, name) > 0:
                 raise ElicitError(f"classifier {name} must be positive")
+        # the same limits as the base policy's training (TrainConfig)
+        if not (math.isfinite(self.lr) and self.lr <= MAX_LR):
+            raise ElicitError(f"classifier lr must be a number in (0, {MAX_LR:g}], got {self.lr}")
+        if self.batch_size > MAX_BATCH_SIZE:
+            raise ElicitError(
+                f"classifier batch_size must be in 1..{MAX_BATCH_SIZE}, got {self.batch_size}"
+            )
 
     @property
     def n_rounds(self) -> int:

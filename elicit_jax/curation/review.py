@@ -72,6 +72,30 @@ def _quality_by_episode(path: str, ids: list[int]) -> dict[int, tuple[bool, str]
     return got
 
 
+def _saved_flags(flags: Any, episodes: set[int], state: Path) -> dict[int, str]:
+    """The reviewer's flags as saved in ``review.json``: episode id -> a one-line reason.
+
+    Raises:
+      ElicitError: naming ``state``: not an object of episode ids of the demos to reasons.
+    """
+    if not isinstance(flags, dict):
+        raise ElicitError("malformed review state: 'flags' is not an object", state)
+    out: dict[int, str] = {}
+    for key, reason in flags.items():
+        if not (isinstance(key, str) and key.isdigit() and int(key) in episodes):
+            raise ElicitError(
+                f"malformed review state: flag {key!r} names no episode of the demos", state
+            )
+        if not isinstance(reason, str) or not reason.strip() or len(reason) > MAX_REASON:
+            raise ElicitError(
+                f"malformed review state: the reason for episode {key} is not a one-line text "
+                f"of 1..{MAX_REASON} characters",
+                state,
+            )
+        out[int(key)] = " ".join(reason.split())
+    return out
+
+
 def check_review_folder(path: str | Path) -> None:
     """Error unless ``path`` can hold a review: new, empty, or an earlier review's folder
     (it holds ``review.json``). A file or another folder is never written into."""
@@ -113,9 +137,11 @@ class Review:
         state = self.out / STATE_FILE
         if state.exists():
             saved = read_json(state)
+            if not isinstance(saved, dict):
+                raise ElicitError("malformed review state: not a JSON object", state)
             if saved.get("demos_sha256") != self._demos_hash():
                 raise ElicitError("this review folder is of another demos file", state)
-            self.flags = {int(k): str(v) for k, v in saved.get("flags", {}).items()}
+            self.flags = _saved_flags(saved.get("flags", {}), set(self.bounds), state)
 
     def _demos_hash(self) -> str:
         from elicit_jax.artifact import file_sha256

@@ -41,12 +41,13 @@ def demos_to_table(demos: Demos) -> Any:
     return pa.table(cols)
 
 
-def read_table(path: str | Path) -> Any:
-    """Read a Parquet table; unreadable input becomes a one-line :class:`ElicitError`."""
+def read_table(path: str | Path, columns: list[str] | None = None) -> Any:
+    """Read a Parquet table (only ``columns`` if given); unreadable input becomes a one-line
+    :class:`ElicitError`."""
     import pyarrow.parquet as pq
 
     try:
-        return pq.read_table(path)
+        return pq.read_table(path, columns=columns)
     except Exception as e:  # pyarrow raises several types for corrupt input
         raise ElicitError(f"not a readable Parquet file ({type(e).__name__}: {e})", path) from e
 

@@ -19,7 +19,7 @@ from elicit_jax.data.demos import (
     validate,
     write_demos,
 )
-from elicit_jax.data.validation import action_dim_warnings, bad_episodes
+from elicit_jax.data.validation import action_dim_warnings, bad_episodes, check_operator_name
 from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
@@ -48,6 +48,8 @@ class ImportConfig:
         format's default (``unit`` for robomimic/npz, ``data`` for LeRobot).
       skip_bad_episodes: leave out episodes with non-finite values (listed in a warning and
         in the provenance) instead of failing.
+      allow_duplicates: keep episodes identical (obs and actions, step for step) to an earlier
+        episode of the same source, with a warning; without it they are refused.
     """
 
     source: str
@@ -61,6 +63,10 @@ class ImportConfig:
     bounds: BoundsPolicy = "error"
     action_bounds: Literal["unit", "data"] | None = None
     skip_bad_episodes: bool = False
+    allow_duplicates: bool = False
+
+    def __post_init__(self) -> None:
+        check_operator_name(self.operator, "--operator")
 
 
 def infer_format(source: str | Path) -> Format:
@@ -109,7 +115,9 @@ def load_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
 
         bounds = unit if cfg.action_bounds == "unit" else None
         demos = import_lerobot(cfg.source, obs_keys=cfg.obs_keys, action_bounds=bounds, **common)
-        return _skip_bad(demos, cfg.source) if cfg.skip_bad_episodes else demos
+        demos = _skip_bad(demos, cfg.source) if cfg.skip_bad_episodes else demos
+        _check_duplicates(demos, cfg)
+        return demos
     if fmt == "robomimic":
         from elicit_jax.data.robomimic import import_robomimic
 
@@ -130,7 +138,30 @@ def load_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
         demos = import_npz(cfg.source, action_bounds=unit, **common)
     if cfg.skip_bad_episodes:
         demos = _skip_bad(demos, cfg.source)
+    _check_duplicates(demos, cfg)
     return _data_bounds(demos, cfg.action_bounds)
+
+
+def _check_duplicates(demos: Demos, cfg: ImportConfig) -> None:
+    """Refuse (or, with ``cfg.allow_duplicates``, warn about) episodes of one source that
+    repeat an earlier one step for step: trained on twice, and exported twice."""
+    from elicit_jax.data.duplicates import find_duplicates
+
+    dups = find_duplicates([demos])
+    if not dups:
+        return
+    names = demos.extra.get(SOURCE_EPISODE)
+    first = {e: s for e, s, _ in demos.episode_bounds()}
+
+    def name(e: int) -> str:
+        return f"episode {e}" + (f" ({names[first[e]]})" if names is not None else "")
+
+    shown = "; ".join(f"{name(d.episode)} repeats {name(d.of_episode)}" for d in dups[:3])
+    more = f" (and {len(dups) - 3} more)" if len(dups) > 3 else ""
+    msg = f"{len(dups)} episode(s) repeat earlier ones step for step: {shown}{more}"
+    if not cfg.allow_duplicates:
+        raise ElicitError(f"{msg}; pass --allow-duplicates to keep them", cfg.source)
+    warnings.warn(f"{cfg.source}: {msg} (kept: --allow-duplicates)", DemosWarning, stacklevel=3)
 
 
 def import_dataset(cfg: ImportConfig, progress: Progress | None = None) -> Demos:
@@ -162,7 +193,9 @@ def _skip_bad(demos: Demos, source: str) -> Demos:
     if not bad:
         return demos
     if len(bad) == demos.n_episodes:
-        raise ElicitError(f"every one of the {len(bad)} episodes has non-finite values", source)
+        raise ElicitError(
+            f"every one of the {len(bad)} episodes has non-finite or absurd values", source
+        )
     names = demos.extra.get(SOURCE_EPISODE)
     first = {e: s for e, s, _ in demos.episode_bounds()}
     skipped = [

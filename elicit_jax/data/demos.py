@@ -33,7 +33,12 @@ from elicit_jax.data.demo_set import (
     ObsField,
     fields_from_sizes,
 )
-from elicit_jax.data.validation import BoundsPolicy, DemosWarning, validate
+from elicit_jax.data.validation import (
+    BoundsPolicy,
+    DemosWarning,
+    check_episode_layout,
+    validate,
+)
 from elicit_jax.errors import ElicitError
 
 DEMOS_KIND = "demos"
@@ -226,21 +231,21 @@ def write_demos(
         n_steps=demos.n_steps,
         extra_columns=sorted(demos.extra),
     )
-    write_parquet(path, demos_to_table(demos), header)
+    try:
+        write_parquet(path, demos_to_table(demos), header)
+    except OSError as e:  # e.g. a full disk: pyarrow's error names no file
+        raise ElicitError(
+            f"cannot write ({e}); nothing was written (a full disk or a file size limit?)", path
+        ) from e
     return demos
 
 
-def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos:
-    """Read and validate a demonstration artifact.
-
-    Args:
-      path: the Parquet file.
-      bounds: what to do with actions outside their declared bounds: ``error``, ``warn``
-        or ``clip``; ``None`` (default) uses the policy recorded when the file was written
-        (``error`` unless the importer was told otherwise).
+def read_demos_header(path: str | Path) -> dict[str, Any]:
+    """The header of a demonstrations artifact, checked: its kind and a schema version this
+    elicit-jax understands (every reader, streaming or not, starts here).
 
     Raises:
-      ElicitError: one line naming the file (and episode/step) of the first problem found.
+      ElicitError: another kind of artifact, or a bad or newer schema version.
     """
     header = read_header(path)
     if header.get("kind") != DEMOS_KIND:
@@ -255,6 +260,69 @@ def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos
             f"({DEMOS_SCHEMA_VERSION}); upgrade elicit-jax",
             path,
         )
+    return header
+
+
+def check_episode_count(header: Mapping[str, Any], episode: np.ndarray, path: str | Path) -> None:
+    """The header's ``n_episodes`` matches the distinct ids of the ``episode`` column."""
+    n_unique = len(np.unique(episode))
+    if "n_episodes" in header and int(header["n_episodes"]) != n_unique:
+        raise ElicitError(
+            f"header lists {header['n_episodes']} episodes but the file holds {n_unique} "
+            "(an empty or truncated episode?)",
+            path,
+        )
+
+
+def check_demos_layout(path: str | Path) -> dict[str, Any]:
+    """Check a demonstrations artifact the way :func:`read_demos` does, without loading its
+    obs and actions (a streaming reader checks those per batch): the header
+    (:func:`read_demos_header`), the core columns, and the episode layout
+    (:func:`~elicit_jax.data.validation.check_episode_layout`). Returns the header.
+
+    Raises:
+      ElicitError: one line naming the file and the first problem found.
+    """
+    import pyarrow.parquet as pq
+
+    header = read_demos_header(path)
+    try:
+        names = pq.read_schema(path).names
+    except Exception as e:  # pyarrow raises several types for corrupt input
+        raise ElicitError(f"not a readable Parquet file ({type(e).__name__}: {e})", path) from e
+    missing = [c for c in CORE_COLUMNS if c not in names]
+    if missing:
+        raise ElicitError(f"missing column(s) {', '.join(missing)}", path)
+    table = read_table(path, ["episode", "operator", "step", "success"])
+    for name in table.column_names:
+        if table.column(name).null_count:
+            raise ElicitError(
+                f"column '{name}' has {table.column(name).null_count} null rows", path
+            )
+    episode = numeric_column(table, "episode", np.int64, path)
+    constant = {
+        "operator": np.asarray([str(x) for x in table.column("operator").to_pylist()], object),
+        "success": numeric_column(table, "success", bool, path),
+    }
+    step = numeric_column(table, "step", np.int32, path)
+    check_episode_layout(episode, step, constant, str(path))
+    check_episode_count(header, episode, path)
+    return header
+
+
+def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos:
+    """Read and validate a demonstration artifact.
+
+    Args:
+      path: the Parquet file.
+      bounds: what to do with actions outside their declared bounds: ``error``, ``warn``
+        or ``clip``; ``None`` (default) uses the policy recorded when the file was written
+        (``error`` unless the importer was told otherwise).
+
+    Raises:
+      ElicitError: one line naming the file (and episode/step) of the first problem found.
+    """
+    header = read_demos_header(path)
     table = read_table(path)
     missing = [
         c for c in (*CORE_COLUMNS, *header.get("extra_columns", [])) if c not in table.column_names
@@ -298,13 +366,7 @@ def read_demos(path: str | Path, *, bounds: BoundsPolicy | None = None) -> Demos
         )
     except (TypeError, ValueError) as e:
         raise ElicitError(f"malformed demos header ({e})", path) from e
-    n_unique = len(np.unique(demos.episode))
-    if "n_episodes" in header and int(header["n_episodes"]) != n_unique:
-        raise ElicitError(
-            f"header lists {header['n_episodes']} episodes but the file holds {n_unique} "
-            "(an empty or truncated episode?)",
-            path,
-        )
+    check_episode_count(header, demos.episode, path)
     policy = bounds or header.get("action_bounds_policy", "error")
     if policy not in ("error", "warn", "clip"):
         raise ElicitError(f"unknown action bounds policy {policy!r}", path)
@@ -321,12 +383,15 @@ __all__ = [
     "Demos",
     "DemosWarning",
     "ObsField",
+    "check_demos_layout",
+    "check_episode_count",
     "concat_demos",
     "episode_digest",
     "fields_from_sizes",
     "from_episodes",
     "make_provenance",
     "read_demos",
+    "read_demos_header",
     "validate",
     "write_demos",
 ]

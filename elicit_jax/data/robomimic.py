@@ -109,8 +109,15 @@ def _operator_labels(
     if not keys:
         raise ElicitError(f"no mask key matches '{pattern}'", path)
     label: dict[str, str] = {}
+    present = set(demo_names(f, path))
     for key in keys:
         for demo in read_mask(f, key, path):
+            if demo not in present:
+                raise ElicitError(
+                    f"mask/{key} lists {demo}, which is not in the file (no data/{demo}): "
+                    "a stale mask would label the wrong demos; fix or delete the mask",
+                    path,
+                )
             if demo in label:
                 raise ElicitError(
                     f"{demo} is listed by both mask/{label[demo]} and mask/{key}", path
@@ -127,6 +134,20 @@ def _operator_labels(
     return [label.get(n, default) for n in names]
 
 
+def numeric_dataset(f: Any, key: str, path: str | Path) -> np.ndarray:
+    """``f[key]`` as float32; a dataset of bytes, strings or other non-numbers is an error
+    naming the file and the dataset (not numpy's "could not convert string to float")."""
+    data = f[key]
+    kind = getattr(data.dtype, "kind", "O")
+    if kind not in "biuf":
+        raise ElicitError(
+            f"{key} holds {data.dtype} values, not numbers (bytes or text where a robomimic "
+            "file has floats)",
+            path,
+        )
+    return np.asarray(data[:], np.float32)
+
+
 def read_demo(
     f: Any, path: str | Path, name: str, obs_keys: Sequence[str]
 ) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
@@ -135,7 +156,7 @@ def read_demo(
     g = f["data"][name]
     if "actions" not in g:
         raise ElicitError(f"data/{name} has no 'actions'", path)
-    action = np.asarray(g["actions"][:], np.float32)
+    action = numeric_dataset(f, f"data/{name}/actions", path)
     t = len(action)
     if t == 0:
         raise ElicitError(f"data/{name} is empty (0 steps)", path)
@@ -153,17 +174,18 @@ def read_demo(
                 "choose keys with --obs-keys",
                 path,
             )
-        arr = np.asarray(g["obs"][key][:])
-        if arr.ndim > 2:
+        shape = g["obs"][key].shape
+        if len(shape) > 2:
             raise ElicitError(
-                f"data/{name}/obs/{key} has shape {arr.shape}: image keys are not supported", path
+                f"data/{name}/obs/{key} has shape {shape}: image keys are not supported", path
             )
+        arr = numeric_dataset(f, f"data/{name}/obs/{key}", path)
         if len(arr) != t:
             raise ElicitError(f"data/{name}/obs/{key} has {len(arr)} steps, actions {t}", path)
         parts.append(arr.reshape(t, -1).astype(np.float32))
     ep = {"obs": np.concatenate(parts, axis=1), "action": action}
     if "rewards" in g:
-        ep["reward"] = np.asarray(g["rewards"][:], np.float32).reshape(-1)
+        ep["reward"] = numeric_dataset(f, f"data/{name}/rewards", path).reshape(-1)
         if len(ep["reward"]) != t:
             raise ElicitError(f"data/{name}/rewards has {len(ep['reward'])} steps, not {t}", path)
     ep[SOURCE_EPISODE] = np.full(t, name, dtype=object)

@@ -8,14 +8,19 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from collections.abc import Callable, Mapping, Sequence
 from typing import Literal
 
 import numpy as np
 
-from elicit_jax.data.demo_set import ARRAY_FIELDS, SOURCE_EPISODE, Demos
+from elicit_jax.data.demo_set import ARRAY_FIELDS, SOURCE_EPISODE, Demos, ObsField
 from elicit_jax.errors import ElicitError
 
 BoundsPolicy = Literal["error", "warn", "clip"]
+MAX_MAGNITUDE = 1e6
+"""Largest ``|value|`` accepted in obs and action: beyond it a value is a unit or sensor
+error (one value of 1e30 makes its column's std about 2e28, which erases the feature after
+normalisation, and float32 squares of it overflow); such data is refused, not trained on."""
 
 
 class DemosWarning(UserWarning):
@@ -68,35 +73,21 @@ def validate(
             row, *col = (int(x) for x in np.argwhere(bad)[0])
             where = f"[{col[0]}]" if col else ""
             raise ElicitError(f"non-finite {name}{where} value at {_where(demos, row)}", source)
-    bounds_list = demos.episode_bounds()
-    seen: dict[int, int] = {}
-    for e, s, _ in bounds_list:
-        if e in seen:
-            raise ElicitError(
-                f"episode {e} is not contiguous: its rows resume at row {s} (step "
-                f"{demos.step[s]}) after other episodes",
-                source,
-            )
-        seen[e] = s
-    for e, s, stop in bounds_list:
-        steps = demos.step[s:stop]
-        expect = np.arange(stop - s)
-        if not np.array_equal(steps, expect):
-            i = _first_bad_row(steps != expect)
-            raise ElicitError(
-                f"episode {e}: steps must run 0..{stop - s - 1} in order, "
-                f"found step {steps[i]} at position {i}",
-                source,
-            )
-        for name in ("operator", "success"):
-            col = getattr(demos, name)[s:stop]
-            if len(set(col.tolist())) > 1:
-                i = _first_bad_row(col != col[0])
-                raise ElicitError(
-                    f"episode {e}: {name} changes within the episode at step {i} "
-                    f"({col[0]!r} -> {col[i]!r})",
-                    source,
-                )
+    if finite:
+        check_magnitudes(
+            {"obs": demos.obs, "action": demos.action},
+            lambda row: _where(demos, row),
+            source,
+            demos.obs_fields,
+        )
+    for name in set(demos.operator.tolist()):
+        check_operator_name(name, source)
+    check_episode_layout(
+        demos.episode,
+        demos.step,
+        {"operator": demos.operator, "success": demos.success},
+        source,
+    )
     names = [f.name for f in demos.obs_fields]
     if len(names) != len(set(names)):
         raise ElicitError(f"duplicate obs field names in {names}", source)
@@ -109,16 +100,122 @@ def validate(
     return demos if bounds is None else _check_bounds(demos, source, bounds)
 
 
+def check_operator_name(name: str, source: str) -> None:
+    """An operator label is printable text on one line (it names files, pages and table rows).
+
+    Raises:
+      ElicitError: a newline, tab or other control character in ``name``, naming ``source``
+        (the file, or the flag it came from).
+    """
+    if not str(name).isprintable():
+        raise ElicitError(
+            f"operator name {str(name)!r} holds a newline or another non-printable "
+            "character; operator names are printable text on one line",
+            source,
+        )
+
+
+def check_episode_layout(
+    episode: np.ndarray,
+    step: np.ndarray,
+    constant: Mapping[str, np.ndarray],
+    source: str,
+) -> None:
+    """Check that episodes are contiguous, their steps run 0..T-1 in order and each column of
+    ``constant`` (operator, success) holds one value per episode.
+
+    Every reader of a demos artifact checks this: :func:`validate` on whole sets, and the
+    scorer, which streams obs and actions, on these columns alone.
+
+    Raises:
+      ElicitError: one line naming ``source`` and the first episode that breaks a rule.
+    """
+    episode = np.asarray(episode)
+    if not len(episode):
+        return
+    starts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]])
+    stops = np.r_[starts[1:], len(episode)]
+    seen: dict[int, int] = {}
+    for s in starts:
+        e = int(episode[s])
+        if e in seen:
+            raise ElicitError(
+                f"episode {e} is not contiguous: its rows resume at row {s} (step "
+                f"{step[s]}) after other episodes",
+                source,
+            )
+        seen[e] = int(s)
+    for s, stop in zip(starts, stops, strict=True):
+        e = int(episode[s])
+        steps = np.asarray(step[s:stop])
+        expect = np.arange(stop - s)
+        if not np.array_equal(steps, expect):
+            i = _first_bad_row(steps != expect)
+            raise ElicitError(
+                f"episode {e}: steps must run 0..{stop - s - 1} in order, "
+                f"found step {steps[i]} at position {i}",
+                source,
+            )
+        for name, values in constant.items():
+            col = np.asarray(values[s:stop])
+            if len(set(col.tolist())) > 1:
+                i = _first_bad_row(col != col[0])
+                raise ElicitError(
+                    f"episode {e}: {name} changes within the episode at step {i} "
+                    f"({col[0]!r} -> {col[i]!r})",
+                    source,
+                )
+
+
+def check_magnitudes(
+    arrays: Mapping[str, np.ndarray],
+    where: Callable[[int], str],
+    source: str,
+    obs_fields: Sequence[ObsField] = (),
+) -> None:
+    """Refuse finite values beyond :data:`MAX_MAGNITUDE` in 2-D ``arrays`` (obs, action).
+
+    Args:
+      arrays: column name -> (rows, width) values (already known to be finite).
+      where: row -> ``episode E, step S`` for the message.
+      source: the file named in the message.
+      obs_fields: the obs field slices, to name the field an obs column belongs to.
+
+    Raises:
+      ElicitError: one line naming the file, episode, step and column of the first such value.
+    """
+    for name, values in arrays.items():
+        if not values.size or -MAX_MAGNITUDE <= values.min() <= values.max() <= MAX_MAGNITUDE:
+            continue  # (no |values| copy of a large array in the common case)
+        big = np.abs(values) > MAX_MAGNITUDE
+        row, col = (int(x) for x in np.argwhere(big.reshape(len(values), -1))[0])
+        field = next((f for f in obs_fields if f.start <= col < f.stop), None)
+        named = f" ('{field.name}'[{col - field.start}])" if name == "obs" and field else ""
+        value = float(values.reshape(len(values), -1)[row, col])
+        raise ElicitError(
+            f"{name}[{col}]{named} = {value:.4g} at {where(row)}: beyond ±{MAX_MAGNITUDE:.0e}, "
+            f"a unit or sensor error ({int(big.any(axis=-1).sum())} steps in all); it would "
+            "erase the column after normalisation: fix or rescale the data",
+            source,
+        )
+
+
 def bad_episodes(demos: Demos) -> dict[int, str]:
-    """Episode id -> why it cannot be used (non-finite obs, action or reward), for importers
-    asked to skip such episodes rather than fail."""
+    """Episode id -> why it cannot be used (non-finite obs, action or reward, or obs/action
+    beyond :data:`MAX_MAGNITUDE`), for importers asked to skip such episodes rather than
+    fail."""
     out: dict[int, str] = {}
     for name in ("obs", "action", "reward"):
-        values = getattr(demos, name)
-        bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
-        for row in np.flatnonzero(bad):
-            e = int(demos.episode[row])
-            out.setdefault(e, f"non-finite {name} at step {int(demos.step[row])}")
+        values = getattr(demos, name).reshape(len(demos.step), -1)
+        finite = np.isfinite(values)
+        checks = [("non-finite", ~finite.all(axis=1))]
+        if name != "reward":
+            huge = (np.abs(np.where(finite, values, 0)) > MAX_MAGNITUDE).any(axis=1)
+            checks.append((f"|value| > {MAX_MAGNITUDE:.0e} in", huge))
+        for what, bad in checks:
+            for row in np.flatnonzero(bad):
+                e = int(demos.episode[row])
+                out.setdefault(e, f"{what} {name} at step {int(demos.step[row])}")
     return out
 
 

@@ -225,13 +225,14 @@ class Session:
         self._n_scored += 1
         self._n_incompatible += int(s.incompatible)
         if self._indicator:
+            eta = self.setup.scorer.config.thresholds.eta
             live = live_state(
                 self.setup.rule,
                 int(self.setup.task.config.horizon),
                 self._n_incompatible,
                 self._n_scored,
                 incompatible=s.incompatible,
-                unfamiliar=bool(np.float32(s.novelty) >= np.float32(self.setup.scorer.config.eta)),
+                unfamiliar=bool(np.float32(s.novelty) >= np.float32(eta)),
                 idle=is_idle(action, previous, self.setup.action_names),
             )
             self._emit(

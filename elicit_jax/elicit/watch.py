@@ -153,8 +153,20 @@ def _busy(error: BaseException) -> bool:
     return "unable to lock file" in text or "resource temporarily unavailable" in text
 
 
-def _safe(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text)[:80]
+def page_stem(item: str, episode: str) -> str:
+    """The file stem of a demonstration's page: ``<item>__<episode>``, one-to-one.
+
+    Characters other than ``A-Za-z0-9._-`` become ``_`` and each part is cut at 80; when that
+    changes either part (``a b.hdf5`` and ``a_b.hdf5`` would share a page) or a part holds
+    ``__`` (the separator), ``~`` and a hash of the original names follow. A name needing no
+    change never contains ``~``, so no two inputs share a stem.
+    """
+    parts = [re.sub(r"[^A-Za-z0-9._-]+", "_", p)[:80] for p in (item, episode)]
+    stem = "__".join(parts)
+    if parts != [item, episode] or any("__" in p for p in parts):
+        digest = hashlib.sha256(f"{item}\0{episode}".encode()).hexdigest()[:12]
+        stem += f"~{digest}"
+    return stem
 
 
 def episode_hash(obs: np.ndarray, action: np.ndarray) -> str:
@@ -265,6 +277,7 @@ class Watcher:
         from elicit_jax.compat.score import check_dims
         from elicit_jax.data.convert import ImportConfig, load_dataset
         from elicit_jax.data.demos import DemosWarning, validate
+        from elicit_jax.sim.task_match import check_same_task
 
         cfg = ImportConfig(source=str(item), out="", **dict(self.config.import_options))
         try:
@@ -276,6 +289,7 @@ class Watcher:
             demos = validate(demos, str(item), bounds=cfg.bounds)
         names = tuple(f.name for f in demos.obs_fields)
         check_dims(self.policy, demos.obs_dim, demos.action_dim, str(item), names)
+        check_same_task(demos.task, self.config.policy, item)
         return demos
 
     def judge_item(self, item: Path) -> int:
@@ -337,7 +351,7 @@ class Watcher:
         text = summary_text(verdict, n_inc, length, self.rule.describe(), shown)
         if verdict == "failed":
             text = f"failed: the demonstration is marked unsuccessful ({length} steps)"
-        stem = f"{_safe(item.name)}__{_safe(name)}"
+        stem = page_stem(item.name, name)
         page = self.out / f"{stem}.html"
         write_demo_page(
             page,

@@ -46,6 +46,7 @@ SPEC_KEYS = (
     "mdn_min_std",
 )
 _EPOCH_RE = re.compile(r"^epoch_(\d+)\.npz$")
+NORMALIZATION = "normalization.npz"
 
 
 _RUN_FILE = re.compile(
@@ -114,12 +115,82 @@ def load_params(path: Path) -> dict[str, Any]:
     for name, value in flat.items():
         if value.dtype.kind == "f" and not np.isfinite(value).all():
             bad = int((~np.isfinite(value)).sum())
+            why = (
+                "the training data held values too large for float32, or the file is corrupt"
+                if path.name == NORMALIZATION
+                else "the checkpoint is corrupt or its training diverged"
+            )
+            what = "statistics" if path.name == NORMALIZATION else "parameters"
             raise ElicitError(
-                f"parameters hold non-finite values ({bad} NaN/inf entries in '{name}'): the "
-                "checkpoint is corrupt or its training diverged",
+                f"{what} hold non-finite values ({bad} NaN/inf entries in '{name}'): {why}",
                 path,
             )
     return unflatten_params(flat)
+
+
+def check_normalization(norm: Mapping[str, np.ndarray], path: Path) -> None:
+    """Refuse observation statistics beyond :data:`~elicit_jax.data.validation.MAX_MAGNITUDE`:
+    the policy was trained on absurd observations (one value of 1e30 gives its column a std of
+    about 2e28, which erases the feature), so its predictions mean nothing.
+
+    Raises:
+      ElicitError: naming ``path``, the statistic and the column.
+    """
+    from elicit_jax.data.validation import MAX_MAGNITUDE
+
+    for key in ("obs_mean", "obs_std"):
+        values = np.abs(np.asarray(norm.get(key, ()), np.float64)).reshape(-1)
+        if (values > MAX_MAGNITUDE).any():
+            col = int(np.argmax(values > MAX_MAGNITUDE))
+            raise ElicitError(
+                f"{key}[{col}] = {values[col]:.3g}: the policy was trained on observations with "
+                f"absurd values (beyond ±{MAX_MAGNITUDE:.0e}) that erase that feature; fix the "
+                "data (import and train now refuse it) and train again",
+                path,
+            )
+
+
+FILE_HASHES = "file_sha256"
+"""Seed header key: relative path -> sha256 of each parameter and normalisation file, recorded
+when the run is written, so parameters copied in from another run are detected."""
+
+
+def file_hashes(seed_dir: Path) -> dict[str, str]:
+    """Relative path -> sha256 of a seed directory's ``normalization.npz`` and
+    ``params/*.npz`` (recorded in its header as :data:`FILE_HASHES`)."""
+    from elicit_jax.hashing import file_sha256
+
+    files = [seed_dir / "normalization.npz", *sorted((seed_dir / "params").glob("*.npz"))]
+    return {f.relative_to(seed_dir).as_posix(): file_sha256(f) for f in files if f.is_file()}
+
+
+def check_file_hash(seed_dir: Path, header: Mapping[str, Any], file: Path) -> None:
+    """Refuse a parameter or normalisation file whose bytes are not the ones the seed's
+    header recorded when the run was written (checkpoints written before the hashes were
+    recorded are not checked).
+
+    Raises:
+      ElicitError: the file differs from, or is missing in, the recorded hashes.
+    """
+    from elicit_jax.hashing import file_sha256
+
+    recorded = header.get(FILE_HASHES)
+    if not isinstance(recorded, Mapping):
+        return
+    name = file.relative_to(seed_dir).as_posix()
+    if name not in recorded:
+        raise ElicitError(
+            "is not one of the files this checkpoint was written with (its artifact.json "
+            "records no hash for it): copied in from elsewhere?",
+            file,
+        )
+    if file_sha256(file) != recorded[name]:
+        raise ElicitError(
+            "does not match the sha256 its checkpoint's artifact.json recorded when the run "
+            "was written: copied from another run or changed since; retrain, or copy the "
+            "whole run directory",
+            file,
+        )
 
 
 def write_seed_header(seed_dir: Path, header: Mapping[str, Any]) -> None:
@@ -237,8 +308,11 @@ def load_checkpoint(
     kind = _kind_of(spec, seed_dir)
     file = _params_file(seed_dir, header, which)
     params = load_params(file)
-    norm = load_params(seed_dir / "normalization.npz")
+    norm = load_params(seed_dir / NORMALIZATION)
+    check_normalization(norm, seed_dir / NORMALIZATION)
     check_param_shapes(params, spec, file)
+    for f in (file, seed_dir / "normalization.npz"):
+        check_file_hash(seed_dir, header, f)
     optional = {k: spec[k] for k in ("layer_norm_eps", "dropout_last", "mdn_min_std") if k in spec}
     policy = Policy(
         params=jax.tree.map(jnp.asarray, params),
@@ -323,14 +397,16 @@ def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file:
 def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
     """Seed -> problems found in its checkpoint directory (empty list: healthy).
 
-    Reads every parameter file and the normalisation statistics, checking that each opens,
-    holds only finite numbers and matches the model spec; used by ``elicit-jax info``.
+    Reads every parameter file and the normalisation statistics, checking that each is the
+    file the run was written with (:func:`check_file_hash`), opens, holds only finite numbers
+    and matches the model spec; used by ``elicit-jax info``.
     """
     out: dict[int, list[str]] = {}
     for seed, d in sorted(seed_dirs(path).items()):
         problems: list[str] = []
         try:
-            spec = read_header(d)["model"]
+            header = read_header(d)
+            spec = header["model"]
         except (ElicitError, KeyError) as e:
             out[seed] = [f"{d}: unreadable header ({e})"]
             continue
@@ -342,8 +418,11 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
         for file in [d / "normalization.npz", *files]:
             try:
                 params = load_params(file)
-                if file.name != "normalization.npz":
+                if file.name == NORMALIZATION:
+                    check_normalization(params, file)
+                else:
                     check_param_shapes(params, spec, file)
+                check_file_hash(d, header, file)
             except ElicitError as e:
                 problems.append(str(e))
         out[seed] = problems

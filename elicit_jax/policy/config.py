@@ -38,6 +38,7 @@ Profiles (:data:`PROFILES`):
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any
@@ -47,6 +48,11 @@ from elicit_jax.policy.kinds import MODELS, foreign_fields, model_kind
 
 __all__ = ["MODELS", "PIPELINE_PROFILES", "PROFILES", "Profile", "TrainConfig", "default_profile"]
 LOSSES = ("mean", "sum")
+MAX_LR = 1.0
+"""Largest Adam learning rate accepted (every command and pipeline: :class:`TrainConfig`)."""
+MAX_BATCH_SIZE = 1 << 16
+"""Largest minibatch accepted, in samples (65,536: 128 times the paper's 512); beyond it one
+batch's activations outgrow a machine's memory."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,8 +125,16 @@ class TrainConfig:
             (self.ensemble_size >= 1, "ensemble_size must be >= 1"),
             (len(self.hidden) >= 1 and min(self.hidden) >= 1, "hidden sizes must be >= 1"),
             (0.0 <= self.dropout < 1.0, "dropout must be in [0, 1)"),
-            (self.lr > 0, "lr must be > 0"),
-            (self.batch_size >= 1, "batch_size must be >= 1"),
+            (
+                math.isfinite(self.lr) and 0 < self.lr <= MAX_LR,
+                f"lr must be a number in (0, {MAX_LR:g}], got {self.lr:g} (Adam diverges "
+                "beyond; the paper uses 1e-3)",
+            ),
+            (
+                1 <= self.batch_size <= MAX_BATCH_SIZE,
+                f"batch_size must be in 1..{MAX_BATCH_SIZE}, got {self.batch_size} (a larger "
+                "minibatch does not fit in memory; the paper uses 512)",
+            ),
             (self.epochs >= 1, "epochs must be >= 1"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (self.progress_every >= 1, "progress_every must be >= 1"),

@@ -169,6 +169,7 @@ def write_seed(
         "n_train_samples": data.n_train,
         "n_val_samples": data.n_val,
         "train_seconds": round(seconds, 3),
+        ckpt.FILE_HASHES: ckpt.file_hashes(seed_dir),
     }
     write_parquet(
         seed_dir / "loss.parquet",

@@ -18,6 +18,7 @@ import numpy as np
 
 from elicit_jax.artifact import atomic_path, refuse_overwriting_inputs
 from elicit_jax.data.demos import Demos
+from elicit_jax.errors import ElicitError
 from elicit_jax.policy import checkpoint as ckpt
 from elicit_jax.policy.config import TrainConfig
 from elicit_jax.policy.dataset import TrainData, demos_sha256, prepare
@@ -197,7 +198,7 @@ def train_policy(
     window = config.seq_len if model_kind(config.model).recurrent else 1
     data = prepare(demos, config.val_fraction, window)
     with atomic_path(out_dir) as tmp, TrainProgress(config, data.n_train, quiet) as progress:
-        results = _train_groups(tmp, config, demos, data, progress)
+        results = _train_groups(tmp, config, demos, data, progress, out_dir)
         notes = training_warnings(config, demos.action, results)
         fields = tuple(f.name for f in demos.obs_fields)
         template = _template(config, data, demos.obs_dim, demos.action_dim, fields)
@@ -207,12 +208,48 @@ def train_policy(
     return out_dir
 
 
+def check_losses(
+    seeds: tuple[int, ...], done: int, train: np.ndarray, val: np.ndarray, out: str | Path
+) -> None:
+    """Stop a run whose loss became non-finite (NaN or inf): it diverged, and its "best"
+    parameters would be whatever came before (at worst the random initialisation).
+
+    Args:
+      seeds: the seeds of ``train``'s and ``val``'s leading axis.
+      done: epochs done after this chunk.
+      train: (S, n, K) training losses of the chunk's n epochs; val: the same (NaN when there
+        is no validation split, which is not a divergence).
+      out: the run directory, named in the error.
+
+    Raises:
+      ElicitError: one line naming the run, the seed and the first bad epoch.
+    """
+    n = train.shape[1]
+    for i, s in enumerate(seeds):
+        bad = ~np.isfinite(train[i]).all(axis=-1)
+        has_val = np.isfinite(val[i]).any()
+        if has_val:
+            bad |= ~np.isfinite(val[i]).all(axis=-1)
+        if bad.any():
+            epoch = done - n + int(np.flatnonzero(bad)[0]) + 1
+            raise ElicitError(
+                f"training diverged: seed {s}'s loss is not finite (NaN or inf) at epoch "
+                f"{epoch}; nothing was written (lower --lr, or check the data)",
+                out,
+            )
+
+
 def _train_groups(
-    tmp: Path, config: TrainConfig, demos: Demos, data: TrainData, progress: Any
+    tmp: Path,
+    config: TrainConfig,
+    demos: Demos,
+    data: TrainData,
+    progress: Any,
+    out: str | Path = "<run>",
 ) -> dict[int, tuple[np.ndarray, np.ndarray, int, float]]:
     """Train every seed (all at once, or one after another without ``vmap_seeds``), saving
     the periodic and best parameters under ``tmp``; seed -> (train loss, val loss, best
-    epoch, seconds)."""
+    epoch, seconds). A loss that becomes non-finite stops the run (:func:`check_losses`)."""
     groups = [config.seeds] if config.vmap_seeds else [(s,) for s in config.seeds]
     results = {}
     for seeds in groups:
@@ -220,6 +257,7 @@ def _train_groups(
         t0 = time.perf_counter()
 
         def on_chunk(done: int, states: Any, tl: Any, vl: Any, dt: float, seeds=seeds):
+            check_losses(seeds, done, np.asarray(tl), np.asarray(vl), out)
             progress.update(done, tl, vl, dt)
             if done % config.checkpoint_every == 0 or done == config.epochs:
                 for i, s in enumerate(seeds):

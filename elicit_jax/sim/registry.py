@@ -38,6 +38,9 @@ class TaskEntry:
       preset_aliases: other names of the task a demonstrations file may carry (robosuite's /
         the original code's environment names, lower case), which get its preset too.
       no_preset: why the task has no paper preset (empty when it has one).
+      recorded_as: more names (lower case) a training set of this task may record, e.g. the
+        robosuite environment a robomimic file names (its own name and ``preset_aliases``
+        count too); :mod:`elicit_jax.sim.task_match` checks a policy's task with them.
     """
 
     name: str
@@ -46,6 +49,7 @@ class TaskEntry:
     preset: tuple[float, float] | None = None
     preset_aliases: tuple[str, ...] = ()
     no_preset: str = ""
+    recorded_as: tuple[str, ...] = ()
 
 
 _ROBOSUITE = (
@@ -89,12 +93,14 @@ TASKS: Mapping[str, TaskEntry] = MappingProxyType(
                 "robosuite_nuts:RobosuiteSquare",
                 "robosuite_nuts",
                 no_preset=_ROBOSUITE,
+                recorded_as=("nutassemblysquare",),
             ),
             TaskEntry(
                 "robosuite-round",
                 "robosuite_nuts:RobosuiteRound",
                 "robosuite_nuts",
                 no_preset=_ROBOSUITE,
+                recorded_as=("nutassemblyround",),
             ),
         )
     }
