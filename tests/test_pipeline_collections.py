@@ -211,7 +211,7 @@ def test_shipped_robosuite_phenomenon_evaluates_the_final_checkpoint_only():
     spec = load_spec("phenomenon-robosuite", "paper", ("robosuite-square",))
     graph = build_graph(spec)
     assert sum(s.kind == "train" for s in graph) == 5 * (1 + 2)
-    evaluate = graph["evaluate/robosuite-square/mlp/naive-conflict-flip-pause"].config
+    evaluate = graph["evaluate/robosuite-square/mlp/naive-conflict-down"].config
     assert evaluate["checkpoints"] == ["final"]
     assert selection_meta(evaluate, 0) == {"selection": "reported"}
 
