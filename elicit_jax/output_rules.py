@@ -85,33 +85,26 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     directory is only ever replaced by a directory).
     """
     path = Path(path)
-    existed = path.exists() or path.is_symlink()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        clean_stale_temporaries(path)
-        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
-    except OSError as e:
-        raise ElicitError(f"cannot write here ({e.strerror or e})", path) from e
-    target = tmp / path.name
-    try:
-        yield target
-        if path.is_dir() and not path.is_symlink() and not target.is_dir():
-            raise ElicitError(
-                "is an existing directory; refusing to replace it with a file (nothing written)",
-                path,
-            )
+    with _staged(path) as (target, existed):
+        tmp = target.parent
         try:
-            sync_tree(target)
-            _commit(target, path, existed)
+            yield target
+            if path.is_dir() and not path.is_symlink() and not target.is_dir():
+                raise ElicitError(
+                    "is an existing directory; refusing to replace it with a file "
+                    "(nothing written)",
+                    path,
+                )
+            try:
+                sync_tree(target)
+                _commit(target, path, existed)
+            except OSError as e:
+                raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
+            _sync_dir(path.parent)
         except OSError as e:
-            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
-        _sync_dir(path.parent)
-    except OSError as e:
-        if e.errno in _DISK_FULL or (e.filename and str(e.filename).startswith(str(tmp))):
-            raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
-        raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+            if e.errno in _DISK_FULL or (e.filename and str(e.filename).startswith(str(tmp))):
+                raise ElicitError(f"cannot write ({e.strerror or e}; nothing written)", path) from e
+            raise
 
 
 @contextlib.contextmanager
