@@ -127,7 +127,7 @@ def test_batch_sizes_and_dropout_passes_that_cannot_fit_are_one_line(run, tmp_pa
     with pytest.raises(ElicitError, match="classifier lr must be a number"):
         ClassifierConfig(lr=float("inf"))
     with pytest.raises(ElicitError, match=r"dropout samples must be in 0\.\.1000"):
-        ScoreConfig(dropout_samples=1001)
+        ScoreConfig.from_preset("square-nut", dropout_samples=1001)
 
 
 def test_many_dropout_passes_score_in_smaller_chunks_with_the_same_scores(run, monkeypatch):
@@ -141,7 +141,7 @@ def test_many_dropout_passes_score_in_smaller_chunks_with_the_same_scores(run, m
 
     policy = load_policy(run / "run")
     demos = read_demos(run / "demos.parquet")
-    config = ScoreConfig(dropout_samples=8, chunk_size=64)
+    config = ScoreConfig.from_preset("square-nut", dropout_samples=8, chunk_size=64)
     wide = score_demos(policy, demos, config)
     chunks = []
     real = score_mod.pad

@@ -109,8 +109,10 @@ def test_cli_evaluate_trajectories_then_filter_cupid(trained, tmp_path):
     def run(*args):
         return CliRunner().invoke(app, [str(a) for a in args])
 
-    ev = ["evaluate", "--policy", d / "run", "--rollouts", 3, "--horizon", 4,
-          "--backend", "mujoco", "--checkpoint", "final", "--action-noise", 0.3]  # fmt: skip
+    # the planted demos record no task: the task is named (evaluate no longer assumes one)
+    ev = ["evaluate", "--policy", d / "run", "--task", "square-nut", "--rollouts", 3,
+          "--horizon", 4, "--backend", "mujoco", "--checkpoint", "final",
+          "--action-noise", 0.3]  # fmt: skip
     for name in ("a", "b"):
         r = run(*ev, "--trajectories", tmp_path / f"{name}.parquet")
         assert r.exit_code == 0, (r.output, r.exception)

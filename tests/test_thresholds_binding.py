@@ -14,6 +14,7 @@ from fixtures_data import cli_ok, invoke, tiny_run
 
 from elicit_jax.compat.thresholds import read_thresholds
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.checkpoint import FILE_HASHES, file_hashes
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +27,11 @@ def d(tmp_path_factory):
     with np.load(best) as z:
         arrays = {k: z[k] + np.float32(0.01) for k in z.files}
     np.savez(best, **arrays)
+    # a new policy written consistently: its header records the nudged files' hashes
+    seed = d / "other" / "seed0"
+    header = json.loads((seed / "artifact.json").read_text())
+    header[FILE_HASHES] = file_hashes(seed)
+    (seed / "artifact.json").write_text(json.dumps(header))
     for run, out in (("run", "s.parquet"), ("other", "s_other.parquet")):
         cli_ok(*_score(d, run, out), "--lambda", "0.3", "--eta", "0.5")
     cli_ok("fit-thresholds", "--scores", d / "s.parquet", "--lambda", "0.3", "--eta", "0.5",

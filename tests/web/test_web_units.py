@@ -196,7 +196,7 @@ def test_serve_refuses_bad_settings_in_one_line():
 def test_serve_keeps_the_thresholds_whole(monkeypatch, tmp_path):
     """Their source, file and recorded trust verdict reach the sessions (serve took them
     apart into λ and η and rebuilt them, losing the verdict)."""
-    from elicit_jax.cli import app
+    from elicit_jax.cli import app, session_options
     from elicit_jax.compat.thresholds import Thresholds, read_thresholds, write_thresholds
     from elicit_jax.web import serve
 
@@ -205,6 +205,8 @@ def test_serve_keeps_the_thresholds_whole(monkeypatch, tmp_path):
     write_thresholds(t, given, method="manual", inputs={}, config={}, report={})
     seen = []
     monkeypatch.setattr(serve, "serve", lambda config, **_: seen.append(config))
+    # no real policy here: the recorded-task check (tests/test_task_recorded.py) is not this one
+    monkeypatch.setattr(session_options, "recorded_task", lambda given, force: None)
     args = ["serve", "--task", "reach-pillar", "--policy", "p", "--base-demos", "b.parquet"]
     result = CliRunner().invoke(app, [*args, "--thresholds", str(t), "--horizon", "50"])
     assert result.exit_code == 0, (result.output, result.exception)
