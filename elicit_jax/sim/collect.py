@@ -93,11 +93,13 @@ def run_batch(task: Any, operator: Any, sim: Any, seeds: np.ndarray, rng: Any) -
       dict with ``obs (B, H, 23)``, ``action (B, H, 7)``, ``success (B,)`` and
       ``length (B,)`` (steps up to and including the first success, else the horizon).
     """
+    from elicit_jax.sim.env import ACTION_DIM
+
     b, h = len(seeds), task.config.horizon
     obs = sim.reset_seeds(seeds)
     operator.reset(obs, rng)
     obs_buf = np.zeros((b, h, obs.shape[1]), np.float32)
-    act_buf = np.zeros((b, h, 7), np.float32)
+    act_buf = np.zeros((b, h, ACTION_DIM), np.float32)
     length = np.full(b, h, np.int64)
     done = np.zeros(b, bool)
     for t in range(h):

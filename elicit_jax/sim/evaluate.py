@@ -185,7 +185,7 @@ def evaluate_refs(
     import pandas as pd
 
     from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.env import ACTION_DIM, OBS_DIM, make_task
     from elicit_jax.sim.rollout_mjx import rollout_mjx
 
     backend = resolve_backend(config.backend, config.task, config.env_from)
@@ -203,10 +203,10 @@ def evaluate_refs(
     for ref in refs:
         which: str | int = int(ref.checkpoint) if ref.checkpoint.isdigit() else ref.checkpoint
         policy = load_policy(ref.path, which)
-        if policy.obs_dim != 23 or policy.action_dim != 7:
+        if policy.obs_dim != OBS_DIM or policy.action_dim != ACTION_DIM:
             raise ElicitError(
                 f"policy has obs_dim={policy.obs_dim}, action_dim={policy.action_dim}; task "
-                f"'{task.name}' needs 23 and 7",
+                f"'{task.name}' needs {OBS_DIM} and {ACTION_DIM}",
                 ref.path,
             )
         if backend == "mjx":

@@ -96,7 +96,7 @@ class BatchSim:
         self._pool = ThreadPoolExecutor(self.threads - 1) if self.threads > 1 else None
         self._gripper_q = np.zeros((self.batch, N_GRIPPER_Q))
         self._sensordata = np.zeros((self.batch, self.model.nsensordata))
-        self.obs = np.zeros((self.batch, 23))
+        self.obs = np.zeros((self.batch, OBS_DIM))
         self.success = np.zeros(self.batch, bool)
         self.unstable = np.zeros(self.batch, bool)
         self._routing = True
