@@ -335,6 +335,14 @@ def report(args: argparse.Namespace, work: Path, prep: dict[str, Any], cmd: str)
     return "\n".join(lines) + "\n"
 
 
+def emit_report(text: str, out: Path | None) -> None:
+    """Print the Markdown report and write it to ``out`` when given."""
+    print(text)
+    if out:
+        out.write_text(text)
+        print(f"wrote {out}")
+
+
 def main() -> None:
     args = parse_args()
     work = args.work
@@ -351,11 +359,7 @@ def main() -> None:
         print(f"[3/3] naive vs filtered: train, evaluate {args.rollouts} rollouts each")
         run_rollouts(args, work)
     cmd = "python benchmarks/real_human.py " + " ".join(sys.argv[1:])
-    text = report(args, work, prep, cmd)
-    print(text)
-    if args.out:
-        args.out.write_text(text)
-        print(f"wrote {args.out}")
+    emit_report(report(args, work, prep, cmd), args.out)
 
 
 if __name__ == "__main__":

@@ -40,7 +40,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from real_human import PAPER_THRESHOLDS, cli, fmt_ops, human_profile, per_operator, run_walk
+from real_human import (
+    PAPER_THRESHOLDS,
+    cli,
+    emit_report,
+    fmt_ops,
+    human_profile,
+    per_operator,
+    run_walk,
+)
 from thriftydagger_source import (
     HOLD_TICKS,
     N_EPISODES,
@@ -327,11 +335,7 @@ def main() -> None:
                 str(work / "thresholds.json"), "-o", str(png), log=work / "png.log")  # fmt: skip
         info["map"] = png.name
     cmd = "python benchmarks/thriftydagger_human.py " + " ".join(sys.argv[1:])
-    text = report(args, work, info, cmd)
-    print(text)
-    if args.out:
-        args.out.write_text(text)
-        print(f"wrote {args.out}")
+    emit_report(report(args, work, info, cmd), args.out)
 
 
 if __name__ == "__main__":
