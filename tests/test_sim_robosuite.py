@@ -276,3 +276,31 @@ def test_conflict_down_demos_conflict_by_their_own_states(work, tmp_path):
                     "--require", "conflicts", "-o", str(tmp_path / "no.parquet")])  # fmt: skip
     assert refused.exit_code != 0 and "2 of them not 'conflicts'" in str(refused.exception)
     assert not (tmp_path / "no.parquet").exists()
+
+
+def test_remembered_action_dims_step_exactly_as_robosuite():
+    """The evaluation speed-up (``make_env(fast=True)``: each robot remembers its action size)
+    changes no number: from the same seeded initial states and actions, across a reset (which
+    builds new controllers), both environments give the same observations and successes to
+    the bit, and the remembered size is recomputed for a new controller."""
+    from elicit_jax.sim import robosuite_env as rs
+    from elicit_jax.sim.env import make_task
+
+    spec = make_task("robosuite-round").spec
+    plain, fast = rs.make_env(spec, 1000, fast=False), rs.make_env(spec, 1000)
+    assert not getattr(type(plain.robots[0]), "_elicit_remembers", False)
+    assert type(fast.robots[0])._elicit_remembers and fast.robots[0].action_dim == 7
+    actions = np.random.default_rng(0).uniform(-0.6, 0.6, (2, 12, 7))
+    for seed, steps in zip((5, 6), actions, strict=True):
+        runs = []
+        for env in (plain, fast):
+            obs = [rs.flat_obs(rs.reset_seeded(env, seed), spec.obs_keys)]
+            for a in steps:
+                d, *_ = env.step(a)
+                obs.append(np.append(rs.flat_obs(d, spec.obs_keys), rs.success(env)))
+            runs.append(np.concatenate(obs[1:]))
+        assert np.array_equal(runs[0], runs[1])
+        robot = fast.robots[0]
+        assert robot.__dict__["_elicit_action_dim"][0] is robot.composite_controller
+    plain.close()
+    fast.close()
