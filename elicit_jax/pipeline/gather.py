@@ -34,6 +34,7 @@ from elicit_jax.pipeline.evidence import (
     run_provenance,
 )
 from elicit_jax.pipeline.report_rows import ReportData, ResultRow
+from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
 from elicit_jax.provenance import shown_path, shown_paths_in
 
 MANIFEST = "run.json"
@@ -234,9 +235,10 @@ def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -
     each row marked with the stage's collection."""
     kind, cfg = stage["kind"], stage["config"]
     collection = int(cfg.get("collection", 0))
+    sizes = str(cfg.get("sizes", DEFAULT_SIZES))
 
     def mark(row: Any) -> Any:
-        return dataclasses.replace(row, collection=collection)
+        return dataclasses.replace(row, collection=collection, task=sized_task(row.task, sizes))
 
     if kind == "collect":
         rows["lengths"] += [mark(r) for r in _length_rows(stage, path)]
@@ -249,9 +251,12 @@ def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -
     elif kind in ("deminf", "demo-score", "cupid", "quality"):
         rows["curation"].append(mark(_curation_row(stage, path)))
     elif kind == "lambda-point":
-        rows["lambda_points"].append(_lambda_point(stage, path))
+        point = _lambda_point(stage, path)
+        rows["lambda_points"].append(dataclasses.replace(point, task=sized_task(point.task, sizes)))
     elif kind == "map":
-        where = f"{cfg['task']}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
+        where = f"{sized_task(cfg['task'], sizes)}, {cfg['model']}" + (
+            f", collection {collection}" * bool(collection)
+        )
         rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
 
 

@@ -38,12 +38,13 @@ from elicit_jax.pipeline.tables import (
     sensitivity_tables,
     threshold_table,
 )
+from elicit_jax.pipeline.tables_sizes import sizes_heading, sizes_note, sizes_tables
 
 
 def _sections(data: ReportData) -> list[tuple[str, Any]]:
     """Ordered (title, content) blocks shared by both renderers; content is a Table, text,
     a list of maps or a code block (``("code", text)``)."""
-    blocks: list[tuple[str, Any]] = list(across_tables(data))
+    blocks: list[tuple[str, Any]] = [*sizes_tables(data), *across_tables(data)]
     diffs = difference_tables(data)
     for (title, table), diff in zip(results_tables(data), diffs, strict=True):
         blocks += [(title, table), diff]
@@ -78,6 +79,7 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
 def _intro(data: ReportData) -> list[str]:
     lines = intro_lines(data, "Pipeline")
     lines += list(data.notes)
+    lines += sizes_note(data)
     lines += selection_lines((*data.results, *data.heldout))
     if data.results or data.heldout:
         lines.append(f"Differences between policies: {INTERVAL_NOTE}")
@@ -87,12 +89,13 @@ def _intro(data: ReportData) -> list[str]:
 
 
 def summary_tables(data: ReportData) -> list[tuple[str, Any]]:
-    """The tables a finished run prints (the paper's layout): the across-collections tables
-    of a study over several collections, then each results table followed by its differences
-    from Naive with their paired 95% intervals, then the model comparison."""
+    """The tables a finished run prints (the paper's layout): the sizes side by side of a run
+    at several sizes, the across-collections tables of a study over several collections, then
+    each results table followed by its differences from Naive with their paired 95%
+    intervals, then the model comparison."""
     results = results_tables(data)
     paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
-    return across_tables(data) + paired + models_table(data)
+    return sizes_tables(data) + across_tables(data) + paired + models_table(data)
 
 
 def render_markdown(data: ReportData, map_dir: str = "") -> str:
@@ -127,7 +130,7 @@ def render_html(data: ReportData) -> str:
 
 
 def _heading(data: ReportData) -> str:
-    return f"elicit-jax report: {data.pipeline} ({data.profile} profile)"
+    return f"elicit-jax report: {data.pipeline} ({data.profile} profile{sizes_heading(data)})"
 
 
 def write_report(

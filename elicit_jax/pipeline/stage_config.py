@@ -181,11 +181,18 @@ _RESOLVERS = {
 def resolve_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
     """Full, validated config of a stage: pipeline keys plus the library config's fields
     (``map`` and ``report`` stages keep their raw config); a ``collection`` key (a stage of
-    a later collection) is kept beside them."""
+    a later collection) and a ``sizes`` key (a stage of named sizes other than the default:
+    :mod:`elicit_jax.pipeline.sizes`) are kept beside them."""
     resolver = _RESOLVERS.get(kind)
     if resolver is None:
         return raw
-    if "collection" not in raw:
+    kept = [k for k in ("collection", "sizes") if k in raw]
+    if not kept:
         return resolver(raw)
-    rest = {k: v for k, v in raw.items() if k != "collection"}
-    return {**resolver(rest), "collection": int(raw["collection"])}
+    rest = {k: v for k, v in raw.items() if k not in kept}
+    out = resolver(rest)
+    if "collection" in raw:
+        out["collection"] = int(raw["collection"])
+    if "sizes" in raw:
+        out["sizes"] = str(raw["sizes"])
+    return out
