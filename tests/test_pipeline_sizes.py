@@ -250,3 +250,45 @@ def read_back(frame, folder):
     write_rollouts_table(folder / "rollouts.parquet", frame, "mini", "cpu")
     (folder / DATA_FILE).write_text(json.dumps({"kind": DATA_KIND}))
     return read_raw(folder)[1]
+
+
+def test_tiny_run_at_two_sizes_reports_them_side_by_side_and_rebuilds(tmp_path):
+    """A real tiny run: ``--sizes small`` after nothing, then ``--sizes default,small`` runs
+    only the default sizes' stages; the report sets both side by side and rebuilds byte for
+    byte from its folder."""
+    import os
+
+    from rich.console import Console
+    from test_pipeline_e2e import TINY
+
+    from elicit_jax.pipeline.gather import gather
+    from elicit_jax.pipeline.run import PipelineRunConfig, rebuild_report, run_pipeline
+
+    text = TINY.replace('methods = ["base", "naive", "filtered"]', 'methods = ["base", "naive"]')
+    text = text.replace(
+        "[train]", "[task.sizes.small]\nbase_episodes = 4\nnew_episodes = 2\n\n[train]"
+    )
+    spec, out = tmp_path / "tiny.toml", tmp_path / "run"
+    spec.write_text(text)
+
+    def run(sizes: str):
+        console = Console(file=open(os.devnull, "w"))  # noqa: SIM115
+        cfg = PipelineRunConfig(pipeline=str(spec), out=str(out), progress=False, sizes=sizes)
+        return run_pipeline(cfg, console=console)
+
+    first = run("small")
+    assert all("/sizes-small/" in s for s in first.result.ran if s != "report")
+    both = run("default,small")
+    assert not any("/sizes-small/" in s for s in both.result.ran)  # cached from the first run
+    data = gather(out)
+    assert {(r.task, r.method, r.sizes) for r in data.results} == {
+        ("reach-pillar", "base", "default"), ("reach-pillar", "naive", "default"),
+        ("reach-pillar (small sizes)", "base", "small"),
+        ("reach-pillar (small sizes)", "naive", "small"),
+    }  # fmt: skip
+    report = both.report_md.read_text()
+    assert "(cpu profile; sizes default, small)" in report.splitlines()[0]
+    assert "## Sizes side by side" in report and "| 4 + 2 |" in report
+    assert "**small** (reach-pillar 4 + 2 per operator)" in report
+    md, _ = rebuild_report(out / "report", tmp_path / "rebuilt")
+    assert md.read_text() == report
