@@ -304,3 +304,21 @@ def test_remembered_action_dims_step_exactly_as_robosuite():
         assert robot.__dict__["_elicit_action_dim"][0] is robot.composite_controller
     plain.close()
     fast.close()
+
+
+def test_evaluation_loop_gives_the_same_rollouts_with_and_without_the_speed_up(work, pool):
+    """Through the evaluation's own loop (worker processes, refilled slots): a pool built as
+    robosuite builds its environments (``fast=False``) and the shared, sped-up pool record
+    the same states, actions, successes and lengths."""
+    from elicit_jax.policy.base import jitted_act
+    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.sim.rollout_robosuite import SHARED_HORIZON, EnvPool, rollout_policy
+
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
+    seeds = np.array([31, 32, 33])
+    with EnvPool(pool.spec, 2, SHARED_HORIZON, fast=False) as plain:
+        old = rollout_policy(pool.spec, jitted_act(), policy, seeds, 6, 2, plain, True)
+    new = rollout_policy(pool.spec, jitted_act(), policy, seeds, 6, 2, pool, True)
+    for key in ("success", "steps_to_success", "ret", "unstable", "init_obs", "states",
+                "state_mask", "actions", "env_steps"):  # fmt: skip
+        assert np.array_equal(old[key], new[key]), key
