@@ -70,6 +70,13 @@ def test_a_checkpoint_without_a_model_kind_is_refused_naming_its_file(run, tmp_p
     _one_line(e, header_file2, NO_KIND)
 
 
+def test_info_names_a_checkpoint_without_a_model_kind(run, tmp_path):
+    copy, header_file = _planted(run, tmp_path, _no_kind)
+    r = invoke("info", copy / "seed0")
+    assert isinstance(r.exception, ElicitError), r.output
+    _one_line(r.exception, header_file, NO_KIND)
+
+
 def test_a_checkpoint_of_other_sizes_than_the_task_is_refused(run):
     sizes = task_entry("reach-pillar")
     assert (sizes.obs_dim, sizes.action_dim) == (OBS_DIM, ACTION_DIM) == (23, 7)

@@ -137,7 +137,7 @@ def score_sequences(
 def still_dims(policy: Policy) -> list[int]:
     """The action dims the base policy's training actions never moved (std < 1e-6); empty
     when the checkpoint records no action std."""
-    std = getattr(policy, "action_std", None)
+    std = policy.action_std
     if std is None:
         return []
     return [int(i) for i in np.flatnonzero(np.asarray(std, np.float64) < STILL_STD)]
@@ -153,7 +153,7 @@ def action_weight(policy: Policy, config: ScoreConfig, source: str = "<policy>")
     """
     if config.action_scale == "none":
         return None
-    std = getattr(policy, "action_std", None)
+    std = policy.action_std
     if std is None:
         raise ElicitError(
             "--action-scale std needs the training actions' std, which this checkpoint "

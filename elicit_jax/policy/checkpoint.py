@@ -227,6 +227,36 @@ def list_checkpoints(path: str | Path) -> dict[int, list[int | str]]:
     return out
 
 
+_REQUIRED = (
+    "kind",
+    "obs_dim",
+    "action_dim",
+    "n_members",
+    "hidden",
+    "dropout",
+    "n_components",
+    "reset_every",
+)
+"""Spec keys every checkpoint records (the others have defaults for older checkpoints)."""
+
+
+def checkpoint_spec(header: Mapping[str, Any], seed_dir: Path) -> Mapping[str, Any]:
+    """The model spec a seed header records, checked to name a kind and its sizes.
+
+    Raises:
+      ElicitError: no spec, no model kind or a missing size, naming the seed's
+        ``artifact.json`` (a checkpoint is never read as one kind by default).
+    """
+    spec = header.get("model")
+    file = seed_dir / "artifact.json"
+    if not isinstance(spec, Mapping) or not spec.get("kind"):
+        raise ElicitError("checkpoint records no model kind ('model.kind' is missing)", file)
+    missing = [k for k in _REQUIRED if k not in spec]
+    if missing:
+        raise ElicitError(f"checkpoint model spec lacks {', '.join(missing)}", file)
+    return spec
+
+
 def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file: Path) -> None:
     """Raise unless ``params`` have exactly the shapes the model ``spec`` builds."""
     import jax
@@ -259,8 +289,8 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
         problems: list[str] = []
         try:
             header = read_artifact(d, CHECKPOINT_KIND, SCHEMA_VERSION, what=_WHAT)
-            spec = header["model"]
-        except (ElicitError, KeyError) as e:
+            spec = checkpoint_spec(header, d)
+        except ElicitError as e:
             out[seed] = [f"{d}: unreadable header ({e})"]
             continue
         files = sorted((d / "params").glob("*.npz"))

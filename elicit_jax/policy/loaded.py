@@ -243,29 +243,11 @@ def _resolve_seed_dir(path: Path, seed: int | None) -> Path:
 
 def _spec_of(header: Mapping[str, Any], seed_dir: Path) -> tuple[Mapping[str, Any], ModelKind]:
     """The model spec of a seed header and its kind's registry entry."""
-    spec = header.get("model")
-    file = seed_dir / "artifact.json"
-    if not isinstance(spec, Mapping) or not spec.get("kind"):
-        raise ElicitError("checkpoint records no model kind ('model.kind' is missing)", file)
-    missing = [k for k in _REQUIRED if k not in spec]
-    if missing:
-        raise ElicitError(f"checkpoint model spec lacks {', '.join(missing)}", file)
+    spec = ckpt.checkpoint_spec(header, seed_dir)
     try:
         return spec, model_kind(str(spec["kind"]))
     except ElicitError as e:
-        raise ElicitError(f"{e} (checkpoint model spec)", file) from None
-
-
-_REQUIRED = (
-    "obs_dim",
-    "action_dim",
-    "n_members",
-    "hidden",
-    "dropout",
-    "n_components",
-    "reset_every",
-)
-"""Spec keys every checkpoint records (the others have defaults for older checkpoints)."""
+        raise ElicitError(f"{e} (checkpoint model spec)", seed_dir / "artifact.json") from None
 
 
 def _recorded_task(seed_dir: Path, header: Mapping[str, Any]) -> str | None:
