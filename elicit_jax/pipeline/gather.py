@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import read_header, read_json
+from elicit_jax.artifact import read_artifact, read_header
 from elicit_jax.compat.thresholds import (
     Thresholds,
     config_fields,
@@ -45,10 +45,7 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / MANIFEST
     if not path.exists():
         raise ElicitError(f"not a pipeline run directory (no {MANIFEST})", run_dir)
-    data = read_json(path)
-    if data.get("kind") != MANIFEST_KIND:
-        raise ElicitError(f"is a '{data.get('kind')}' artifact, expected a pipeline run", path)
-    return data
+    return read_artifact(path, MANIFEST_KIND, 1, what="a pipeline run")
 
 
 def _length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.LengthRow]:
