@@ -80,6 +80,8 @@ def serve_cmd(
     server |= {"max_operators": max_operators, "admin_token": admin_token}
     config = _serve_config(given, chosen, allow_hosts=tuple(allow_host), **server)
     th.show_chosen(config.session.thresholds)
+    s = config.session
+    so.thresholds_fit_policy(s.thresholds, s.policy, s.which, s.policy_seed, force)
     serve(config, echo=typer.echo, summary=_print_summary)
 
 
