@@ -36,6 +36,8 @@ from elicit_jax.pipeline.plan_cell import (
     sensitivity_stages,
 )
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
+from elicit_jax.pipeline.stage_kind import reported_kinds
+from elicit_jax.pipeline.stages import FILTERING_KINDS
 from elicit_jax.sim.operators import episode_traits
 
 FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
@@ -44,20 +46,9 @@ COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
 COLLECTION_STRIDE = 100
 """Collection ``c`` collects with seeds ``collect_seed + COLLECTION_STRIDE · c + offset``."""
-REPORT_KINDS = (
-    "collect",
-    "fit-thresholds",
-    "evaluate",
-    "map",
-    "filter",
-    "curate",
-    "deminf",
-    "demo-score",
-    "cupid",
-    "quality",
-    "lambda-point",
-    "lambda-valley",
-)
+REPORTED = reported_kinds(FILTERING_KINDS)
+"""The stage kinds the report stage reads
+(:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
 
 def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
@@ -128,7 +119,7 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
     stages: list[Stage] = []
     for number, sub in collection_specs(spec):
         stages += collection_stages(sub, number, resolve)
-    stages.append(report_stage(spec, "report", stages, REPORT_KINDS, resolve))
+    stages.append(report_stage(spec, "report", stages, REPORTED, resolve))
     return Graph(stages)
 
 

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
+from elicit_jax.pipeline.elicitation.stages import ELICITATION_KINDS
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.plan import (
     collect_stages,
@@ -27,9 +28,14 @@ from elicit_jax.pipeline.plan import (
     report_stage,
     threshold_stages,
 )
+from elicit_jax.pipeline.stage_kind import reported_kinds
+from elicit_jax.pipeline.stages import FILTERING_KINDS
 
 ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
+REPORTED = reported_kinds((*FILTERING_KINDS, *ELICITATION_KINDS))
+"""The stage kinds the study's report stage reads
+(:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
 
 def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
@@ -72,8 +78,7 @@ def build_study_graph(spec: StudySpec, resolve: ConfigResolver = _identity) -> G
         stages += _collect_stages(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, resolve)
-    kinds = ("collect", "fit-thresholds", "evaluate", "session", "filter-session")
-    stages.append(report_stage(spec, "study-report", stages, kinds, resolve))
+    stages.append(report_stage(spec, "study-report", stages, REPORTED, resolve))
     return Graph(stages)
 
 
