@@ -325,9 +325,10 @@ def _study(tmp_path: Path):
 
 def test_an_elicitation_study_report_rebuilds_byte_for_byte(tmp_path):
     from elicit_jax.pipeline.elicitation.evidence import round_trip_study
-    from elicit_jax.pipeline.elicitation.report import write_study_report
+    from elicit_jax.pipeline.elicitation.report import LAYOUT
+    from elicit_jax.pipeline.report_folder import write_report
 
-    md, _ = write_study_report(round_trip_study(_study(tmp_path)), tmp_path / "study")
+    md, _ = write_report(LAYOUT, round_trip_study(_study(tmp_path)), tmp_path / "study")
     folder = md.parent
     assert "Checkpoint selection: held-out" in md.read_text()
     assert "`elicit-jax report --rebuild <this folder>`" in md.read_text()

@@ -179,8 +179,6 @@ def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoi
     )
 
 
-
-
 def threshold_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.ThresholdRow]:
     """A threshold fit: the fitted (λ, η), the contrast sets it was fitted on, its metrics."""
     return _mark(stage, [_threshold_row(stage, path)])

@@ -33,7 +33,9 @@ from elicit_jax.pipeline.gather import gather, read_manifest
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.plan import build_graph
 from elicit_jax.pipeline.plan_cell import ConfigResolver
-from elicit_jax.pipeline.report import summary_tables, write_report
+from elicit_jax.pipeline.report import LAYOUT as REPORT_LAYOUT
+from elicit_jax.pipeline.report import summary_tables
+from elicit_jax.pipeline.report_folder import ReportLayout, write_report
 from elicit_jax.pipeline.runner import StageContext, StageFn
 from elicit_jax.pipeline.spec import load_spec, parse_spec, resolve_path
 from elicit_jax.pipeline.stage_kind import StageKind, StageKinds
@@ -56,7 +58,8 @@ class StudyKind:
       round_trip: ``data -> data`` as a rebuild reads it back (first report = its rebuilds).
       from_raw: ``(report-data.json header, rollout table, folder) -> data``: a report's data
         from its folder's raw results.
-      write_report: ``(data, folder, rebuilt_from=None) -> (md, html)``: writes a report folder.
+      layout: its report's tables, figures and intro (:class:`ReportLayout`), written by the
+        one report path of every kind (:meth:`write_report`).
       summary: ``data -> [(title, table)]``: the tables a finished run prints.
       data_kind: the artifact kind of its reports' ``report-data.json``.
     """
@@ -68,7 +71,7 @@ class StudyKind:
     gather: Callable[[Path, StageKinds], Any]
     round_trip: Callable[[Any], Any]
     from_raw: Callable[[Mapping[str, Any], Any, Path], Any]
-    write_report: Callable[..., tuple[Path, Path]]
+    layout: ReportLayout
     summary: Callable[[Any], list[tuple[str, Any]]]
     data_kind: str
 
@@ -77,19 +80,26 @@ class StudyKind:
         :data:`STAGE_KINDS`)."""
         return self.gather(Path(run_dir), STAGE_KINDS)
 
+    def write_report(
+        self, data: Any, folder: str | Path, rebuilt_from: Path | None = None
+    ) -> tuple[Path, Path]:
+        """Write the report folder of ``data`` (:func:`report_folder.write_report` with this
+        kind's layout); returns the Markdown and HTML paths."""
+        return write_report(self.layout, data, folder, rebuilt_from)
+
 
 # fmt: off
 STUDY_KINDS = {
     DEFAULT_KIND: StudyKind(
         name=DEFAULT_KIND, parse=parse_spec, build_graph=build_graph, report_stage="report",
         gather=gather, round_trip=round_trip, from_raw=report_data_of,
-        write_report=write_report, summary=summary_tables, data_kind=DATA_KIND,
+        layout=REPORT_LAYOUT, summary=summary_tables, data_kind=DATA_KIND,
     ),
     study_spec.KIND: StudyKind(
         name=study_spec.KIND, parse=study_spec.parse_study,
         build_graph=study_plan.build_study_graph, report_stage="study-report",
         gather=study_gather.gather_study, round_trip=study_evidence.round_trip_study,
-        from_raw=study_evidence.study_from_json, write_report=study_report.write_study_report,
+        from_raw=study_evidence.study_from_json, layout=study_report.LAYOUT,
         summary=study_report.summary_tables, data_kind=STUDY_DATA_KIND,
     ),
 }
