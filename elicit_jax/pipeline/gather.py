@@ -1,15 +1,17 @@
-"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report_rows.ReportData`
-(:func:`walk_run`: what every report kind reads of a run directory).
+"""Gather a run directory's artifacts into a study's report data (:func:`gather_fields`: what
+every study kind reads of a run directory; :func:`gather`: a filtering study's
+:class:`~elicit_jax.pipeline.report_rows.ReportData`).
 
 Reads the run manifest (``run.json``: the definition and every stage) and, for each finished
-stage, its artifact: evaluations (success per seed), threshold fits, filter counts, maps and
-the demonstration sets' lengths. Stages that have not finished yet are listed in a note, so a
-report of a partial run is still correct about what it shows.
+stage, its artifact, by its stage kind's gatherers: evaluations (success per seed), threshold
+fits, filter counts, maps and the demonstration sets' lengths (:mod:`.gather_rows`). Stages
+that have not finished yet are listed in a note, so a report of a partial run is still correct
+about what it shows.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -76,25 +78,33 @@ def training_note(train: Mapping[str, Any]) -> str:
     )
 
 
-def walk_run(
-    run_dir: str | Path, report_kind: str, take: Callable[[Mapping[str, Any], Path], bool]
-) -> dict[str, Any]:
-    """Read a run directory the way every report kind does: its manifest, every stage's
-    config, every finished evaluation's rollouts; ``take(stage, path)`` reads what any other
-    finished stage (not the ``report_kind`` stage) contributes, and returns False when its
-    output is not complete yet.
+ROLLOUTS = "rollouts"
+"""The report field every study gathers: the per-rollout tables of its finished evaluations
+(the evaluate kind's gatherer), from which its ``results`` are computed."""
+
+
+def gather_fields(
+    run_dir: str | Path, report_kind: str, kinds: StageKinds, fields: tuple[str, ...]
+) -> tuple[dict[str, Any], dict[str, list[Any]]]:
+    """Read a run directory the way every study kind's report does: its manifest, every
+    stage's config, and each finished stage (not the ``report_kind`` stage) by its kind's
+    gatherers (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather`) into the report
+    ``fields`` the study has and :data:`ROLLOUTS` (the gatherers of other fields are not
+    called). A stage whose output is missing, or whose gatherer finds it incomplete, is
+    listed in a note as not finished.
 
     Returns:
       The fields every report has (:class:`~elicit_jax.pipeline.report_rows.RunReport`:
       definition, run directory, ``results`` of every finished evaluation, ``rollouts``,
-      notes, provenance) and the stage ``configs`` and library ``versions``.
+      notes, provenance) and the stage ``configs`` and library ``versions``; and per report
+      field the items its stages added, in stage order.
     """
     import pandas as pd
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     head = manifest["config"]
-    frames = []
+    rows: dict[str, list[Any]] = {name: [] for name in (ROLLOUTS, *fields)}
     configs: dict[str, dict[str, Any]] = {}
     missing = []
     for stage in manifest["stages"]:
@@ -102,11 +112,8 @@ def walk_run(
         configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
         if stage["kind"] == report_kind:
             continue
-        if not path.exists():
-            missing.append(stage["id"])
-        elif stage["kind"] == "evaluate":
-            frames.append(cell_frame(stage["config"], path))
-        elif not take(stage, path):
+        kind = kinds.kind(stage["kind"], run_dir)
+        if not path.exists() or not _take(kind.gather, stage, path, rows):
             missing.append(stage["id"])
     notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
@@ -115,8 +122,9 @@ def walk_run(
             + ", ".join(missing[:8])
             + (" …" if len(missing) > 8 else "")
         )
+    frames = rows.pop(ROLLOUTS)
     rollouts = pd.concat(frames, ignore_index=True) if frames else empty_rollouts()
-    return {
+    run = {
         "pipeline": head["pipeline"],
         "profile": head["profile"],
         "description": head.get("description", ""),
@@ -129,34 +137,24 @@ def walk_run(
         "notes": tuple(notes),
         "provenance": run_provenance(manifest, run_dir),
     }
+    return run, rows
 
 
-def gather_fields(
-    run_dir: str | Path, report_kind: str, kinds: StageKinds, fields: tuple[str, ...]
-) -> tuple[dict[str, Any], dict[str, list[Any]]]:
-    """:func:`walk_run` with each finished stage gathered by its kind's gatherers
-    (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather`) into the report ``fields``
-    the study has (the gatherers of other fields are not called).
-
-    Returns:
-      :func:`walk_run`'s fields, and per report field the items its stages added, in stage
-      order.
-    """
-    rows: dict[str, list[Any]] = {name: [] for name in fields}
-
-    def take(stage: Mapping[str, Any], path: Path) -> bool:
-        added = []
-        for name, gatherer in kinds.kind(stage["kind"], run_dir).gather.items():
-            if name in rows:
-                found = gatherer(stage, path)
-                if found is None:
-                    return False
-                added.append((name, found))
-        for name, found in added:
-            rows[name] += found
-        return True
-
-    return walk_run(run_dir, report_kind, take), rows
+def _take(
+    gatherers: Mapping[str, Any], stage: Mapping[str, Any], path: Path, rows: dict[str, list]
+) -> bool:
+    """Add what one finished stage contributes to ``rows`` (the fields it has); False, adding
+    nothing, when a gatherer finds its output incomplete."""
+    added = []
+    for name, gatherer in gatherers.items():
+        if name in rows:
+            found = gatherer(stage, path)
+            if found is None:
+                return False
+            added.append((name, found))
+    for name, found in added:
+        rows[name] += found
+    return True
 
 
 def gather(run_dir: str | Path, kinds: StageKinds) -> ReportData:

@@ -1,7 +1,8 @@
 """What each finished stage of a filtering study adds to its report: the gatherers of the
 stage kinds (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather`), one per report field
 of :class:`~elicit_jax.pipeline.report_rows.ReportData` (demonstration lengths, threshold
-fits and valley rules, filter counts, curation scores, λ points, maps).
+fits and valley rules, filter counts, curation scores, λ points, maps) and the evaluations'
+rollouts every study gathers.
 
 Each gatherer takes a stage's record in ``run.json`` and its output path and returns the rows
 it adds, each marked with the stage's collection.
@@ -26,6 +27,7 @@ from elicit_jax.compat.thresholds import (
     read_thresholds_header,
 )
 from elicit_jax.pipeline import report_rows
+from elicit_jax.pipeline.evidence import cell_frame
 from elicit_jax.provenance import shown_paths_in
 
 
@@ -177,6 +179,12 @@ def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoi
         low=float(lo),
         high=float(hi),
     )
+
+
+def rollout_frames(stage: Mapping[str, Any], path: Path) -> list[Any]:
+    """An evaluation's per-rollout table (:func:`~elicit_jax.pipeline.evidence.cell_frame`),
+    from which every study computes its results."""
+    return [cell_frame(stage["config"], path)]
 
 
 def threshold_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.ThresholdRow]:

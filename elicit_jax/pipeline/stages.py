@@ -27,6 +27,7 @@ from elicit_jax.pipeline.curation_stages import (
     resolve_cupid,
     resolve_quality,
 )
+from elicit_jax.pipeline.gather import ROLLOUTS
 from elicit_jax.pipeline.runner import StageContext
 from elicit_jax.pipeline.stage_kind import StageKind
 from elicit_jax.pipeline.stages_compat import (
@@ -129,7 +130,10 @@ FILTERING_KINDS = (
     StageKind(
         "train", train_stage, sc.resolve_train, inputs=("demos0", "demos1"), outputs="policies/"
     ),
-    StageKind("evaluate", evaluate_stage, sc.resolve_evaluate, ("policy",), "evals/", True),
+    StageKind(
+        "evaluate", evaluate_stage, sc.resolve_evaluate, ("policy",), "evals/", True,
+        gather={ROLLOUTS: gr.rollout_frames},
+    ),
     StageKind(
         "score", score_stage, sc.resolve_score, ("policy", "demos0", "demos1", "thresholds"),
         "scores/",
