@@ -37,7 +37,6 @@ ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
 ROLLOUTS_KIND = "study-rollouts"
 DATA_KIND = "report-data"
-STUDY_DATA_KIND = "study-report-data"
 SELECTIONS = ("heldout", "reported")
 SELECT_SEED_OFFSET = 100
 """Default selection seed of held-out selection: the reported evaluation seed + this."""
@@ -312,9 +311,9 @@ def round_trip(data: ReportData) -> ReportData:
     return dataclasses.replace(back, **{k: getattr(data, k) for k in kept})
 
 
-def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
-    """A report folder's ``report-data.json`` header and rollout table, or a one-line error
-    naming what is missing."""
+def read_raw(folder: str | Path, data_kinds: Sequence[str]) -> tuple[dict[str, Any], Any]:
+    """A report folder's ``report-data.json`` header (of one of the ``data_kinds``: the study
+    kinds') and rollout table, or a one-line error naming what is missing."""
     import pyarrow.parquet as pq
 
     folder = Path(folder)
@@ -326,18 +325,17 @@ def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
                 folder,
             )
     header = read_json(folder / DATA_FILE)
-    if header.get("kind") not in (DATA_KIND, STUDY_DATA_KIND):
+    if header.get("kind") not in data_kinds:
         raise ElicitError(f"{DATA_FILE} is a '{header.get('kind')}' artifact", folder)
     if read_header(folder / ROLLOUTS_FILE).get("kind") != ROLLOUTS_KIND:
         raise ElicitError(f"{ROLLOUTS_FILE} is not a study rollout table", folder)
-    frame = pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
-    if header["kind"] == DATA_KIND and "collection" not in frame:  # kept before [collections]
-        frame.insert(0, "collection", np.int32(0))
-    return header, frame
+    return header, pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
 
 
 def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> ReportData:
     """A filtering or models report's data from its folder's raw results."""
+    if "collection" not in frame:  # kept before [collections]
+        frame.insert(0, "collection", np.int32(0))
     results = result_rows_of(frame) if len(frame) else []
     return dataclasses.replace(
         data_from_json(header, folder),

@@ -278,10 +278,10 @@ def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[P
     """
     from elicit_jax.pipeline.evidence import read_raw
     from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
-    from elicit_jax.pipeline.study_kinds import kind_of_data
+    from elicit_jax.pipeline.study_kinds import data_kinds, kind_of_data
 
     folder = Path(folder)
-    header, rollouts = read_raw(folder)
+    header, rollouts = read_raw(folder, data_kinds())
     findings = None
     if (folder / FINDINGS_FILE).is_file():
         findings = read_findings(folder / FINDINGS_FILE)

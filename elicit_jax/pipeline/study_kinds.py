@@ -28,7 +28,7 @@ from elicit_jax.pipeline.elicitation import plan as study_plan
 from elicit_jax.pipeline.elicitation import report as study_report
 from elicit_jax.pipeline.elicitation import spec as study_spec
 from elicit_jax.pipeline.elicitation.stages import ELICITATION_GATHER, ELICITATION_KINDS
-from elicit_jax.pipeline.evidence import DATA_KIND, STUDY_DATA_KIND, report_data_of, round_trip
+from elicit_jax.pipeline.evidence import DATA_KIND, report_data_of, round_trip
 from elicit_jax.pipeline.gather import gather, read_manifest
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.plan import build_graph
@@ -100,7 +100,7 @@ STUDY_KINDS = {
         build_graph=study_plan.build_study_graph, report_stage="study-report",
         gather=study_gather.gather_study, round_trip=study_evidence.round_trip_study,
         from_raw=study_evidence.study_from_json, layout=study_report.LAYOUT,
-        summary=study_report.summary_tables, data_kind=STUDY_DATA_KIND,
+        summary=study_report.summary_tables, data_kind=study_evidence.STUDY_DATA_KIND,
     ),
 }
 # fmt: on
@@ -148,8 +148,14 @@ def study_kind(name: str, where: Any = None) -> StudyKind:
     return STUDY_KINDS[name]
 
 
+def data_kinds() -> tuple[str, ...]:
+    """The artifact kinds of every study kind's ``report-data.json``."""
+    return tuple(k.data_kind for k in STUDY_KINDS.values())
+
+
 def kind_of_data(data_kind: str) -> StudyKind:
-    """The study kind whose reports keep a ``report-data.json`` of artifact kind ``data_kind``."""
+    """The study kind whose reports keep a ``report-data.json`` of artifact kind ``data_kind``
+    (one of :func:`data_kinds`)."""
     return next(k for k in STUDY_KINDS.values() if k.data_kind == data_kind)
 
 

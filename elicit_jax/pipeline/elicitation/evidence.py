@@ -19,7 +19,10 @@ import numpy as np
 
 from elicit_jax.artifact import dumps, make_header
 from elicit_jax.pipeline.elicitation.gather import FilterCount, SessionData, StudyData
-from elicit_jax.pipeline.evidence import STUDY_DATA_KIND, result_rows_of
+from elicit_jax.pipeline.evidence import result_rows_of
+
+STUDY_DATA_KIND = "study-report-data"
+"""The artifact kind of an elicitation study report's ``report-data.json``."""
 
 
 def study_to_json(data: StudyData) -> dict[str, Any]:
