@@ -117,6 +117,7 @@ def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
         ("filtered", "conflict-right"),
     }
     assert all(r.n_rollouts == 4 and 0.0 <= r.success <= 1.0 for r in data.results)
+    assert sum(data.provenance["result_commits"].values()) == 3  # one per finished evaluation
     (fit,) = data.thresholds
     assert "conflict-over" in fit.incompatible and "held-out" in fit.compatible
     assert data.filters[0].pairs_total == pytest.approx(

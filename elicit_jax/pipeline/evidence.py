@@ -72,19 +72,17 @@ ROLLOUT_COLUMNS = [
 """The columns of a report's ``rollouts.parquet``, in order."""
 
 
-def run_provenance(manifest: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
+def run_provenance(manifest: Mapping[str, Any], evaluations: Sequence[Path]) -> dict[str, Any]:
     """The run's provenance (its manifest's, i.e. the last ``pipeline run``), plus the code
-    commits that made its finished evaluations (``result_commits``: commit -> count), which
+    commits that made its finished ``evaluations`` (``result_commits``: commit -> count), which
     differ when cached stages carried the run across code versions."""
     from elicit_jax.artifact import PROVENANCE_KEY
 
     commits: dict[str, int] = {}
-    for stage in manifest.get("stages", []):
-        path = run_dir / stage["output"]
-        if stage["kind"] == "evaluate" and path.is_file():
-            made = read_header(path).get(PROVENANCE_KEY, {})
-            commit = str(made.get("commit", "unknown")) + ("+dirty" if made.get("dirty") else "")
-            commits[commit] = commits.get(commit, 0) + 1
+    for path in evaluations:
+        made = read_header(path).get(PROVENANCE_KEY, {})
+        commit = str(made.get("commit", "unknown")) + ("+dirty" if made.get("dirty") else "")
+        commits[commit] = commits.get(commit, 0) + 1
     return {**manifest.get(PROVENANCE_KEY, {}), "result_commits": commits}
 
 

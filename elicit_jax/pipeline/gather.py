@@ -106,7 +106,7 @@ def gather_fields(
     head = manifest["config"]
     rows: dict[str, list[Any]] = {name: [] for name in (ROLLOUTS, *fields)}
     configs: dict[str, dict[str, Any]] = {}
-    missing = []
+    missing, evaluations = [], []
     for stage in manifest["stages"]:
         path = run_dir / stage["output"]
         configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
@@ -115,6 +115,8 @@ def gather_fields(
         kind = kinds.kind(stage["kind"], run_dir)
         if not path.exists() or not _take(kind.gather, stage, path, rows):
             missing.append(stage["id"])
+        elif ROLLOUTS in kind.gather:
+            evaluations.append(path)
     notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
@@ -135,7 +137,7 @@ def gather_fields(
         "configs": configs,
         "versions": manifest.get("versions", {}),
         "notes": tuple(notes),
-        "provenance": run_provenance(manifest, run_dir),
+        "provenance": run_provenance(manifest, evaluations),
     }
     return run, rows
 
