@@ -51,7 +51,9 @@ REPORTED = reported_kinds(FILTERING_KINDS)
 (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
 
-def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+def unresolved(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+    """The config resolver that keeps every raw config (a graph's shape, without the
+    registry's validation: :meth:`~elicit_jax.pipeline.stage_kind.StageKinds.resolve`)."""
     return raw
 
 
@@ -108,7 +110,7 @@ def threshold_stages(
     return contrast, fit
 
 
-def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Graph:
+def build_graph(spec: PipelineSpec, resolve: ConfigResolver = unresolved) -> Graph:
     """The stage graph of ``spec``: each collection's per-task chains, then one report.
 
     Args:

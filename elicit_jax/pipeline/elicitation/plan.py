@@ -16,7 +16,6 @@ pairs before training. One report.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import Any
 
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
@@ -27,19 +26,16 @@ from elicit_jax.pipeline.plan import (
     contrast_sets,
     report_stage,
     threshold_stages,
+    unresolved,
 )
+from elicit_jax.pipeline.plan_cell import ConfigResolver
 from elicit_jax.pipeline.stage_kind import reported_kinds
 from elicit_jax.pipeline.stages import FILTERING_KINDS
 
-ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
 REPORTED = reported_kinds((*FILTERING_KINDS, *ELICITATION_KINDS))
 """The stage kinds the study's report stage reads
 (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
-
-
-def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
-    return raw
 
 
 def session_modes(spec: StudySpec, task: StudyTask) -> dict[str, dict[str, Any]]:
@@ -71,7 +67,7 @@ def person_id(index: int) -> str:
     return f"p{index}"
 
 
-def build_study_graph(spec: StudySpec, resolve: ConfigResolver = _identity) -> Graph:
+def build_study_graph(spec: StudySpec, resolve: ConfigResolver = unresolved) -> Graph:
     """The stage graph of an elicitation study (see the module docstring)."""
     stages: list[Stage] = []
     for task in spec.tasks:
