@@ -30,6 +30,8 @@ from elicit_jax.provenance import shown_path
 
 MANIFEST = "run.json"
 MANIFEST_KIND = "pipeline-run"
+REPORT_STAGE = "report"
+"""The stage kind of a filtering study's report stage."""
 
 
 def read_manifest(run_dir: str | Path) -> dict[str, Any]:
@@ -165,7 +167,7 @@ def gather(run_dir: str | Path, kinds: StageKinds) -> ReportData:
     from (``rollouts``: :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished
     evaluation)."""
     fields = (*report_rows.ROW_FIELDS, "maps")
-    run, rows = gather_fields(run_dir, "report", kinds, fields)
+    run, rows = gather_fields(run_dir, REPORT_STAGE, kinds, fields)
     results = run.pop("results")
     return ReportData(
         **run,

@@ -28,6 +28,7 @@ from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.curation_stages import cupid_plan, operator_stages, per_demo_source
+from elicit_jax.pipeline.gather import REPORT_STAGE
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.plan_cell import (
     Cell,
@@ -121,7 +122,7 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = unresolved) -> Gra
     stages: list[Stage] = []
     for number, sub in collection_specs(spec):
         stages += collection_stages(sub, number, resolve)
-    stages.append(report_stage(spec, "report", stages, REPORTED, resolve))
+    stages.append(report_stage(spec, REPORT_STAGE, stages, REPORTED, resolve))
     return Graph(stages)
 
 

@@ -29,7 +29,7 @@ from elicit_jax.pipeline.elicitation import report as study_report
 from elicit_jax.pipeline.elicitation import spec as study_spec
 from elicit_jax.pipeline.elicitation.stages import ELICITATION_GATHER, ELICITATION_KINDS
 from elicit_jax.pipeline.evidence import DATA_KIND, report_data_of, round_trip
-from elicit_jax.pipeline.gather import gather, read_manifest
+from elicit_jax.pipeline.gather import REPORT_STAGE, gather, read_manifest
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.plan import build_graph
 from elicit_jax.pipeline.plan_cell import ConfigResolver
@@ -91,13 +91,14 @@ class StudyKind:
 # fmt: off
 STUDY_KINDS = {
     DEFAULT_KIND: StudyKind(
-        name=DEFAULT_KIND, parse=parse_spec, build_graph=build_graph, report_stage="report",
+        name=DEFAULT_KIND, parse=parse_spec, build_graph=build_graph, report_stage=REPORT_STAGE,
         gather=gather, round_trip=round_trip, from_raw=report_data_of,
         layout=REPORT_LAYOUT, summary=summary_tables, data_kind=DATA_KIND,
     ),
     study_spec.KIND: StudyKind(
         name=study_spec.KIND, parse=study_spec.parse_study,
-        build_graph=study_plan.build_study_graph, report_stage="study-report",
+        build_graph=study_plan.build_study_graph,
+        report_stage=study_gather.STUDY_REPORT_STAGE,
         gather=study_gather.gather_study, round_trip=study_evidence.round_trip_study,
         from_raw=study_evidence.study_from_json, layout=study_report.LAYOUT,
         summary=study_report.summary_tables, data_kind=study_evidence.STUDY_DATA_KIND,

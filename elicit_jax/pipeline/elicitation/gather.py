@@ -23,6 +23,8 @@ from elicit_jax.pipeline.gather_rows import kept_counts
 from elicit_jax.pipeline.report_rows import RunReport
 from elicit_jax.pipeline.stage_kind import StageKinds
 
+STUDY_REPORT_STAGE = "study-report"
+"""The stage kind of an elicitation study's report stage."""
 PERSON_FILE = "person.json"
 """Beside a study's session: the person's traits, starting and final choices, every change."""
 DISTANCE_KEY = "distance_from_base"
@@ -175,7 +177,7 @@ filtering kinds' :attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather` keys).
 def gather_study(run_dir: str | Path, kinds: StageKinds) -> StudyData:
     """Everything the study report shows, read from ``run_dir``'s finished artifacts by the
     gatherers of ``kinds``."""
-    run, rows = gather_fields(run_dir, "study-report", kinds, STUDY_FIELDS)
+    run, rows = gather_fields(run_dir, STUDY_REPORT_STAGE, kinds, STUDY_FIELDS)
     return StudyData(
         **run,
         sessions=tuple(rows["sessions"]),

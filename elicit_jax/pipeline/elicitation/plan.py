@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from elicit_jax.pipeline.elicitation.gather import STUDY_REPORT_STAGE
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
 from elicit_jax.pipeline.elicitation.stages import ELICITATION_KINDS
 from elicit_jax.pipeline.graph import Graph, Stage
@@ -74,7 +75,7 @@ def build_study_graph(spec: StudySpec, resolve: ConfigResolver = unresolved) -> 
         stages += _collect_stages(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, resolve)
-    stages.append(report_stage(spec, "study-report", stages, REPORTED, resolve))
+    stages.append(report_stage(spec, STUDY_REPORT_STAGE, stages, REPORTED, resolve))
     return Graph(stages)
 
 
