@@ -294,11 +294,6 @@ def write_rollouts_table(path: Path, rollouts: Any, pipeline: str, profile: str)
     pq.write_table(table, path, compression="zstd")
 
 
-def write_data(path: Path, data: ReportData) -> None:
-    """Write ``report-data.json``: everything the report shows besides the results."""
-    path.write_text(dumps(data_to_json(data)) + "\n")
-
-
 def round_trip(data: ReportData) -> ReportData:
     """``data`` as a rebuild will read it back (JSON turns tuples into lists): rendering this
     makes the first report and its rebuilds byte-identical."""

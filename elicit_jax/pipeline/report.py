@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.pipeline.across import across_note, across_tables
-from elicit_jax.pipeline.evidence import selection_lines, write_data
+from elicit_jax.pipeline.evidence import data_to_json, selection_lines
 from elicit_jax.pipeline.report_folder import ReportLayout, intro_lines
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
@@ -129,7 +129,7 @@ LAYOUT = ReportLayout(
     sections=lambda data, _: _sections(data),
     draw=_draw,
     figures=_figures,
-    write_data=write_data,
+    to_json=data_to_json,
 )
 """A filtering (or models) study's report, for
 :func:`~elicit_jax.pipeline.report_folder.write_report`: the paper's tables with their

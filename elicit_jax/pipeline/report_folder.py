@@ -139,7 +139,7 @@ class ReportLayout:
       draw: ``(folder, data) -> (data, files)``: writes its figures into the folder being
         written, returns ``data`` as rendered and the figure files to list in its header.
       figures: ``folder -> (markdown, HTML)``: how each renderer shows one of its figures.
-      write_data: writes its ``report-data.json`` of ``data``.
+      to_json: ``data -> header``: its ``report-data.json`` (everything but the rollouts).
       fields: ``data -> {field: value}``: further fields of the folder's header.
     """
 
@@ -151,7 +151,7 @@ class ReportLayout:
     sections: Callable[[Any, Path], list[tuple[str, Any]]]
     draw: Callable[[Path, Any], tuple[Any, list[str]]]
     figures: Callable[[Path], tuple[FigureRenderer, FigureRenderer]]
-    write_data: Callable[[Path, Any], None]
+    to_json: Callable[[Any], dict[str, Any]]
     fields: Callable[[Any], dict[str, Any]] = lambda _: {}
 
 
@@ -201,7 +201,7 @@ def write_report(
                 (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
         elif data.rollouts is not None:
             write_rollouts_table(tmp / ROLLOUTS_FILE, data.rollouts, data.pipeline, data.profile)
-            layout.write_data(tmp / DATA_FILE, data)
+            (tmp / DATA_FILE).write_text(dumps(layout.to_json(data)) + "\n")
         kept = [n for n in RAW_FILES if (tmp / n).is_file()]
         data, drawn = layout.draw(tmp, dataclasses.replace(data, raw_results=bool(kept)))
         markdown, html = render_report(layout, data, tmp)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,11 +59,6 @@ def study_from_json(header: Mapping[str, Any], rollouts: Any, folder: Any = None
             "rollouts": rollouts,
         }
     )
-
-
-def write_study_data(path: Path, data: StudyData) -> None:
-    """Write a study's ``report-data.json``."""
-    path.write_text(dumps(study_to_json(data)) + "\n")
 
 
 def round_trip_study(data: StudyData) -> StudyData:

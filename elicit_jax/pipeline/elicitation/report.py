@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.pipeline.elicitation.evidence import write_study_data
+from elicit_jax.pipeline.elicitation.evidence import study_to_json
 from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
@@ -185,7 +185,7 @@ LAYOUT = ReportLayout(
     sections=_sections,
     draw=_draw,
     figures=_figures,
-    write_data=write_study_data,
+    to_json=study_to_json,
     fields=lambda data: {"n_sessions": len(data.sessions)},
 )
 """An elicitation study's report, for :func:`~elicit_jax.pipeline.report_folder.write_report`:
