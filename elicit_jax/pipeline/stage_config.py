@@ -1,7 +1,7 @@
 """Stage configs: each ``resolve_*`` turns a stage's raw overrides into the library's full,
 validated config (unknown fields are an error naming the section), so a changed library default
 changes the recorded config and re-runs the stage. They are the ``resolve`` of the stage kinds
-(:mod:`elicit_jax.pipeline.filtering_kinds`); a stage planned in another collection than the
+(:data:`elicit_jax.pipeline.stages.FILTERING_KINDS`); a stage planned in another collection than the
 first (``[collections]``) carries ``collection = c`` beside it
 (:meth:`~elicit_jax.pipeline.stage_kind.StageKind.config`).
 """
