@@ -37,7 +37,7 @@ from elicit_jax.pipeline.plan_cell import (
     sensitivity_stages,
 )
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
-from elicit_jax.pipeline.stage_kind import reported_kinds
+from elicit_jax.pipeline.stage_kind import StageKinds
 from elicit_jax.pipeline.stages import FILTERING_KINDS
 from elicit_jax.sim.operators import episode_traits
 
@@ -47,7 +47,9 @@ COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
 COLLECTION_STRIDE = 100
 """Collection ``c`` collects with seeds ``collect_seed + COLLECTION_STRIDE · c + offset``."""
-REPORTED = reported_kinds(FILTERING_KINDS)
+FILTERING = StageKinds(FILTERING_KINDS)
+"""The filtering study's stage kinds (what this planner places)."""
+REPORTED = FILTERING.reported()
 """The stage kinds the report stage reads
 (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
@@ -207,8 +209,8 @@ def collection_stages(spec: PipelineSpec, number: int, resolve: ConfigResolver) 
 
 def in_collection(stage: Stage, number: int) -> Stage:
     """``stage`` moved into collection ``number``: ``c<number>/`` after the first part of its
-    id, output and input ids (a map: ``maps/c<number>-<name>.png``, as reports keep maps side
-    by side under their file names)."""
+    id, output and input ids (a kind whose outputs sit side by side, a map:
+    ``maps/c<number>-<name>.png``, as reports keep maps under their file names)."""
 
     def move(path: str, sep: str = "/") -> str:
         head, _, rest = path.partition("/")
@@ -217,7 +219,7 @@ def in_collection(stage: Stage, number: int) -> Stage:
     return dataclasses.replace(
         stage,
         id=move(stage.id),
-        output=move(stage.output, "-" if stage.kind == "map" else "/"),
+        output=move(stage.output, "-" if FILTERING[stage.kind].side_by_side else "/"),
         inputs={k: move(v) for k, v in stage.inputs.items()},
         label=f"c{number}: {stage.label}",
     )

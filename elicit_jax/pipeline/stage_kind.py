@@ -41,6 +41,9 @@ class StageKind:
       outputs: the folder of the run directory its outputs go under (``data/``) or the one
         output it writes (``report``).
       reported: the study's report stage reads it (an input of the report stage).
+      side_by_side: its outputs are files side by side in ``outputs`` (reports keep them
+        under their file names), so a later collection's have ``c<n>-`` before their name
+        rather than a ``c<n>/`` folder.
       gather: report field -> :data:`Gatherer`: what a finished stage adds to that field of a
         report; a study's report takes the fields it has.
     """
@@ -51,6 +54,7 @@ class StageKind:
     inputs: tuple[str, ...] = ()
     outputs: str = ""
     reported: bool = False
+    side_by_side: bool = False
     gather: Mapping[str, Gatherer] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:

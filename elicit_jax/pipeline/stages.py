@@ -176,7 +176,7 @@ FILTERING_KINDS = (
         True, gather={"thresholds": gr.valley_rows},
     ),
     StageKind(
-        "map", map_stage, None, ("thresholds", "scores:*"), "maps/", True,
+        "map", map_stage, None, ("thresholds", "scores:*"), "maps/", True, side_by_side=True,
         gather={"maps": gr.map_figures},
     ),
 )
