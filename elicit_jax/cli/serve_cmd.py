@@ -108,7 +108,11 @@ def _serve_config(given: dict[str, Any], chosen: Thresholds | None, **server: An
 
 
 def _demo_inputs(
-    given: dict[str, Any], demo_dir: Path | None, policy: Any, base_demos: Any, chosen: Any
+    given: dict[str, Any],
+    demo_dir: Path | None,
+    policy: Path | None,
+    base_demos: Path | None,
+    chosen: Thresholds | None,
 ) -> Thresholds | None:
     """``--demo``: the built-in inputs (built once, cached) go into ``given``; returns the
     thresholds read from the built-in thresholds file.

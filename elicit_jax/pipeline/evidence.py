@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import dumps, read_header, read_json
+from elicit_jax.artifact import dumps, read_artifact, read_header
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
 
@@ -317,11 +317,8 @@ def read_raw(folder: str | Path, data_kinds: Sequence[str]) -> tuple[dict[str, A
                 "results cannot be rebuilt; re-run the study)",
                 folder,
             )
-    header = read_json(folder / DATA_FILE)
-    if header.get("kind") not in data_kinds:
-        raise ElicitError(f"{DATA_FILE} is a '{header.get('kind')}' artifact", folder)
-    if read_header(folder / ROLLOUTS_FILE).get("kind") != ROLLOUTS_KIND:
-        raise ElicitError(f"{ROLLOUTS_FILE} is not a study rollout table", folder)
+    header = read_artifact(folder / DATA_FILE, tuple(data_kinds), 1)
+    read_artifact(folder / ROLLOUTS_FILE, ROLLOUTS_KIND, 1, what="a study rollout table")
     return header, pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
 
 

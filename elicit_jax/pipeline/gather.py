@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from elicit_jax.artifact import read_json
+from elicit_jax.artifact import read_artifact
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import (
@@ -39,10 +39,7 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / MANIFEST
     if not path.exists():
         raise ElicitError(f"not a pipeline run directory (no {MANIFEST})", run_dir)
-    data = read_json(path)
-    if data.get("kind") != MANIFEST_KIND:
-        raise ElicitError(f"is a '{data.get('kind')}' artifact, expected a pipeline run", path)
-    return data
+    return read_artifact(path, MANIFEST_KIND, 1, what="a pipeline run")
 
 
 def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:

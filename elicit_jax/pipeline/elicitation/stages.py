@@ -135,7 +135,7 @@ def filter_session_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.pipeline.stages import DEMOS_FILE, SCORES_FILE
     from elicit_jax.pipeline.stages_compat import write_filter_output
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
     thresholds = read_thresholds(ctx.inputs["thresholds"])
     source = ctx.inputs["session"] / DEMOS_FILE
@@ -148,7 +148,7 @@ def filter_session_stage(ctx: StageContext) -> None:
         if source.exists():
             policy = load_policy(
                 ctx.inputs["policy"], score_cfg["checkpoint"], seed=score_cfg["policy_seed"]
-            )
+            ).policy
             score_file(
                 policy,
                 source,
