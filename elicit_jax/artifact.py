@@ -187,6 +187,67 @@ def read_header(path: str | Path) -> dict[str, Any]:
         raise ElicitError(f"malformed elicit-jax header: {e.msg}", path) from e
 
 
+def read_artifact(
+    path: str | Path,
+    kind: str | tuple[str, ...],
+    schema_version: int,
+    *,
+    what: str | None = None,
+) -> dict[str, Any]:
+    """The header of an artifact that must be of ``kind`` (one of them, for a tuple) and of a
+    schema version this elicit-jax reads (``1 .. schema_version``): every artifact reader
+    starts here. A header without a ``schema_version`` (written before versions were
+    recorded) is read as version 1.
+
+    Args:
+      path: a Parquet file, a JSON artifact or a directory with ``artifact.json``.
+      kind: the kind(s) the reader takes.
+      schema_version: the newest version of that layout this elicit-jax understands.
+      what: how the error names the expected artifact (default: the kind).
+
+    Raises:
+      ElicitError: one line naming the file: unreadable, another kind, or a missing, invalid
+        or newer schema version.
+    """
+    header = read_header(path)
+    check_artifact(header, path, kind, schema_version, what=what)
+    return header
+
+
+def check_artifact(
+    header: Mapping[str, Any],
+    path: str | Path,
+    kind: str | tuple[str, ...],
+    schema_version: int,
+    *,
+    what: str | None = None,
+) -> None:
+    """Refuse a header (read by :func:`read_artifact`, or by a reader that opens the file its
+    own way) of another kind or of a schema version this elicit-jax does not read.
+
+    Raises:
+      ElicitError: as :func:`read_artifact`.
+    """
+    kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+    got = header.get("kind") if isinstance(header, Mapping) else type(header).__name__
+    if got not in kinds:
+        expected = what or " or ".join(f"'{k}'" for k in kinds)
+        raise ElicitError(f"is a '{got}' artifact, expected {expected}", path)
+    version = header.get("schema_version", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ElicitError(
+            f"'{got}' artifact has no valid schema version ({version!r}); this elicit-jax "
+            f"reads versions 1 to {schema_version}",
+            path,
+        )
+    if version > schema_version:
+        raise ElicitError(
+            f"'{got}' schema version {version} is newer than this elicit-jax understands "
+            f"({schema_version}); upgrade elicit-jax",
+            path,
+        )
+
+
 def is_up_to_date(
     output: str | Path, config: Mapping[str, Any], inputs: Mapping[str, str | Path]
 ) -> bool:

@@ -676,8 +676,8 @@ def square_nut_session_inputs(d: Path) -> SessionInputs:
     from elicit_jax.compat.score import score_demos
     from elicit_jax.compat.threshold_fit import fit_thresholds
     from elicit_jax.data.demos import concat_demos, from_episodes, read_demos
-    from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.policy.train import train_policy
     from elicit_jax.sim.collect import CollectConfig, collect, collect_episodes
     from elicit_jax.sim.env import make_task
@@ -698,7 +698,7 @@ def square_nut_session_inputs(d: Path) -> SessionInputs:
         parts.append(from_episodes(r.episodes, operators=op, obs_fields=task.obs_fields))
     contrast = concat_demos(parts)
     scores = score_demos(
-        load_policy(d / "base_run"), contrast, ScoreConfig.from_preset("square-nut")
+        load_policy(d / "base_run").policy, contrast, ScoreConfig.from_preset("square-nut")
     )
     labels = {e: op == "same-style" for e, op in contrast.episode_operator().items()}
     fit = fit_thresholds(scores["likelihood"], scores["novelty"], contrast.episode, labels)

@@ -137,9 +137,9 @@ def test_many_dropout_passes_score_in_smaller_chunks_with_the_same_scores(run, m
     from elicit_jax.compat.measures import ScoreConfig
     from elicit_jax.compat.score import score_demos
     from elicit_jax.data.demos import read_demos
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
-    policy = load_policy(run / "run")
+    policy = load_policy(run / "run").policy
     demos = read_demos(run / "demos.parquet")
     config = ScoreConfig.from_preset("square-nut", dropout_samples=8, chunk_size=64)
     wide = score_demos(policy, demos, config)

@@ -45,14 +45,14 @@ def noisy_rollouts(policy, m=120, t=4, noise=0.2):
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.policy.train import train_policy
 
     demos = planted_demos()
     d = tmp_path_factory.mktemp("cupid")
     cfg = tiny_train_config(hidden=(16,), epochs=60, checkpoint_every=60, dropout=0.0)
     train_policy(demos, cfg, d / "run", quiet=True)
-    return demos, load_policy(d / "run", "final"), d
+    return demos, load_policy(d / "run", "final").policy, d
 
 
 def test_planted_harmful_demo_ranks_worst(trained):

@@ -143,7 +143,7 @@ def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, t
     from elicit_jax.compat.score import score_demos
     from elicit_jax.data.demos import CORE_COLUMNS, read_demos
     from elicit_jax.elicit.replay import replay_episode
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.env import make_task
 
     session, rec = _run(nut, tmp_path / "op1", "scripted:same-style")
@@ -159,7 +159,7 @@ def test_informed_same_style_is_accepted_into_a_collect_schema_demos_file(nut, t
     assert {"init_seed", "session_episode", "source_step"} <= set(demos.extra)
     assert set(CORE_COLUMNS) and demos.success.all()
     score_demos(
-        load_policy(nut.policy), demos, ScoreConfig.from_preset("square-nut")
+        load_policy(nut.policy).policy, demos, ScoreConfig.from_preset("square-nut")
     )  # score takes it as is
     store = SessionStore(tmp_path / "op1")
     ep = store.read_episode(int(demos.extra["session_episode"][0]))

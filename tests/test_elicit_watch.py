@@ -26,8 +26,8 @@ def _episode(rng, t=40, style="base", dims=(23, 7)):
 
 
 def _base_and_policy(d, dims):
-    from elicit_jax.policy.checkpoint import load_policy
     from elicit_jax.policy.config import TrainConfig
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.policy.train import train_policy
 
     rng = np.random.default_rng(0)
@@ -39,7 +39,7 @@ def _base_and_policy(d, dims):
     write_demos(d / "base.parquet", base)
     cfg = TrainConfig(ensemble_size=3, hidden=(32, 32), epochs=1, checkpoint_every=1, seeds=(0,))
     train_policy(base, cfg, d / "run", quiet=True)
-    POLICIES[dims] = load_policy(d / "run")
+    POLICIES[dims] = load_policy(d / "run").policy
 
 
 @pytest.fixture(scope="module")

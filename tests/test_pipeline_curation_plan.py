@@ -7,7 +7,7 @@ from test_pipeline_spec import MINI
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.plan import build_graph
 from elicit_jax.pipeline.spec import load_spec, parse_spec
-from elicit_jax.pipeline.stages import resolve_config
+from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
 METHODS = ["base", "naive", "filtered", "cupid", "cupid-matched", "quality", "quality-matched"]
 
@@ -22,7 +22,9 @@ def _spec(**over):
 
 
 def test_tiny_pipeline_plans_cupid_and_quality():
-    g = build_graph(_spec(cupid={"proj_dim": 64}, quality={"z_threshold": 3.0}), resolve_config)
+    g = build_graph(
+        _spec(cupid={"proj_dim": 64}, quality={"z_threshold": 3.0}), STAGE_KINDS.resolve
+    )
     q = g["quality/reach-pillar/mild"]  # per task: the flags need no policy
     assert q.kind == "quality" and dict(q.inputs) == {"demos1": "collect/reach-pillar/new/mild"}
     assert q.config["quality"]["z_threshold"] == 3.0
@@ -60,13 +62,13 @@ def test_cupid_needs_naive_and_known_options():
     with pytest.raises(ElicitError, match=r"cupid rolls out.*add 'naive'"):
         parse_spec(no_naive)
     with pytest.raises(ElicitError, match=r"\[cupid\] unknown option\(s\) proj"):
-        build_graph(_spec(cupid={"proj": 64}), resolve_config)
+        build_graph(_spec(cupid={"proj": 64}), STAGE_KINDS.resolve)
     with pytest.raises(ElicitError, match=r"\[quality\] unknown option\(s\) z"):
-        build_graph(_spec(quality={"z": 3}), resolve_config)
+        build_graph(_spec(quality={"z": 3}), STAGE_KINDS.resolve)
 
 
 def test_shipped_filtering_study_includes_them():
-    g = build_graph(load_spec("filtering", "cpu"), resolve_config)
+    g = build_graph(load_spec("filtering", "cpu"), STAGE_KINDS.resolve)
     kinds = {s.kind for s in g.order}
     assert {"cupid", "quality"} <= kinds
     assert any(s.id.startswith("filter/square-nut/mlp/cupid-matched/") for s in g.order)

@@ -15,13 +15,13 @@ import pytest
 from rich.console import Console
 
 from elicit_jax.artifact import read_header
-from elicit_jax.pipeline.gather import gather
 from elicit_jax.pipeline.run import (
     PipelineRunConfig,
     pipeline_status,
     print_results,
     run_pipeline,
 )
+from elicit_jax.pipeline.study_kinds import STUDY_KINDS
 
 TINY = """# tiny end-to-end pipeline for the tests
 [pipeline]
@@ -85,10 +85,10 @@ def _check_heldout_evaluation(spec: Path, out: Path, cell: str) -> None:
     from elicit_jax.pipeline.evidence import choose_checkpoint
     from elicit_jax.pipeline.plan import build_graph
     from elicit_jax.pipeline.spec import load_spec
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
     from elicit_jax.sim.evaluate import EvalConfig, evaluate_refs, expand_policies
 
-    stage = build_graph(load_spec(spec), resolve_config)[f"evaluate/reach-pillar/mlp/{cell}"]
+    stage = build_graph(load_spec(spec), STAGE_KINDS.resolve)[f"evaluate/reach-pillar/mlp/{cell}"]
     raw = dict(stage.config["evaluate"])
     cfg = EvalConfig(**{**raw, "checkpoints": tuple(raw["checkpoints"])})
     frame = pd.read_parquet(out / stage.output)
@@ -110,13 +110,14 @@ def test_tiny_pipeline_runs_skips_and_reruns_only_what_changed(tmp_path):
     spec, out, first = first_run(tmp_path, TINY)
     assert len(first.result.ran) == 16
     # the report: a result for every trained policy, the fit, the filter, the map
-    data = gather(out)
+    data = STUDY_KINDS["filtering"].report_data(out)
     assert {(r.method, r.operator) for r in data.results} == {
         ("base", None),
         ("naive", "conflict-right"),
         ("filtered", "conflict-right"),
     }
     assert all(r.n_rollouts == 4 and 0.0 <= r.success <= 1.0 for r in data.results)
+    assert sum(data.provenance["result_commits"].values()) == 3  # one per finished evaluation
     (fit,) = data.thresholds
     assert "conflict-over" in fit.incompatible and "held-out" in fit.compatible
     assert data.filters[0].pairs_total == pytest.approx(
@@ -205,7 +206,7 @@ def test_tiny_pipeline_with_curation_baselines_intervals_and_lambda_study(tmp_pa
     from elicit_jax.curation.episodes import read_episode_scores
 
     spec, out, first = first_run(tmp_path, CURATION)
-    data = gather(out)
+    data = STUDY_KINDS["filtering"].report_data(out)
     methods = {
         *("base", "naive", "filtered", "filtered-valley"),
         *("deminf", "deminf-matched", "demo-score", "demo-score-matched"),
@@ -278,7 +279,7 @@ rollouts = 3
 @pytest.mark.slow
 def test_tiny_models_study_trains_and_evaluates_mdn_and_lstm(tmp_path):
     _, out, outcome = first_run(tmp_path, MODELS)
-    data = gather(out)
+    data = STUDY_KINDS["filtering"].report_data(out)
     assert {(r.model, r.method, r.seed) for r in data.results} == {
         (m, k, s) for m in ("mdn", "lstm") for k in ("base", "naive") for s in (0, 1)
     }
@@ -300,7 +301,7 @@ def test_tiny_pipeline_over_two_collections(tmp_path):
     collections = '\n[collections]\nseeds = [0, 1]\nmethods = ["base", "naive"]\n'
     spec, out, first = first_run(tmp_path, TINY + collections)
     assert len(first.result.ran) == 16 + 6
-    data = gather(out)
+    data = STUDY_KINDS["filtering"].report_data(out)
     assert {(r.collection, r.method) for r in data.results} == {
         (0, "base"), (0, "naive"), (0, "filtered"), (1, "base"), (1, "naive"),
     }  # fmt: skip

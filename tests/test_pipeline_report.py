@@ -5,11 +5,14 @@ from __future__ import annotations
 import base64
 import hashlib
 import re
+from pathlib import Path
 
 import pytest
 
 from elicit_jax.artifact import read_header
-from elicit_jax.pipeline.report import CPU_NOTE, render_html, render_markdown, write_report
+from elicit_jax.pipeline import report_folder
+from elicit_jax.pipeline.report import LAYOUT
+from elicit_jax.pipeline.report_folder import CPU_NOTE, render_report
 from elicit_jax.pipeline.tables import (
     FilterRow,
     LengthRow,
@@ -20,6 +23,20 @@ from elicit_jax.pipeline.tables import (
     models_table,
     results_tables,
 )
+
+
+def render_markdown(d: ReportData) -> str:
+    """The filtering report's Markdown (its figures are files of the run: no folder read)."""
+    return render_report(LAYOUT, d, Path())[0]
+
+
+def render_html(d: ReportData) -> str:
+    return render_report(LAYOUT, d, Path())[1]
+
+
+def write_report(d: ReportData, out: Path) -> tuple[Path, Path]:
+    return report_folder.write_report(LAYOUT, d, out)
+
 
 # The smallest valid PNG (1×1, transparent).
 PNG = base64.b64decode(
@@ -104,7 +121,7 @@ def test_results_table_has_paper_layout(tmp_path):
 
 def test_markdown_and_html_carry_every_section(tmp_path):
     d = data(tmp_path)
-    md = render_markdown(d, map_dir="maps/")
+    md = render_markdown(d)
     for text in (
         CPU_NOTE,
         "| same-style | 54.0 (3.5) | 52.0 (2.0) |",

@@ -43,6 +43,8 @@ incompatible_operator = "c"
 base_episodes = 50
 new_episodes = 50
 """
+SMALL = "[task.sizes.small]\nbase_episodes = 4\nnew_episodes = 2\n"
+"""The tiny sizes the tests add to ``test_pipeline_e2e.TINY``'s task."""
 
 
 def _spec(head: str = "", text: str | None = None):
@@ -77,6 +79,19 @@ def test_paper_sizes_collect_the_papers_counts_per_stage():
     }
     report = list(graph)[-1]
     assert report.config["sizes"] == {"paper": {"round-nut": [30, 10], "square-nut": [50, 50]}}
+
+
+def test_the_registry_keeps_the_sizes_in_every_resolved_config():
+    """The stage kinds' config resolution keeps ``sizes`` beside the library's full config."""
+    from test_pipeline_e2e import TINY
+
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
+
+    text = TINY.replace("[train]", SMALL + "\n[train]")
+    spec = dataclasses.replace(_spec(text=text), sizes=("small",))
+    graph = build_graph(spec, STAGE_KINDS.resolve)
+    assert {s.config["sizes"] for s in graph if s.kind != "report"} == {"small"}
+    assert next(s for s in graph if s.kind == "collect").config["collect"]["episodes"] == 4
 
 
 def test_default_sizes_keep_the_stages_of_a_run_without_sizes():
@@ -249,7 +264,7 @@ def read_back(frame, folder):
 
     write_rollouts_table(folder / "rollouts.parquet", frame, "mini", "cpu")
     (folder / DATA_FILE).write_text(json.dumps({"kind": DATA_KIND}))
-    return read_raw(folder)[1]
+    return read_raw(folder, (DATA_KIND,))[1]
 
 
 def test_tiny_run_at_two_sizes_reports_them_side_by_side_and_rebuilds(tmp_path):
@@ -263,11 +278,10 @@ def test_tiny_run_at_two_sizes_reports_them_side_by_side_and_rebuilds(tmp_path):
 
     from elicit_jax.pipeline.gather import gather
     from elicit_jax.pipeline.run import PipelineRunConfig, rebuild_report, run_pipeline
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
     text = TINY.replace('methods = ["base", "naive", "filtered"]', 'methods = ["base", "naive"]')
-    text = text.replace(
-        "[train]", "[task.sizes.small]\nbase_episodes = 4\nnew_episodes = 2\n\n[train]"
-    )
+    text = text.replace("[train]", SMALL + "\n[train]")
     spec, out = tmp_path / "tiny.toml", tmp_path / "run"
     spec.write_text(text)
 
@@ -280,7 +294,7 @@ def test_tiny_run_at_two_sizes_reports_them_side_by_side_and_rebuilds(tmp_path):
     assert all("/sizes-small/" in s for s in first.result.ran if s != "report")
     both = run("default,small")
     assert not any("/sizes-small/" in s for s in both.result.ran)  # cached from the first run
-    data = gather(out)
+    data = gather(out, STAGE_KINDS)
     assert {(r.task, r.method, r.sizes) for r in data.results} == {
         ("reach-pillar", "base", "default"), ("reach-pillar", "naive", "default"),
         ("reach-pillar (small sizes)", "base", "small"),

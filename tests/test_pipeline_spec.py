@@ -52,15 +52,15 @@ def test_shipped_definitions_parse_under_both_profiles():
 
 
 def test_shipped_definitions_name_real_operators_and_valid_options():
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
     for name in _filtering_names():
-        graph = build_graph(load_spec(name, "cpu"), resolve_config)
+        graph = build_graph(load_spec(name, "cpu"), STAGE_KINDS.resolve)
         assert graph["report"].config["pipeline"] == name
 
 
 def test_unknown_operator_or_option_fails_before_running():
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
     bad_op = {
         **MINI,
@@ -69,7 +69,7 @@ def test_unknown_operator_or_option_fails_before_running():
         ],
     }
     with pytest.raises(ElicitError, match="has no operator 'nobody'"):
-        build_graph(parse_spec(bad_op), resolve_config)
+        build_graph(parse_spec(bad_op), STAGE_KINDS.resolve)
     bad_opt = {
         **MINI,
         "task": [
@@ -78,7 +78,7 @@ def test_unknown_operator_or_option_fails_before_running():
         "train": {"epochz": 3},
     }
     with pytest.raises(ElicitError, match=r"\[train\] unknown option\(s\) epochz"):
-        build_graph(parse_spec(bad_opt), resolve_config)
+        build_graph(parse_spec(bad_opt), STAGE_KINDS.resolve)
 
 
 def test_profile_overrides_are_merged_over_sections():
@@ -257,7 +257,7 @@ def test_curation_stages_and_their_inputs():
 
 
 def test_resolved_curate_config_takes_rate_level_and_deminf_cut():
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
     spec = parse_spec(
         {
@@ -270,7 +270,7 @@ def test_resolved_curate_config_takes_rate_level_and_deminf_cut():
             ],
         }
     )
-    g = build_graph(spec, resolve_config)
+    g = build_graph(spec, STAGE_KINDS.resolve)
     cfg = g["filter/reach-pillar/mlp/deminf-matched/mild"].config
     assert (cfg["rate"], cfg["level"], cfg["drop_fraction"]) == ("m", "episode", 0.3)
     assert g["deminf/reach-pillar/mild"].config["deminf"]["ks"] == [4]

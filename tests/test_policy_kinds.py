@@ -18,7 +18,7 @@ import pytest
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import Policy, init_policy
-from elicit_jax.policy.checkpoint import SPEC_KEYS, load_checkpoint, load_policy
+from elicit_jax.policy.checkpoint import SPEC_KEYS
 from elicit_jax.policy.config import PIPELINE_PROFILES, PROFILES, TrainConfig
 from elicit_jax.policy.kinds import (
     MODEL_KINDS,
@@ -29,6 +29,7 @@ from elicit_jax.policy.kinds import (
     make_module,
     model_kind,
 )
+from elicit_jax.policy.loaded import load_policy
 from tests.fixtures_data import tiny_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -147,7 +148,7 @@ def test_one_profile_table():
 
 def test_a_checkpoint_is_read_once_into_a_loaded_policy(tmp_path):
     run = tiny_run(tmp_path, seeds=(3,)) / "run"
-    loaded = load_checkpoint(run)
+    loaded = load_policy(run)
     assert loaded.seed == 3 and loaded.kind is model_kind("mlp")
     assert loaded.seed_dir == run / "seed3" and loaded.source == str(run)
     # the retraining config: the base run's own, restricted to the loaded seed
@@ -155,7 +156,7 @@ def test_a_checkpoint_is_read_once_into_a_loaded_policy(tmp_path):
     assert loaded.train_config() == dataclasses.replace(
         TrainConfig.from_dict(header["config"]), seeds=(3,)
     )
-    same = load_policy(run / "seed3")
+    same = load_policy(run / "seed3").policy
     for a, b in zip(jax.tree.leaves(loaded.policy), jax.tree.leaves(same), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     bare = dataclasses.replace(loaded, config={})

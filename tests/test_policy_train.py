@@ -16,9 +16,10 @@ from elicit_jax.artifact import read_header
 from elicit_jax.data.demos import fields_from_sizes, from_episodes
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.base import init_policy
-from elicit_jax.policy.checkpoint import check_compatible, list_checkpoints, load_policy
+from elicit_jax.policy.checkpoint import check_compatible, list_checkpoints
 from elicit_jax.policy.config import TrainConfig
 from elicit_jax.policy.dataset import prepare
+from elicit_jax.policy.loaded import load_policy
 from elicit_jax.policy.train import train_policy, train_states
 
 OBS, ACT = 4, 2
@@ -86,7 +87,7 @@ def _val_mse(policy, demos, run: Path, seed: int = 0) -> float:
 @pytest.mark.parametrize("model", ["mlp", "mdn", "lstm"])
 def test_every_model_learns_the_mapping(runs, demos, model):
     run, config = runs[model]
-    policy = load_policy(run / "seed0", "best")
+    policy = load_policy(run / "seed0", "best").policy
     untrained = init_policy(
         jax.random.key(0),
         kind=model,
@@ -122,8 +123,8 @@ def test_loss_curve_and_header(runs):
 
 def test_members_and_seeds_differ(runs, demos):
     run, _ = runs["mlp"]
-    p0 = load_policy(run, "final", seed=0)
-    p1 = load_policy(run, "final", seed=1)
+    p0 = load_policy(run, "final", seed=0).policy
+    p1 = load_policy(run, "final", seed=1).policy
     obs = jnp.asarray(demos.obs[:50])
     m0, m1 = np.asarray(p0.members(obs)), np.asarray(p1.members(obs))
     assert m0.shape == (3, 50, ACT)
@@ -149,7 +150,7 @@ def test_save_load_gives_identical_predictions(runs, demos):
     cfg = dataclasses.replace(config, seeds=(0, 1))
     data = prepare(demos, cfg.val_fraction, 1)
     states, _, _ = train_states(cfg, data, OBS, ACT, cfg.seeds)
-    loaded = load_policy(run, "final", seed=1)
+    loaded = load_policy(run, "final", seed=1).policy
     in_memory = loaded.replace(params=jax.tree.map(lambda x: x[1], states.params))
     obs = jnp.asarray(demos.obs)
     np.testing.assert_array_equal(loaded.members(obs), in_memory.members(obs))
@@ -157,7 +158,7 @@ def test_save_load_gives_identical_predictions(runs, demos):
 
 def test_mismatched_data_and_missing_checkpoints_fail_clearly(runs, tmp_path):
     run, _ = runs["mlp"]
-    policy = load_policy(run / "seed0")
+    policy = load_policy(run / "seed0").policy
     other = _demos(n_episodes=2, obs_dim=OBS + 1)
     with pytest.raises(ElicitError, match=r"obs_dim=5.*obs_dim=4"):
         check_compatible(policy, other, "other.parquet")
@@ -171,7 +172,7 @@ def test_mismatched_data_and_missing_checkpoints_fail_clearly(runs, tmp_path):
 
 
 def test_lstm_act_with_carried_state_matches_members(runs, demos):
-    policy = load_policy(runs["lstm"][0] / "seed0")
+    policy = load_policy(runs["lstm"][0] / "seed0").policy
     assert policy.reset_every == 5
     obs = jnp.asarray(demos.obs[:12])  # 12 steps: the state is reset at steps 0, 5 and 10
     seq = np.asarray(jnp.mean(policy.members(obs), axis=0))
@@ -184,12 +185,12 @@ def test_lstm_act_with_carried_state_matches_members(runs, demos):
 
 
 def test_mdn_spread(runs, demos):
-    policy = load_policy(runs["mdn"][0] / "seed0")
+    policy = load_policy(runs["mdn"][0] / "seed0").policy
     obs = jnp.asarray(demos.obs[:10])
     spread = np.asarray(policy.spread(obs))
     assert spread.shape == (10, ACT) and np.all(spread >= 0)
     assert policy.members(obs).shape == (1, 10, ACT)
-    assert load_policy(runs["mlp"][0] / "seed0").spread(obs) is None
+    assert load_policy(runs["mlp"][0] / "seed0").policy.spread(obs) is None
 
 
 def test_bootstrap_gives_each_member_its_own_resample(demos):

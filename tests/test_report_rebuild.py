@@ -26,7 +26,7 @@ from elicit_jax.pipeline.evidence import (
 from elicit_jax.pipeline.plan import build_graph
 from elicit_jax.pipeline.run import rebuild_report, render_run_report, write_manifest
 from elicit_jax.pipeline.spec import load_spec
-from elicit_jax.pipeline.stages import resolve_config
+from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 from elicit_jax.pipeline.tables import selection_label
 
 SPEC = """# a tiny study: two methods, two training seeds, held-out checkpoint selection (default)
@@ -138,7 +138,7 @@ def _tiny_run(tmp_path: Path, text: str = SPEC) -> Path:
     spec_path = tmp_path / "tiny.toml"
     spec_path.write_text(text)
     spec = load_spec(spec_path)
-    graph = build_graph(spec, resolve_config)
+    graph = build_graph(spec, STAGE_KINDS.resolve)
     run = tmp_path / "run"
     run.mkdir()
     write_manifest(run, spec, graph)
@@ -325,9 +325,10 @@ def _study(tmp_path: Path):
 
 def test_an_elicitation_study_report_rebuilds_byte_for_byte(tmp_path):
     from elicit_jax.pipeline.elicitation.evidence import round_trip_study
-    from elicit_jax.pipeline.elicitation.report import write_study_report
+    from elicit_jax.pipeline.elicitation.report import LAYOUT
+    from elicit_jax.pipeline.report_folder import write_report
 
-    md, _ = write_study_report(round_trip_study(_study(tmp_path)), tmp_path / "study")
+    md, _ = write_report(LAYOUT, round_trip_study(_study(tmp_path)), tmp_path / "study")
     folder = md.parent
     assert "Checkpoint selection: held-out" in md.read_text()
     assert "`elicit-jax report --rebuild <this folder>`" in md.read_text()
@@ -395,7 +396,7 @@ def test_a_report_names_no_folder_of_the_machine_that_ran_the_study(tmp_path):
     text = SPEC.replace('methods = ["base", "naive"]', 'methods = ["base", "naive", "filtered"]')
     run = _tiny_run(tmp_path, text)  # an absolute run directory, as a Ray worker records it
     spec = load_spec(tmp_path / "tiny.toml")
-    fit = next(s for s in build_graph(spec, resolve_config) if s.kind == "fit-thresholds")
+    fit = next(s for s in build_graph(spec, STAGE_KINDS.resolve) if s.kind == "fit-thresholds")
     seed_dir = run / "policies" / "reach-pillar" / "mlp" / "base" / "seed0"
     write_json(
         run / fit.output,

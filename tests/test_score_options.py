@@ -181,9 +181,9 @@ def test_thresholds_follow_the_task(run):
 
 
 def test_checkpoint_records_action_std_and_std_scoring_runs(run):
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
-    policy = load_policy(run / "run")
+    policy = load_policy(run / "run").policy
     assert policy.action_std is not None and policy.action_std.shape == (2,)
     r, out = _score(run, "my-task.parquet", "--action-scale", "std", "--lambda", "1", "--eta", "1")
     assert r.exit_code == 0, r.output

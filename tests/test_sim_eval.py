@@ -135,13 +135,13 @@ def test_summarize_by_hand():
 
 def test_mjx_and_c_backends_agree_with_the_policy_in_the_loop(work):
     """Same policy, same initial states, 6 control steps: same final observations."""
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.evaluate import rollout_mujoco_policy
     from elicit_jax.sim.rollout_mjx import rollout_mjx
 
     task = make_task("reach-pillar")
-    policy = load_policy(work / "runs", "best", seed=0)
+    policy = load_policy(work / "runs", "best", seed=0).policy
     seeds = np.arange(7, 11)
     m = rollout_mjx(task, policy, seeds, horizon=6)
     c = rollout_mujoco_policy(task, policy, seeds, horizon=6)
@@ -165,13 +165,13 @@ def test_mjx_and_c_success_rates_statistically_consistent(work):
     import jax
 
     from elicit_jax.policy.base import init_policy
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.compare import compare_backends, mcnemar_exact
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.evaluate import rollout_mujoco_policy
 
     task = make_task("reach-pillar")
-    policy = load_policy(work / "runs", "best", seed=0)
+    policy = load_policy(work / "runs", "best", seed=0).policy
     seeds = eval_seeds(EvalConfig(rollouts=24, seed=1))
     test, m, c = compare_backends(task, policy, seeds)
     assert test.n == 24 and test.consistent(0.01), test
@@ -203,13 +203,13 @@ def test_evaluate_errors(work):
 
 
 def test_rollouts_record_the_states_the_policy_acted_in(work):
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.evaluate import rollout_mujoco_policy
     from elicit_jax.sim.rollout_mujoco import BatchSim
 
     task = make_task("reach-pillar")
-    policy = load_policy(work / "runs", 100, seed=0)
+    policy = load_policy(work / "runs", 100, seed=0).policy
     seeds = eval_seeds(EvalConfig(rollouts=6))
     out = rollout_mujoco_policy(task, policy, seeds, 40, record_states=True)
     assert out["states"].shape == (6, 40, 23) and out["state_mask"].shape == (6, 40)

@@ -100,10 +100,10 @@ def test_scripted_base_operator_succeeds(work):
 
 def test_paired_initial_states_identical_across_policies_and_workers(work, pool):
     from elicit_jax.policy.base import jitted_act
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.rollout_robosuite import rollout_policy
 
-    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final").policy
     spec = pool.spec
     seeds = np.array([11, 12, 13])
     a = rollout_policy(spec, jitted_act(), policy, seeds, 3, 2, pool)
@@ -117,10 +117,10 @@ def test_recorded_states_and_seeded_noise_do_not_depend_on_the_worker(work, pool
     """What CUPID and Demo-SCORE read on robosuite: every state the policy acted in and the
     action taken, the exploration noise drawn per rollout seed (the same whichever worker)."""
     from elicit_jax.policy.base import jitted_act
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.rollout_robosuite import rollout_policy
 
-    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final").policy
     seeds = np.array([21, 22, 23])
     a = rollout_policy(pool.spec, jitted_act(), policy, seeds, 3, 2, pool, True, 0.2)
     b = rollout_policy(pool.spec, jitted_act(), policy, seeds[::-1], 3, 2, pool, True, 0.2)
@@ -311,10 +311,10 @@ def test_evaluation_loop_gives_the_same_rollouts_with_and_without_the_speed_up(w
     robosuite builds its environments (``fast=False``) and the shared, sped-up pool record
     the same states, actions, successes and lengths."""
     from elicit_jax.policy.base import jitted_act
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.rollout_robosuite import SHARED_HORIZON, EnvPool, rollout_policy
 
-    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final")
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final").policy
     seeds = np.array([31, 32, 33])
     with EnvPool(pool.spec, 2, SHARED_HORIZON, fast=False) as plain:
         old = rollout_policy(pool.spec, jitted_act(), policy, seeds, 6, 2, plain, True)

@@ -148,11 +148,11 @@ def test_definition_errors_name_the_problem(edit, words):
 
 
 def test_unknown_session_option_is_reported_before_anything_runs():
-    from elicit_jax.pipeline.elicitation.stages import resolve_study_config
+    from elicit_jax.pipeline.study_kinds import STAGE_KINDS
 
     spec = _study(TINY.replace("demos = 2", "demos = 2\nspeed = 3"))
     with pytest.raises(ElicitError, match=r"\[session\] unknown session config key.*speed"):
-        build_study_graph(spec, resolve_study_config)
+        build_study_graph(spec, STAGE_KINDS.resolve)
 
 
 def _result(method, person, seed, success):
@@ -236,7 +236,7 @@ def test_table2_and_ablation_by_hand():
 @pytest.mark.slow
 def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
     from elicit_jax.elicit.store import SessionStore
-    from elicit_jax.pipeline.elicitation.gather import gather_study
+    from elicit_jax.pipeline.study_kinds import STUDY_KINDS
 
     spec = tmp_path / "tiny.toml"
     spec.write_text(TINY)
@@ -249,7 +249,7 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
 
     first, text = run()
     assert first.result.ids("failed") == [] and first.result.skipped == []
-    data = gather_study(out)
+    data = STUDY_KINDS["elicitation"].report_data(out)
     conds = {(r.method, r.operator) for r in data.results}
     assert conds == {
         ("base", None),
@@ -318,7 +318,8 @@ def test_tiny_study_runs_reruns_nothing_and_resumes_a_deleted_session(tmp_path):
         "train/reach-pillar/mlp/feedback/p0",
     ]
     assert np.isclose(
-        gather_study(out).sessions[0].rows[0]["length"], data.sessions[0].rows[0]["length"]
+        STUDY_KINDS["elicitation"].report_data(out).sessions[0].rows[0]["length"],
+        data.sessions[0].rows[0]["length"],
     )
     # `elicit-jax report RUN_DIR` rewrites a study's report
     from typer.testing import CliRunner

@@ -112,7 +112,7 @@ def test_best_epoch_last_is_reported():
 
 def test_original_code_checkpoint_round_trip(demos_file, tmp_path):
     from elicit_jax.data.demos import read_demos
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.policy.train import train_policy
 
     cfg = TrainConfig.from_profile(
@@ -120,7 +120,7 @@ def test_original_code_checkpoint_round_trip(demos_file, tmp_path):
         progress_every=1, seeds=(0,), batch_size=32,
     )  # fmt: skip
     train_policy(read_demos(demos_file), cfg, tmp_path / "run", quiet=True)
-    p = load_policy(tmp_path / "run")
+    p = load_policy(tmp_path / "run").policy
     assert p.layer_norm_eps == 1e-5 and p.dropout_last
     assert p.module.layer_norm_eps == 1e-5
 
@@ -157,7 +157,7 @@ def test_cpu_profile_mdn_learns_as_well_as_the_mlp(tmp_path):
     held-out action error on a task with a constant and a ±1 dim; with the paper's lr 1e-4,
     a 1e-4 std floor and 100 epochs it did not (~5x the MLP's error on square-nut)."""
     from elicit_jax.data.demos import read_demos
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.policy.train import train_policy
 
     write_demos(tmp_path / "d.parquet", from_episodes(_saturated_task(0, 12), operators="op"))
@@ -167,7 +167,7 @@ def test_cpu_profile_mdn_learns_as_well_as_the_mlp(tmp_path):
     for model in ("mlp", "mdn"):
         cfg = TrainConfig.from_profile("cpu", model=model, hidden=(32, 32), batch_size=100)
         train_policy(demos, cfg, tmp_path / model, quiet=True)
-        policy = load_policy(tmp_path / model)
+        policy = load_policy(tmp_path / model).policy
         assert policy.mdn_min_std == (0.01 if model == "mdn" else models.MDN_MIN_STD)
         pred = policy.members(jnp.asarray(test.obs)).mean(0)
         errors[model] = np.mean((np.asarray(pred) - test.action) ** 2, axis=0)

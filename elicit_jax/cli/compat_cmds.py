@@ -28,13 +28,11 @@ def _scores_scale(scores: Path) -> str:
 
 def _applied(scores: Path, given: Thresholds | None, force: bool) -> tuple[Thresholds, list[str]]:
     """:func:`~elicit_jax.compat.threshold_source.applied_thresholds` on a scores file."""
-    from elicit_jax.artifact import read_header
-    from elicit_jax.compat.score import SCORES_KIND
+    from elicit_jax.artifact import read_artifact
+    from elicit_jax.compat.score import SCHEMA_VERSION, SCORES_KIND
     from elicit_jax.compat.threshold_source import applied_thresholds
 
-    header = read_header(scores)
-    if header.get("kind") != SCORES_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", scores)
+    header = read_artifact(scores, SCORES_KIND, SCHEMA_VERSION, what="scores")
     return applied_thresholds(header, scores, given, force)
 
 

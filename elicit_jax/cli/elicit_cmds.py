@@ -79,6 +79,9 @@ def elicit_cmd(
             raise ElicitError(f"missing {', '.join(missing)} (or --resume an existing session)")
         config_dict = given
     config = SessionConfig.from_dict(config_dict, thresholds=chosen)
+    so.thresholds_fit_policy(
+        config.thresholds, config.policy, config.which, config.policy_seed, force
+    )
     elicit(config, out, overwrite=overwrite, resume=resume, quiet=quiet)
 
 
@@ -104,6 +107,9 @@ def watch_cmd(
     poll: float = typer.Option(1.0, "--poll", help="Seconds between scans."),
     once: bool = typer.Option(False, "--once", help="Stop when everything present is judged."),
     timeout: float = typer.Option(None, "--timeout", help="Stop after this many seconds."),
+    force: bool = typer.Option(
+        False, "--force", help="Apply thresholds fitted for another policy (with a warning)."
+    ),
     **flags: Any,
 ) -> None:
     """Give a verdict and feedback for each demonstration that lands in INBOX.
@@ -117,7 +123,11 @@ def watch_cmd(
     """
     from elicit_jax.elicit.watch import Watcher
 
-    watcher = Watcher(_watch_config(ctx.params), echo=typer.echo)
+    config = _watch_config(ctx.params)
+    so.thresholds_fit_policy(
+        config.thresholds, config.policy, config.which, config.policy_seed, force
+    )
+    watcher = Watcher(config, echo=typer.echo)
     typer.echo(f"watching {inbox} (pages and log in {watcher.out}; Ctrl-C stops)")
     n = watcher.run()
     typer.echo(f"judged {n} demonstrations")

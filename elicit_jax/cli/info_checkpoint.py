@@ -8,6 +8,7 @@ from typing import Any
 from elicit_jax.policy.checkpoint import (
     CHECKPOINT_KIND,
     checkpoint_problems,
+    checkpoint_spec,
     list_checkpoints,
     seed_dirs,
 )
@@ -42,6 +43,7 @@ def describe_run(path: Path, header: dict[str, Any]) -> None:
 
     from elicit_jax.artifact import read_header
 
+    checkpoint_spec(header, Path(path))  # no model kind: one line, before printing anything
     console = Console()
     console.print(f"[bold]{path}[/]: {header['kind']} (schema v{header['schema_version']})")
     console.print(f"  model: {_model_line(header)}")

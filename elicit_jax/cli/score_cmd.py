@@ -96,32 +96,27 @@ def _score_and_show(
     from rich.console import Console
 
     from elicit_jax.cli.info_compat import print_operator_table
-    from elicit_jax.compat.score_file import (
-        one_member_note,
-        policy_sha256,
-        scale_note,
-        score_file,
-    )
+    from elicit_jax.compat.score_file import one_member_note, scale_note, score_file
     from elicit_jax.compat.show import scoring_bar
     from elicit_jax.compat.threshold_source import check_policy
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
     loaded = load_policy(policy, which, seed=seed)
     chosen = config.thresholds
     if chosen is None:
         raise ElicitError("score needs thresholds: none resolved")
     typer.echo(f"thresholds: {chosen.describe()}", err=True)
-    warning = check_policy(chosen, policy_sha256(loaded), str(policy), force)
+    warning = check_policy(chosen, loaded.sha256, str(policy), force)
     if warning:
         typer.echo(warning, err=True)
-    scaled = scale_note(loaded, config).get("action_scale_note")
+    scaled = scale_note(loaded.policy, config).get("action_scale_note")
     if scaled:
         typer.echo(f"note: --action-scale std: {scaled}", err=True)
-    note = one_member_note(loaded, config)
+    note = one_member_note(loaded.policy, config)
     if note:
         Console(stderr=True).print(f"[yellow]warning:[/] {note}", soft_wrap=True)
     result = score_file(
-        loaded,
+        loaded.policy,
         demos,
         out,
         config,

@@ -80,6 +80,8 @@ def serve_cmd(
     server |= {"max_operators": max_operators, "admin_token": admin_token}
     config = _serve_config(given, chosen, allow_hosts=tuple(allow_host), **server)
     th.show_chosen(config.session.thresholds)
+    s = config.session
+    so.thresholds_fit_policy(s.thresholds, s.policy, s.which, s.policy_seed, force)
     serve(config, echo=typer.echo, summary=_print_summary)
 
 
@@ -108,7 +110,11 @@ def _serve_config(given: dict[str, Any], chosen: Thresholds | None, **server: An
 
 
 def _demo_inputs(
-    given: dict[str, Any], demo_dir: Path | None, policy: Any, base_demos: Any, chosen: Any
+    given: dict[str, Any],
+    demo_dir: Path | None,
+    policy: Path | None,
+    base_demos: Path | None,
+    chosen: Thresholds | None,
 ) -> Thresholds | None:
     """``--demo``: the built-in inputs (built once, cached) go into ``given``; returns the
     thresholds read from the built-in thresholds file.

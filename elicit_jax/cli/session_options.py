@@ -7,6 +7,7 @@ same way; unset options are ``None`` and fall back to :class:`SessionConfig`'s d
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -22,7 +23,10 @@ TASK = typer.Option(
 POLICY = typer.Option(None, "--policy", help="Base policy (run or seed directory).")
 BASE_DEMOS = typer.Option(None, "--base-demos", help="D_base (demos artifact).")
 FORCE_TASK = typer.Option(
-    False, "--force", help="Run --task although the policy or D_base records another task."
+    False,
+    "--force",
+    help="Run --task although the policy or D_base records another task, or with thresholds "
+    "fitted for another policy.",
 )
 
 
@@ -96,3 +100,23 @@ def recorded_task(given: dict[str, Any], force: bool) -> None:
     for note in notes:
         typer.echo(note, err=True)
     given["task"] = task
+
+
+def thresholds_fit_policy(
+    thresholds: Any, policy: str | Path, which: str | int, seed: int | None, force: bool
+) -> None:
+    """Refuse thresholds fitted for another policy than the session's (``--force`` turns the
+    refusal into a warning), as ``score``, ``filter`` and ``map`` do; prints any warning.
+
+    Raises:
+      ElicitError: the thresholds file names another policy and ``force`` is false.
+    """
+    from elicit_jax.compat.threshold_source import check_policy
+    from elicit_jax.policy.loaded import load_policy
+
+    if thresholds is None or thresholds.file is None:
+        return
+    loaded = load_policy(policy, which, seed=seed)
+    warning = check_policy(thresholds, loaded.sha256, str(policy), force)
+    if warning:
+        typer.echo(warning, err=True)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
@@ -38,7 +38,6 @@ from elicit_jax.compat.chunks import balanced_chunk, concat, episode_groups, pad
 from elicit_jax.compat.measures import MC_ROWS_BUDGET, ScoreConfig
 from elicit_jax.compat.scorer import (
     ScoreInputs,
-    policy_spec,
     score_inputs,
     score_rows,
     score_sequences,
@@ -48,6 +47,10 @@ from elicit_jax.data.validation import check_magnitudes
 from elicit_jax.errors import ElicitError
 from elicit_jax.policy.kinds import model_kind
 from elicit_jax.sharding import device_count, round_up, row_placer
+
+if TYPE_CHECKING:
+    from elicit_jax.data.demos import Demos
+    from elicit_jax.policy.base import Policy
 
 SCORES_KIND = "scores"
 EPISODES_KIND = "episode-scores"
@@ -100,7 +103,7 @@ def _check_scores(scores: dict[str, np.ndarray], rows: dict[str, np.ndarray], po
 
 
 def score_batches(
-    policy: Any,
+    policy: Policy,
     batches: Iterable[dict[str, np.ndarray]],
     config: ScoreConfig,
     source: str = "<demos>",
@@ -136,18 +139,18 @@ def score_batches(
 
     inputs = score_inputs(policy, config, bounds, policy_source)
     static = static_config(config)
-    kind = model_kind(policy_spec(policy, "kind", "mlp"))
+    kind = model_kind(policy.kind)
     recurrent = kind.recurrent
     if config.dropout_samples and not kind.mc_dropout:
         raise ElicitError("--dropout-samples applies to MLP ensembles only", policy_source)
-    if config.dropout_samples and not policy_spec(policy, "dropout", 0.0):
+    if config.dropout_samples and not policy.dropout:
         raise ElicitError(
             "--dropout-samples needs a policy trained with dropout (this one has none)",
             policy_source,
         )
     chunk = config.chunk_size
     if config.dropout_samples:  # (K * N, chunk, ...) predictions at once: bound the memory
-        passes = config.dropout_samples * int(policy_spec(policy, "n_members", 1))
+        passes = config.dropout_samples * int(policy.n_members)
         chunk = max(1, min(chunk, MC_ROWS_BUDGET // passes))
     if n_rows is not None and not recurrent:
         chunk = balanced_chunk(n_rows, chunk)
@@ -178,7 +181,7 @@ def score_batches(
 
 
 def _score_episodes(
-    policy: Any,
+    policy: Policy,
     rows: dict[str, np.ndarray],
     inputs: ScoreInputs,
     static: ScoreConfig,
@@ -219,22 +222,22 @@ def _index(tree: Any, j: int) -> Any:
 
 
 def check_dims(
-    policy: Any, obs_dim: int, action_dim: int, source: str, obs_fields: tuple[str, ...] = ()
+    policy: Policy, obs_dim: int, action_dim: int, source: str, obs_fields: tuple[str, ...] = ()
 ) -> None:
     """Raise a clear error when the policy and the demonstrations disagree on dimensions or
     (when both name them) on the observation fields."""
-    p_obs, p_act = policy_spec(policy, "obs_dim"), policy_spec(policy, "action_dim")
-    if p_obs is not None and int(p_obs) != int(obs_dim):
+    p_obs, p_act = policy.obs_dim, policy.action_dim
+    if int(p_obs) != int(obs_dim):
         raise ElicitError(
             f"demonstrations have obs_dim={obs_dim} but the policy expects obs_dim={p_obs}", source
         )
-    if p_act is not None and int(p_act) != int(action_dim):
+    if int(p_act) != int(action_dim):
         raise ElicitError(
             f"demonstrations have action_dim={action_dim} but the policy predicts "
             f"action_dim={p_act}",
             source,
         )
-    names = tuple(policy_spec(policy, "obs_fields", ()) or ())
+    names = tuple(policy.obs_fields)
     if obs_fields and names and tuple(obs_fields) != names:
         raise ElicitError(
             f"demonstrations have obs fields {list(obs_fields)} but the policy was trained on "
@@ -260,7 +263,7 @@ def demos_batches(demos: Any) -> list[dict[str, np.ndarray]]:
 
 
 def score_demos(
-    policy: Any, demos: Any, config: ScoreConfig, n_devices: int | None = None
+    policy: Policy, demos: Demos, config: ScoreConfig, n_devices: int | None = None
 ) -> dict[str, np.ndarray]:
     """Score an in-memory ``Demos``; returns per-pair columns (see :func:`score_batches`)."""
     fields = tuple(f.name for f in demos.obs_fields)

@@ -3,7 +3,8 @@
 Example:
     >>> from elicit_jax.compat.score_file import score_file
     >>> config = ScoreConfig.from_preset("square-nut")
-    >>> score_file(policy, "new.parquet", "scores.parquet", config, policy_path="runs/base")
+    >>> base = load_policy("runs/base")  # elicit_jax.policy.loaded
+    >>> score_file(base.policy, "new.parquet", "scores.parquet", config, policy_path="runs/base")
 
 writes ``scores.parquet`` (per pair) and ``scores.episodes.parquet`` (per episode); see
 :mod:`elicit_jax.compat.score` for their columns.
@@ -16,7 +17,7 @@ import dataclasses
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from elicit_jax.artifact import (
     atomic_paths,
     dumps,
     make_header,
-    read_header,
+    read_artifact,
     refuse_overwriting_inputs,
     write_parquet,
 )
@@ -40,12 +41,15 @@ from elicit_jax.compat.score import (
     SCORES_KIND,
     check_dims,
     episodes_path,
-    policy_spec,
     score_batches,
 )
 from elicit_jax.compat.thresholds import POLICY_KEY, scores_fields
 from elicit_jax.data.demos import check_demos_layout
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.loaded import policy_sha256
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 _CORE = ("episode", "operator", "step", "obs", "action")
 ROW_GROUP = 1 << 17  # rows per written Parquet row group (bounds the writer's buffer)
@@ -136,7 +140,7 @@ def _scores_schema(action_dim: int, passthrough: Sequence[tuple[str, Any]]) -> A
 
 
 def score_file(
-    policy: Any,
+    policy: Policy,
     demos_path: str | Path,
     out_path: str | Path,
     config: ScoreConfig,
@@ -178,7 +182,7 @@ def score_file(
         "obs_dim": pf.schema_arrow.field("obs").type.list_size,
         "action_dim": action_dim,
         "task": header.get("task", "unknown"),
-        "policy_kind": str(policy_spec(policy, "kind", "mlp")),
+        "policy_kind": str(policy.kind),
         "policy": {**dict(policy_info or {}), POLICY_KEY: policy_sha256(policy)},
         **scale_note(policy, config),
     }
@@ -211,7 +215,7 @@ def score_file(
     return ScoreResult(out_path, ep_path, n_total, episodes)
 
 
-def scale_note(policy: Any, config: ScoreConfig) -> dict[str, Any]:
+def scale_note(policy: Policy, config: ScoreConfig) -> dict[str, Any]:
     """``--action-scale std``: the dims the base never moved and how they were scored, for
     the scores header (``still_action_dims``, ``action_scale_note``); else nothing."""
     from elicit_jax.compat.scorer import still_dims
@@ -229,32 +233,7 @@ def scale_note(policy: Any, config: ScoreConfig) -> dict[str, Any]:
     }
 
 
-def policy_sha256(policy: Any) -> str:
-    """Content hash of what a policy computes with: its kind, every parameter array (name,
-    dtype, shape, values) and its normalisation. The same checkpoint gives the same hash
-    however its path was given; thresholds record it to name the policy they were fitted for.
-    """
-    import hashlib
-
-    import jax
-
-    h = hashlib.sha256(str(policy_spec(policy, "kind", "mlp")).encode())
-    parts = {
-        "params": policy.params,
-        "obs_mean": policy.obs_mean,
-        "obs_std": policy.obs_std,
-        "action_std": getattr(policy, "action_std", None),
-    }
-    for path, leaf in sorted(
-        jax.tree_util.tree_flatten_with_path(parts)[0], key=lambda kv: jax.tree_util.keystr(kv[0])
-    ):
-        arr = np.ascontiguousarray(np.asarray(leaf))
-        h.update(f"{jax.tree_util.keystr(path)}|{arr.dtype.str}|{arr.shape}".encode())
-        h.update(arr.tobytes())
-    return h.hexdigest()
-
-
-def _open_demos(demos_path: Path, policy: Any) -> tuple[dict[str, Any], Any]:
+def _open_demos(demos_path: Path, policy: Policy) -> tuple[dict[str, Any], Any]:
     """The header and Parquet file of a demonstrations artifact the policy can score: checked
     as every reader checks it (:func:`~elicit_jax.data.demos.check_demos_layout`: kind,
     schema version, core columns, episode layout), with fixed-size obs/action lists of the
@@ -317,9 +296,7 @@ def read_scores(
     """
     import pyarrow.parquet as pq
 
-    header = read_header(path)
-    if header.get("kind") != SCORES_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected scores", path)
+    header = read_artifact(path, SCORES_KIND, SCHEMA_VERSION, what="scores")
     if columns:
         have = pq.read_schema(path).names
         columns = [*columns, *(c for c in optional if c in have and c not in columns)]
@@ -339,7 +316,7 @@ def read_scores(
     return header, out
 
 
-def one_member_note(policy: Any, config: ScoreConfig) -> str | None:
+def one_member_note(policy: Policy, config: ScoreConfig) -> str | None:
     """The warning a one-member policy earns (``None`` otherwise): with a single member and no
     dropout samples, novelty is 0 everywhere (an MDN's likelihood still varies)."""
     if policy.n_members * max(config.dropout_samples, 1) == 1 and not policy.entry.own_spread:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
@@ -22,13 +22,8 @@ from flax import struct
 from elicit_jax.compat.measures import ScoreConfig, score_pair
 from elicit_jax.errors import ElicitError
 
-
-def policy_spec(policy: Any, name: str, default: Any = None) -> Any:
-    """A static spec field of a policy (on the policy or on its ``spec`` attribute)."""
-    if hasattr(policy, name):
-        return getattr(policy, name)
-    spec = getattr(policy, "spec", None)
-    return getattr(spec, name, default) if spec is not None else default
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 @struct.dataclass
@@ -87,7 +82,7 @@ def _pair_fn(inputs: ScoreInputs, config: ScoreConfig) -> Callable[..., Any]:
 
 @functools.partial(jax.jit, static_argnames=("config",))
 def score_rows(
-    policy: Any, obs: Any, action: Any, inputs: ScoreInputs, row0: Any, config: ScoreConfig
+    policy: Policy, obs: Any, action: Any, inputs: ScoreInputs, row0: Any, config: ScoreConfig
 ) -> Any:
     """Scores of a chunk of independent pairs (jitted; ``config`` is static).
 
@@ -124,7 +119,9 @@ def score_rows(
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, config: ScoreConfig):
+def score_sequences(
+    policy: Policy, obs: Any, action: Any, inputs: ScoreInputs, config: ScoreConfig
+):
     """Scores of G padded episodes from the zero state (recurrent policies; jitted, ``config``
     static). obs: (G, L, O), action: (G, L, A) -> PairScores (G, L)."""
 
@@ -137,16 +134,16 @@ def score_sequences(policy: Any, obs: Any, action: Any, inputs: ScoreInputs, con
     return jax.vmap(one)(obs, action)
 
 
-def still_dims(policy: Any) -> list[int]:
+def still_dims(policy: Policy) -> list[int]:
     """The action dims the base policy's training actions never moved (std < 1e-6); empty
     when the checkpoint records no action std."""
-    std = getattr(policy, "action_std", None)
+    std = policy.action_std
     if std is None:
         return []
     return [int(i) for i in np.flatnonzero(np.asarray(std, np.float64) < STILL_STD)]
 
 
-def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") -> Any:
+def action_weight(policy: Policy, config: ScoreConfig, source: str = "<policy>") -> Any:
     """Per-dim action scaling ``(A,)``: 1/std of the base policy's training actions; None for
     ``action_scale='none'``.
 
@@ -156,7 +153,7 @@ def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") ->
     """
     if config.action_scale == "none":
         return None
-    std = getattr(policy, "action_std", None)
+    std = policy.action_std
     if std is None:
         raise ElicitError(
             "--action-scale std needs the training actions' std, which this checkpoint "
@@ -172,7 +169,7 @@ def action_weight(policy: Any, config: ScoreConfig, source: str = "<policy>") ->
 
 
 def score_inputs(
-    policy: Any, config: ScoreConfig, bounds: tuple[Any, Any] | None, source: str
+    policy: Policy, config: ScoreConfig, bounds: tuple[Any, Any] | None, source: str
 ) -> ScoreInputs:
     """The :class:`ScoreInputs` of a scoring run: thresholds, clipping bounds (``config.clip``,
     else the demonstrations' recorded ``bounds``, else ±1), action weights, dropout seed."""
@@ -180,7 +177,7 @@ def score_inputs(
 
     if config.thresholds is None:
         raise ElicitError("scoring needs thresholds: the config holds none")
-    a = int(policy_spec(policy, "action_dim", 1))
+    a = int(policy.action_dim)
     if config.clip is not None:
         low, high = -config.clip, config.clip
     elif bounds is not None:

@@ -38,7 +38,7 @@ LAMBDA_KEY = "lambda"
 ETA_KEY = "eta"
 POLICY_KEY = "policy_sha256"
 """Where a thresholds file and a scores header's ``policy`` block keep the content hash of
-the policy's parameters (:func:`elicit_jax.compat.score_file.policy_sha256`)."""
+the policy's parameters (:func:`elicit_jax.policy.loaded.policy_sha256`)."""
 STAND_IN = "raw-unit preset"
 """How the recorded source of a raw-unit preset standing in on std-scaled scores begins."""
 
@@ -196,7 +196,7 @@ def read_thresholds_header(path: str | Path) -> dict[str, Any]:
         mistake, ...), an artifact of another kind, a newer schema version, or λ, η that are
         not numbers (strings, booleans), not finite or not > 0; each naming the file.
     """
-    from elicit_jax.artifact import read_json
+    from elicit_jax.artifact import check_artifact, read_json
 
     try:
         data = read_json(path)
@@ -208,16 +208,7 @@ def read_thresholds_header(path: str | Path) -> dict[str, Any]:
             "fit-thresholds writes",
             path,
         ) from e
-    if not isinstance(data, dict) or data.get("kind") != THRESHOLDS_KIND:
-        kind = data.get("kind") if isinstance(data, dict) else type(data).__name__
-        raise ElicitError(f"is a '{kind}' artifact, expected thresholds", path)
-    version = data.get("schema_version", SCHEMA_VERSION)
-    if isinstance(version, bool) or not isinstance(version, int) or version > SCHEMA_VERSION:
-        raise ElicitError(
-            f"thresholds schema version {version!r} is not one this elicit-jax reads "
-            f"(<= {SCHEMA_VERSION}); upgrade elicit-jax",
-            path,
-        )
+    check_artifact(data, path, THRESHOLDS_KIND, SCHEMA_VERSION, what="thresholds")
     pair_from_json(data, path)
     return data
 

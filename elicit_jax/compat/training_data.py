@@ -178,12 +178,12 @@ def _score_missing(
     """ℓ, ν of the training demos whose hash is in ``missing``, under the scoring policy."""
     from elicit_jax.compat.measures import config_from_dict
     from elicit_jax.compat.score import score_demos
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
     digests = episode_digests(demos)
     chosen = demos.select_episodes([e for e, d in digests.items() if d in missing])
     which = (header.get("policy") or {}).get("which", "best")
-    policy = load_policy(seed_dir, int(which) if str(which).isdigit() else which)
+    policy = load_policy(seed_dir, which).policy
     config = config_from_dict(dict(header.get("config") or {}), "the scores file's config")
     return score_demos(policy, chosen, config)
 

@@ -31,12 +31,15 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.curation.episodes import EpisodeScores, episode_table
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,7 +112,7 @@ def _projector(dim: int, config: CupidConfig) -> tuple[Any, int]:
     return project, p
 
 
-def _member_fns(policy: Any) -> tuple[Any, Any, int]:
+def _member_fns(policy: Policy) -> tuple[Any, Any, int]:
     """``train_grads(params_k, x, a) -> (B, D)`` per-sample gradients of member k's loss,
     ``test_grad(params, x, a, w) -> (K, D)`` gradient of Σ w·ℓ̄ per member, and D."""
     import jax
@@ -139,7 +142,7 @@ def _member_fns(policy: Any) -> tuple[Any, Any, int]:
     return jax.jit(train_grads), jax.jit(test_grad), dim
 
 
-def rollout_gradient(policy: Any, steps: Any, config: CupidConfig, test_grad: Any) -> np.ndarray:
+def rollout_gradient(policy: Policy, steps: Any, config: CupidConfig, test_grad: Any) -> np.ndarray:
     """``(K, D)`` per-member ``g_k = (1/m) Σ_j R_j Σ_t ∇ℓ̄(s_jt, a_jt)`` over the rollouts,
     ``R`` = +1 for a success and −1 for a failure."""
     import jax.numpy as jnp
@@ -157,7 +160,7 @@ def rollout_gradient(policy: Any, steps: Any, config: CupidConfig, test_grad: An
 
 
 def pair_influence(
-    policy: Any, obs: np.ndarray, action: np.ndarray, steps: Any, config: CupidConfig
+    policy: Policy, obs: np.ndarray, action: np.ndarray, steps: Any, config: CupidConfig
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """``(N,)`` estimated influence of each training pair on the expected return, summed over
     members, and diagnostics."""
@@ -196,7 +199,7 @@ def pair_influence(
 
 
 def cupid_scores(
-    policy: Any, steps: Any, new: Any, base: Any = None, config: CupidConfig = CupidConfig()
+    policy: Policy, steps: Any, new: Any, base: Any = None, config: CupidConfig = CupidConfig()
 ) -> EpisodeScores:
     """CUPID scores of the demonstrations of ``new`` (mean influence of their pairs on the
     expected return of ``policy``, estimated from its recorded rollouts ``steps``).
@@ -263,7 +266,8 @@ def cupid_file_scores(
     """:func:`cupid_scores` of the ``config.checkpoint`` of a training run (its
     ``config.policy_seed``, default the first) against its recorded rollouts of that seed and
     checkpoint."""
-    from elicit_jax.policy.checkpoint import list_checkpoints, load_policy
+    from elicit_jax.policy.checkpoint import list_checkpoints
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.sim.trajectories import read_trajectories
 
     avail = list_checkpoints(policy_path)
@@ -271,6 +275,6 @@ def cupid_file_scores(
     if seed not in avail:
         raise ElicitError(f"cupid: no training seed {seed} (have {sorted(avail)})", policy_path)
     which: str | int = int(config.checkpoint) if config.checkpoint.isdigit() else config.checkpoint
-    policy = load_policy(policy_path, which, seed=seed)
+    policy = load_policy(policy_path, which, seed=seed).policy
     steps = read_trajectories(trajectories_path, None, seed, config.checkpoint)
     return cupid_scores(policy, steps, new, base, config)

@@ -26,13 +26,16 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.curation.classifier import ClassifierConfig, fit_classifiers, predict
 from elicit_jax.curation.episodes import EpisodeScores, episode_table
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 SEED_STRIDE = 100_000
 
@@ -132,22 +135,17 @@ def collect_rollouts(
       config: which checkpoints, how many rollouts, from which initial states.
       progress: called with ``(epoch, success rate)`` after each checkpoint.
     """
-    from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.sim.env import OBS_DIM, make_task
+    from elicit_jax.policy.loaded import load_policy
+    from elicit_jax.sim.env import make_task
     from elicit_jax.sim.evaluate import EVAL_SEED_BASE
+    from elicit_jax.sim.registry import task_entry
 
     seed, epochs = rollout_epochs(policy_dir, config)
     task = make_task(config.task)
     horizon = config.horizon or task.config.horizon
     success, checkpoint, states, rollout = [], [], [], []
     for j, epoch in enumerate(epochs):
-        policy = load_policy(policy_dir, epoch, seed=seed)
-        if (policy.obs_dim, policy.action_dim) != (OBS_DIM, 7):
-            raise ElicitError(
-                f"policy has obs/action dims {policy.obs_dim}/{policy.action_dim}; task "
-                f"'{task.name}' needs {OBS_DIM}/7",
-                policy_dir,
-            )
+        policy = load_policy(policy_dir, epoch, seed=seed, task=task_entry(task.name)).policy
         init = EVAL_SEED_BASE + (config.seed + j) * SEED_STRIDE + np.arange(config.rollouts)
         out = _rollouts(task, policy, init, horizon, config.threads)
         mask = out["state_mask"]
@@ -183,7 +181,7 @@ class DemoScoreModel:
         return predict(self.config, self.params, (np.asarray(states) - self.mean) / self.std)
 
 
-def _rollouts(task: Any, policy: Any, seeds: np.ndarray, horizon: int, threads: int) -> dict:
+def _rollouts(task: Any, policy: Policy, seeds: np.ndarray, horizon: int, threads: int) -> dict:
     """Rollouts with recorded states on the task's simulator: C MuJoCo, or robosuite's
     worker processes (``threads`` of them; 0: one per CPU) for its tasks."""
     from elicit_jax.sim.evaluate import rollout_mujoco_policy

@@ -175,11 +175,9 @@ def read_episode_scores(path: str | Path) -> EpisodeScores:
     """Read an ``episode-scores`` artifact back."""
     import pyarrow.parquet as pq
 
-    from elicit_jax.artifact import read_header
+    from elicit_jax.artifact import read_artifact
 
-    header = read_header(path)
-    if header.get("kind") != SCORES_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected episode scores", path)
+    header = read_artifact(path, SCORES_KIND, SCHEMA_VERSION, what="episode scores")
     table = pq.read_table(path)
     return EpisodeScores(
         method=str(header["method"]),

@@ -263,11 +263,9 @@ def read_quality(path: str | Path) -> Any:
     """A ``quality`` artifact as a ``pandas.DataFrame`` (one row per episode)."""
     import pyarrow.parquet as pq
 
-    from elicit_jax.artifact import read_header
+    from elicit_jax.artifact import read_artifact
 
-    header = read_header(path)
-    if header.get("kind") != QUALITY_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected quality flags", path)
+    read_artifact(path, QUALITY_KIND, SCHEMA_VERSION, what="quality flags")
     return pq.read_table(path).to_pandas()
 
 

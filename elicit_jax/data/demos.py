@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import make_header, read_header, write_parquet
+from elicit_jax.artifact import make_header, read_artifact, write_parquet
 from elicit_jax.data.columns import (
     column_to_numpy,
     demos_to_table,
@@ -247,20 +247,7 @@ def read_demos_header(path: str | Path) -> dict[str, Any]:
     Raises:
       ElicitError: another kind of artifact, or a bad or newer schema version.
     """
-    header = read_header(path)
-    if header.get("kind") != DEMOS_KIND:
-        raise ElicitError(f"is a '{header.get('kind')}' artifact, expected demonstrations", path)
-    try:
-        version = int(header.get("schema_version", -1))
-    except (TypeError, ValueError) as e:
-        raise ElicitError(f"bad schema version {header.get('schema_version')!r}", path) from e
-    if version > DEMOS_SCHEMA_VERSION:
-        raise ElicitError(
-            f"schema version {version} is newer than this elicit-jax understands "
-            f"({DEMOS_SCHEMA_VERSION}); upgrade elicit-jax",
-            path,
-        )
-    return header
+    return read_artifact(path, DEMOS_KIND, DEMOS_SCHEMA_VERSION, what="demonstrations")
 
 
 def check_episode_count(header: Mapping[str, Any], episode: np.ndarray, path: str | Path) -> None:

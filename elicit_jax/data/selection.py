@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import make_header, read_header, write_json
+from elicit_jax.artifact import make_header, read_artifact, read_header, write_json
 from elicit_jax.data.demos import SOURCE_EPISODE, Demos, read_demos
 from elicit_jax.errors import ElicitError
 
@@ -84,14 +84,10 @@ def selection_from_demos(
 
 def read_selection(path: str | Path, episodes: Sequence[int] | None = None) -> Selection:
     """A selection from a demos artifact or an episode-list JSON, optionally narrowed."""
-    header = read_header(path)
-    kind = header.get("kind")
-    if kind == "demos":
+    if read_header(path).get("kind") == "demos":
         return selection_from_demos(read_demos(path, bounds="warn"), episodes, str(path))
-    if kind != EPISODE_LIST_KIND:
-        raise ElicitError(f"is a '{kind}' artifact, expected demos or an episode list", path)
-    if int(header.get("schema_version", -1)) > EPISODE_LIST_SCHEMA_VERSION:
-        raise ElicitError(f"episode-list schema {header['schema_version']} is too new", path)
+    what = "demos or an episode list"
+    header = read_artifact(path, EPISODE_LIST_KIND, EPISODE_LIST_SCHEMA_VERSION, what=what)
     try:
         ids = [int(x) for x in header["episodes"]]
         names = [str(x) for x in header["source_episodes"]]

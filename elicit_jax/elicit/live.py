@@ -22,13 +22,16 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.compat.measures import ScoreConfig
 from elicit_jax.compat.thresholds import Thresholds
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,11 +53,11 @@ class StepScore:
     policy_action: np.ndarray
 
 
-def check_live_policy(policy: Any, source: str = "<policy>") -> None:
+def check_live_policy(policy: Policy, source: str = "<policy>") -> None:
     """Raise unless ``policy`` can be scored one state at a time (a feed-forward kind)."""
     from elicit_jax.policy.kinds import MODEL_KINDS, model_kind
 
-    kind = model_kind(getattr(policy, "kind", "mlp"))
+    kind = model_kind(policy.kind)
     if kind.recurrent:
         feed_forward = " or ".join(k.name for k in MODEL_KINDS.values() if not k.recurrent)
         raise ElicitError(
@@ -84,7 +87,7 @@ class LiveScorer:
     def __init__(
         self,
         config: ScoreConfig,
-        policy: Any,
+        policy: Policy,
         bounds: tuple[Any, Any] | None = None,
         source: str = "<policy>",
     ) -> None:
@@ -98,7 +101,7 @@ class LiveScorer:
         self.inputs = score_inputs(policy, config, bounds, source)
         static = static_config(config)
 
-        def one(policy: Any, obs: Any, action: Any, inputs: Any, step: Any) -> Any:
+        def one(policy: Policy, obs: Any, action: Any, inputs: Any, step: Any) -> Any:
             self.traces += 1
             s = score_rows(policy, obs[None], action[None], inputs, step, static)
             head = jnp.stack(
@@ -110,7 +113,7 @@ class LiveScorer:
 
     def score(
         self,
-        policy: Any,
+        policy: Policy,
         obs: np.ndarray,
         action: np.ndarray,
         thresholds: Thresholds | None = None,

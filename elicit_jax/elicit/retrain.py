@@ -1,7 +1,7 @@
 """Retraining between batches: π_new on D_base ∪ the accepted demonstrations so far.
 
 The training config is the base policy's own (read with it, once:
-:meth:`elicit_jax.policy.checkpoint.LoadedPolicy.train_config`), with one training seed — the
+:meth:`elicit_jax.policy.loaded.LoadedPolicy.train_config`), with one training seed — the
 seed of the policy the session loaded — so π_new differs from π_base only in its data. Each
 batch's policy is a training run directory ``SESSION/policies/batch<b>/``, written atomically:
 a kill during training leaves no half-written policy, and a resumed session trains that batch

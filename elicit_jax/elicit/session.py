@@ -211,14 +211,14 @@ class Session:
         step = len(self._buf["obs"])
         if self._robot_action is None or self._robot_action[0] != step:
             zeros = np.zeros(self.setup.action_dim, np.float32)
-            a = self.setup.scorer.score(self.setup.policy, obs, zeros).policy_action
+            a = self.setup.scorer.score(self.setup.policy.policy, obs, zeros).policy_action
             self._robot_action = (step, a.astype(np.float32))
         return self._robot_action[1]
 
     def _score(self, obs: np.ndarray, action: np.ndarray, previous: np.ndarray | None) -> None:
         t = time.perf_counter()
         step = len(self._buf["obs"]) - 1
-        s = self.setup.scorer.score(self.setup.policy, obs, action, step=step)
+        s = self.setup.scorer.score(self.setup.policy.policy, obs, action, step=step)
         ms = 1e3 * (time.perf_counter() - t)
         buf = self._buf
         buf["score"].append((s.likelihood, s.novelty, s.compatibility, s.incompatible, ms))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,10 @@ from elicit_jax.elicit.rules import AcceptRule
 from elicit_jax.elicit.session_dir import absolute_inputs, open_store, session_inputs
 from elicit_jax.elicit.store import SCHEMA_VERSION, SESSION_KIND, EpisodeRecord, SessionStore
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.data.demos import Demos
+    from elicit_jax.policy.loaded import LoadedPolicy
 
 
 def _segments(mask: np.ndarray) -> int:
@@ -40,8 +44,8 @@ class SessionSetup:
     store: SessionStore
     task: Any
     base: Any
-    base_policy: Any
-    policy: Any
+    base_policy: LoadedPolicy
+    policy: LoadedPolicy
     train_config: Any
     scorer: LiveScorer
     rule: AcceptRule
@@ -121,7 +125,7 @@ class SessionSetup:
         if self._prompt is None:
             from elicit_jax.compat.score import score_demos
 
-            scores = score_demos(self.base_policy, self.base, self.config.score_config())
+            scores = score_demos(self.base_policy.policy, self.base, self.config.score_config())
             ids, index = np.unique(self.base.episode, return_inverse=True)
             mean_ell = np.bincount(index, weights=scores["likelihood"]) / np.bincount(index)
             order = np.lexsort((ids, mean_ell))[: self.config.prompt]
@@ -225,7 +229,7 @@ class SessionSetup:
         """Train every batch policy the accepted demonstrations call for and load the latest
         (unless the base stays fixed)."""
         from elicit_jax.elicit.retrain import train_batch_policy
-        from elicit_jax.policy.checkpoint import load_policy
+        from elicit_jax.policy.loaded import load_policy
 
         c = self.config
         if not c.batch:
@@ -247,23 +251,51 @@ class SessionSetup:
             self.policy_batch = done
 
 
-def _check_inputs(config: SessionConfig, task: Any, base: Any, policy: Any) -> None:
-    from elicit_jax.compat.score import check_dims
-    from elicit_jax.sim.env import OBS_DIM
+def _check_base(config: SessionConfig, task: Any, base: Demos) -> None:
+    """Refuse base demonstrations whose sizes or observation fields are not the task's."""
+    from elicit_jax.sim.registry import task_entry
 
+    sizes = task_entry(task.name)
     names = tuple(f.name for f in base.obs_fields)
     want = tuple(f.name for f in task.obs_fields)
-    if (base.obs_dim, base.action_dim) != (OBS_DIM, len(task_action_names(task))) or (
+    if (base.obs_dim, base.action_dim) != (sizes.obs_dim, sizes.action_dim) or (
         names and names != want
     ):
         raise ElicitError(
             f"base demonstrations (obs_dim={base.obs_dim}, action_dim={base.action_dim}, fields "
-            f"{list(names)}) do not match task '{task.name}' (obs_dim={OBS_DIM}, fields "
+            f"{list(names)}) do not match task '{task.name}' (obs_dim={sizes.obs_dim}, fields "
             f"{list(want)})",
             config.base_demos,
         )
-    check_dims(policy, base.obs_dim, base.action_dim, config.policy, want)
-    check_live_policy(policy, config.policy)
+
+
+def load_session_policy(
+    path: str | Path,
+    which: str | int,
+    seed: int | None,
+    base: Demos,
+    base_path: str | Path,
+    task: str | None = None,
+) -> LoadedPolicy:
+    """The policy a session or a watched folder scores with, loaded by the one loader and
+    checked: the task's sizes (when ``task`` is given), the base demonstrations' sizes and
+    observation fields, and a feed-forward kind (scored one state at a time).
+
+    Raises:
+      ElicitError: one line naming the checkpoint or the base demonstrations.
+    """
+    from elicit_jax.compat.score import check_dims
+    from elicit_jax.policy.checkpoint import check_compatible
+    from elicit_jax.policy.loaded import load_policy
+    from elicit_jax.sim.registry import task_entry
+
+    sizes = task_entry(task) if task is not None else None
+    loaded = load_policy(path, which, seed=seed, task=sizes)
+    names = tuple(f.name for f in base.obs_fields)
+    check_dims(loaded.policy, base.obs_dim, base.action_dim, str(path), names)
+    check_compatible(loaded.policy, base, base_path)
+    check_live_policy(loaded.policy, str(path))
+    return loaded
 
 
 def task_action_names(task: Any) -> tuple[str, ...]:
@@ -278,21 +310,20 @@ def _load(config: SessionConfig) -> dict[str, Any]:
     from elicit_jax.data.demos import read_demos
     from elicit_jax.elicit import people  # noqa: F401  (registers the person: operators)
     from elicit_jax.elicit.operators import OperatorContext, make_session_operator
-    from elicit_jax.policy.checkpoint import check_compatible, load_checkpoint
     from elicit_jax.sim.env import make_task
 
     # a robosuite task is a task like any other here: its environment is built (in this
     # process) when the first episode begins
     task = make_task(config.task, **({"horizon": config.horizon} if config.horizon else {}))
     base = read_demos(config.base_demos)
-    loaded = load_checkpoint(config.policy, config.which, seed=config.policy_seed)
-    policy = loaded.policy
-    _check_inputs(config, task, base, policy)
-    check_compatible(policy, base, config.base_demos)
+    _check_base(config, task, base)
+    loaded = load_session_policy(
+        config.policy, config.which, config.policy_seed, base, config.base_demos, task.name
+    )
     return {
         "task": task,
         "base": base,
-        "policy": policy,
+        "policy": loaded,
         "seed": loaded.seed,
         "train_config": loaded.train_config() if config.batch else None,
         "operator": make_session_operator(
@@ -316,7 +347,7 @@ def _header(config: SessionConfig, inputs: dict[str, str], loaded: dict[str, Any
         task_config=dataclasses.asdict(task.config),
         obs_fields={f.name: [f.start, f.stop] for f in base.obs_fields},
         action_names=list(task_action_names(task)),
-        policy_model=policy_spec(loaded["policy"]),
+        policy_model=policy_spec(loaded["policy"].policy),
         policy_seed=loaded["seed"],
         train_config=None if train_config is None else train_config.to_dict(),
     )
@@ -364,7 +395,7 @@ def open_session(
         train_config=loaded["train_config"],
         scorer=LiveScorer(
             config.score_config(),
-            policy,
+            policy.policy,
             bounds=(base.action_low, base.action_high),
             source=config.policy,
         ),

@@ -36,8 +36,10 @@ import numpy as np
 
 from elicit_jax.artifact import (
     DIR_HEADER,
+    check_artifact,
     clean_stale_temporaries,
     make_header,
+    read_artifact,
     read_header,
     refuse_foreign_files,
     write_json,
@@ -201,16 +203,7 @@ class SessionStore:
 
     def header(self) -> dict[str, Any]:
         """The session header (``artifact.json``)."""
-        header = read_header(self.root)
-        if header.get("kind") != SESSION_KIND:
-            raise ElicitError(f"is a '{header.get('kind')}' artifact, not a session", self.root)
-        if int(header.get("schema_version", -1)) > SCHEMA_VERSION:
-            raise ElicitError(
-                f"session schema {header.get('schema_version')} is newer than this elicit-jax "
-                f"understands ({SCHEMA_VERSION}); upgrade elicit-jax",
-                self.root,
-            )
-        return header
+        return read_artifact(self.root, SESSION_KIND, SCHEMA_VERSION, what="a session")
 
     def create(self, header: dict[str, Any]) -> None:
         """Start an empty session directory with ``header``."""
@@ -290,7 +283,8 @@ class SessionStore:
                     "episode: move it out of the session to record that episode again",
                     p,
                 ) from e
-            if h.get("kind") != EPISODE_KIND or f"e{int(h.get('index', -1)):06d}" != p.stem:
+            check_artifact(h, p, EPISODE_KIND, SCHEMA_VERSION, what="an episode of a session")
+            if f"e{int(h.get('index', -1)):06d}" != p.stem:
                 raise ElicitError("is not an episode of this session", p)
             out.append(h)
         return out
@@ -300,7 +294,7 @@ class SessionStore:
         from elicit_jax.data.columns import fixed_to_numpy, read_table
 
         path = self.episode_path(index)
-        h = read_header(path)
+        h = read_artifact(path, EPISODE_KIND, SCHEMA_VERSION, what="an episode of a session")
         t = read_table(path)
 
         def scores(name: str) -> np.ndarray:

@@ -186,9 +186,8 @@ class Watcher:
     def __init__(self, config: WatchConfig, echo: Callable[[str], None]) -> None:
         from elicit_jax.compat.feedback import normalizer
         from elicit_jax.data.demos import read_demos
-        from elicit_jax.elicit.live import check_live_policy
         from elicit_jax.elicit.rules import AcceptRule
-        from elicit_jax.policy.checkpoint import check_compatible, load_policy
+        from elicit_jax.elicit.setup import load_session_policy
 
         self.config = config
         self.echo = echo
@@ -197,9 +196,9 @@ class Watcher:
             raise ElicitError("inbox is not a folder", self.inbox)
         self.out = config.out_dir
         self.base = read_demos(config.base_demos)
-        self.policy = load_policy(config.policy, config.which, seed=config.policy_seed)
-        check_compatible(self.policy, self.base, config.base_demos)
-        check_live_policy(self.policy, config.policy)
+        self.policy = load_session_policy(
+            config.policy, config.which, config.policy_seed, self.base, config.base_demos
+        )
         self.rule = AcceptRule(config.accept_fraction, config.reject_count)
         self.stats = normalizer(self.base.obs)
         self.settler = Settler(config.settle)
@@ -288,7 +287,7 @@ class Watcher:
             warnings.simplefilter("ignore", DemosWarning)
             demos = validate(demos, str(item), bounds=cfg.bounds)
         names = tuple(f.name for f in demos.obs_fields)
-        check_dims(self.policy, demos.obs_dim, demos.action_dim, str(item), names)
+        check_dims(self.policy.policy, demos.obs_dim, demos.action_dim, str(item), names)
         check_same_task(demos.task, self.config.policy, item)
         return demos
 
@@ -316,7 +315,7 @@ class Watcher:
         if not todo:
             return 0
         chosen = demos.select_episodes([e for e, _, _ in todo])
-        scores = score_demos(self.policy, chosen, config)
+        scores = score_demos(self.policy.policy, chosen, config)
         rows = {e: (s, t) for e, s, t in chosen.episode_bounds()}
         for e, name, key in todo:
             s, t = rows[e]

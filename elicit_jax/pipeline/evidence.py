@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.artifact import dumps, read_header, read_json
+from elicit_jax.artifact import dumps, read_artifact, read_header
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
@@ -38,7 +38,6 @@ ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
 ROLLOUTS_KIND = "study-rollouts"
 DATA_KIND = "report-data"
-STUDY_DATA_KIND = "study-report-data"
 SELECTIONS = ("heldout", "reported")
 SELECT_SEED_OFFSET = 100
 """Default selection seed of held-out selection: the reported evaluation seed + this."""
@@ -74,19 +73,17 @@ ROLLOUT_COLUMNS = [
 """The columns of a report's ``rollouts.parquet``, in order."""
 
 
-def run_provenance(manifest: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
+def run_provenance(manifest: Mapping[str, Any], evaluations: Sequence[Path]) -> dict[str, Any]:
     """The run's provenance (its manifest's, i.e. the last ``pipeline run``), plus the code
-    commits that made its finished evaluations (``result_commits``: commit -> count), which
+    commits that made its finished ``evaluations`` (``result_commits``: commit -> count), which
     differ when cached stages carried the run across code versions."""
     from elicit_jax.artifact import PROVENANCE_KEY
 
     commits: dict[str, int] = {}
-    for stage in manifest.get("stages", []):
-        path = run_dir / stage["output"]
-        if stage["kind"] == "evaluate" and path.is_file():
-            made = read_header(path).get(PROVENANCE_KEY, {})
-            commit = str(made.get("commit", "unknown")) + ("+dirty" if made.get("dirty") else "")
-            commits[commit] = commits.get(commit, 0) + 1
+    for path in evaluations:
+        made = read_header(path).get(PROVENANCE_KEY, {})
+        commit = str(made.get("commit", "unknown")) + ("+dirty" if made.get("dirty") else "")
+        commits[commit] = commits.get(commit, 0) + 1
     return {**manifest.get(PROVENANCE_KEY, {}), "result_commits": commits}
 
 
@@ -301,11 +298,6 @@ def write_rollouts_table(path: Path, rollouts: Any, pipeline: str, profile: str)
     pq.write_table(table, path, compression="zstd")
 
 
-def write_data(path: Path, data: ReportData) -> None:
-    """Write ``report-data.json``: everything the report shows besides the results."""
-    path.write_text(dumps(data_to_json(data)) + "\n")
-
-
 def round_trip(data: ReportData) -> ReportData:
     """``data`` as a rebuild will read it back (JSON turns tuples into lists): rendering this
     makes the first report and its rebuilds byte-identical."""
@@ -316,9 +308,9 @@ def round_trip(data: ReportData) -> ReportData:
     return dataclasses.replace(back, **{k: getattr(data, k) for k in kept})
 
 
-def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
-    """A report folder's ``report-data.json`` header and rollout table, or a one-line error
-    naming what is missing."""
+def read_raw(folder: str | Path, data_kinds: Sequence[str]) -> tuple[dict[str, Any], Any]:
+    """A report folder's ``report-data.json`` header (of one of the ``data_kinds``: the study
+    kinds') and rollout table, or a one-line error naming what is missing."""
     import pyarrow.parquet as pq
 
     folder = Path(folder)
@@ -329,14 +321,9 @@ def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
                 "results cannot be rebuilt; re-run the study)",
                 folder,
             )
-    header = read_json(folder / DATA_FILE)
-    if header.get("kind") not in (DATA_KIND, STUDY_DATA_KIND):
-        raise ElicitError(f"{DATA_FILE} is a '{header.get('kind')}' artifact", folder)
-    if read_header(folder / ROLLOUTS_FILE).get("kind") != ROLLOUTS_KIND:
-        raise ElicitError(f"{ROLLOUTS_FILE} is not a study rollout table", folder)
+    header = read_artifact(folder / DATA_FILE, tuple(data_kinds), 1)
+    read_artifact(folder / ROLLOUTS_FILE, ROLLOUTS_KIND, 1, what="a study rollout table")
     frame = pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
-    if header["kind"] == DATA_KIND and "collection" not in frame:  # kept before [collections]
-        frame.insert(0, "collection", np.int32(0))
     if "sizes" not in frame:  # kept before named sizes: the default sizes
         frame = frame.assign(sizes=DEFAULT_SIZES)
     return header, frame
@@ -344,6 +331,8 @@ def read_raw(folder: str | Path) -> tuple[dict[str, Any], Any]:
 
 def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> ReportData:
     """A filtering or models report's data from its folder's raw results."""
+    if "collection" not in frame:  # kept before [collections]
+        frame.insert(0, "collection", np.int32(0))
     results = result_rows_of(frame) if len(frame) else []
     return dataclasses.replace(
         data_from_json(header, folder),

@@ -1,30 +1,21 @@
-"""Gather a run directory's artifacts into :class:`~elicit_jax.pipeline.report_rows.ReportData`
-(:func:`walk_run`: what every report kind reads of a run directory).
+"""Gather a run directory's artifacts into a study's report data (:func:`gather_fields`: what
+every study kind reads of a run directory; :func:`gather`: a filtering study's
+:class:`~elicit_jax.pipeline.report_rows.ReportData`).
 
 Reads the run manifest (``run.json``: the definition and every stage) and, for each finished
-stage, its artifact: evaluations (success per seed), threshold fits, filter counts, maps and
-the demonstration sets' lengths. Stages that have not finished yet are listed in a note, so a
-report of a partial run is still correct about what it shows.
+stage, its artifact, by its stage kind's gatherers: evaluations (success per seed), threshold
+fits, filter counts, maps and the demonstration sets' lengths (:mod:`.gather_rows`). Stages
+that have not finished yet are listed in a note, so a report of a partial run is still correct
+about what it shows.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from elicit_jax.artifact import read_header, read_json
-from elicit_jax.compat.thresholds import (
-    Thresholds,
-    config_fields,
-    pair_from_json,
-    read_thresholds,
-    read_thresholds_header,
-)
+from elicit_jax.artifact import read_artifact
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import (
@@ -34,11 +25,13 @@ from elicit_jax.pipeline.evidence import (
     run_provenance,
 )
 from elicit_jax.pipeline.report_rows import ReportData, ResultRow
-from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
-from elicit_jax.provenance import shown_path, shown_paths_in
+from elicit_jax.pipeline.stage_kind import StageKinds
+from elicit_jax.provenance import shown_path
 
 MANIFEST = "run.json"
 MANIFEST_KIND = "pipeline-run"
+REPORT_STAGE = "report"
+"""The stage kind of a filtering study's report stage."""
 
 
 def read_manifest(run_dir: str | Path) -> dict[str, Any]:
@@ -46,153 +39,7 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / MANIFEST
     if not path.exists():
         raise ElicitError(f"not a pipeline run directory (no {MANIFEST})", run_dir)
-    data = read_json(path)
-    if data.get("kind") != MANIFEST_KIND:
-        raise ElicitError(f"is a '{data.get('kind')}' artifact, expected a pipeline run", path)
-    return data
-
-
-def _length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.LengthRow]:
-    import pyarrow.parquet as pq
-
-    table = pq.read_table(path, columns=["episode", "operator"])
-    episode = table.column("episode").to_numpy()
-    operator = np.asarray(table.column("operator").to_pylist(), dtype=str)
-    _, first, counts = np.unique(episode, return_index=True, return_counts=True)
-    rows = []
-    for op in dict.fromkeys(operator[first].tolist()):
-        lens = counts[operator[first] == op]
-        rows.append(
-            report_rows.LengthRow(
-                task=stage["config"]["collect"]["task"],
-                name=Path(stage["output"]).stem,
-                operator=op,
-                n_episodes=len(lens),
-                mean_length=float(lens.mean()),
-                std_length=float(lens.std(ddof=1)) if lens.size > 1 else 0.0,
-            )
-        )
-    return rows
-
-
-def _shown(value: Any, run_dir: Path) -> Any:
-    """``value`` with the absolute paths in its strings shown relative to ``run_dir``
-    (:func:`~elicit_jax.provenance.shown_path`): a report names no folder of the machine."""
-    if isinstance(value, str):
-        return shown_paths_in(value, run_dir)
-    if isinstance(value, Mapping):
-        return {k: _shown(v, run_dir) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return type(value)(_shown(v, run_dir) for v in value)
-    return value
-
-
-def _row_fields(t: Thresholds) -> dict[str, float]:
-    """A report row's ``lambda_`` and ``eta`` (the field names committed report data keeps)."""
-    return config_fields(t, key="lambda_")  # type: ignore[return-value]
-
-
-def _threshold_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
-    data = read_thresholds_header(path)
-    run_dir = path.parents[len(Path(stage["output"]).parts) - 1]
-    report = _shown(dict(data.get("report", {})), run_dir)
-    cfg = stage["config"]
-    method = data.get("method", "fit")
-    report.setdefault("margin", report.get("margin_quantile"))
-    return report_rows.ThresholdRow(
-        task=cfg["task"],
-        model=cfg["model"],
-        **_row_fields(read_thresholds(path)),
-        compatible=f"{report.get('n_compatible', '?')} held-out demos of "
-        f"'{cfg['compatible_operator']}' (collect seed {cfg['holdout_seed']})",
-        incompatible=f"{report.get('n_incompatible', '?')} demos of "
-        f"'{cfg['incompatible_operator']}' (collect seed {cfg['incompatible_seed']}, disjoint "
-        "from every D_new)" + ("" if method == "fit" else "; thresholds set by hand, not fitted"),
-        metrics=report,
-    )
-
-
-def _valley_row(stage: Mapping[str, Any], path: Path) -> report_rows.ThresholdRow:
-    rep = dict(read_thresholds_header(path).get("report", {}))
-    lo, hi = rep.get("lambda_range", (math.nan, math.nan))
-    note = rep.get("note") or (
-        f"density of familiar new pairs {rep.get('density_ratio_chosen_to_fitted', math.nan):.2g}"
-        f"× that at the fitted λ; {100 * rep.get('familiar_share_between', 0):.1f}% of them "
-        "lie between the two"
-    )
-    return report_rows.ThresholdRow(
-        task=stage["config"]["task"],
-        model=stage["config"]["model"],
-        **_row_fields(read_thresholds(path)),
-        compatible=f"valley rule: λ moved from the fitted {rep.get('fitted_lambda', math.nan):.4g} "
-        f"to the sparsest point of D_new's familiar pairs inside the margin {lo:.4g} .. {hi:.4g}",
-        incompatible=note,
-        metrics={},
-    )
-
-
-def kept_counts(header: Mapping[str, Any]) -> dict[str, int]:
-    """What a filter-like stage kept of its input, from its output's header
-    (:func:`~elicit_jax.pipeline.stages_compat.write_filter_header`): pairs and episodes
-    kept, of how many."""
-    return {
-        "pairs_kept": int(header["pairs_in"]) - int(header["pairs_dropped"]),
-        "pairs_total": int(header["pairs_in"]),
-        "episodes_kept": int(header["episodes_out"]),
-        "episodes_total": int(header["episodes_in"]),
-    }
-
-
-def _filter_row(stage: Mapping[str, Any], path: Path) -> report_rows.FilterRow:
-    h = read_header(path)
-    cfg = stage["config"]
-    method = cfg["method"]
-    if "/heldout/" in stage["id"]:  # the λ-sensitivity study's filters
-        applied = pair_from_json(h["thresholds"], path)[0]
-        method = f"M-Filtered at λ = {applied:.4g} (sensitivity)"
-    return report_rows.FilterRow(
-        task=cfg["task"],
-        model=cfg["model"],
-        method=method,
-        operator=cfg["operator"],
-        **kept_counts(h),
-        note="" if h.get("trusted", True) else "no signal: kept every demo",
-    )
-
-
-def _curation_row(stage: Mapping[str, Any], path: Path) -> report_rows.CurationRow:
-    from elicit_jax.curation.episodes import read_episode_scores
-
-    scores = read_episode_scores(path)
-    cfg = stage["config"]
-    report = dict(scores.report)
-    if "deminf" in cfg:
-        report["drop_fraction"] = cfg["deminf"].get("drop_fraction")
-    return report_rows.CurationRow(
-        task=cfg["task"],
-        model=cfg.get("model"),
-        method=scores.method,
-        operator=cfg["operator"],
-        scores=tuple(float(v) for v in scores.score),
-        threshold=scores.threshold,
-        trusted=scores.trusted,
-        report=report,
-    )
-
-
-def _lambda_point(stage: Mapping[str, Any], path: Path) -> report_rows.LambdaPoint:
-    rep = read_thresholds_header(path).get("report", {})
-    lo, hi = rep["lambda_range"]
-    cfg = stage["config"]
-    return report_rows.LambdaPoint(
-        task=cfg["task"],
-        model=cfg["model"],
-        point=int(rep["point"]),
-        lambda_=read_thresholds(path).lam,
-        fitted=float(rep["fitted_lambda"]),
-        low=float(lo),
-        high=float(hi),
-    )
+    return read_artifact(path, MANIFEST_KIND, 1, what="a pipeline run")
 
 
 def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
@@ -230,68 +77,45 @@ def training_note(train: Mapping[str, Any]) -> str:
     )
 
 
-def _gather_stage(stage: Mapping[str, Any], path: Path, rows: dict[str, list]) -> None:
-    """Add what one finished stage (not an evaluation) contributes to the report's ``rows``,
-    each row marked with the stage's collection."""
-    kind, cfg = stage["kind"], stage["config"]
-    collection = int(cfg.get("collection", 0))
-    sizes = str(cfg.get("sizes", DEFAULT_SIZES))
-
-    def mark(row: Any) -> Any:
-        return dataclasses.replace(row, collection=collection, task=sized_task(row.task, sizes))
-
-    if kind == "collect":
-        rows["lengths"] += [mark(r) for r in _length_rows(stage, path)]
-    elif kind == "fit-thresholds":
-        rows["thresholds"].append(mark(_threshold_row(stage, path)))
-    elif kind == "lambda-valley":
-        rows["thresholds"].append(mark(_valley_row(stage, path)))
-    elif kind in ("filter", "curate"):
-        rows["filters"].append(mark(_filter_row(stage, path)))
-    elif kind in ("deminf", "demo-score", "cupid", "quality"):
-        rows["curation"].append(mark(_curation_row(stage, path)))
-    elif kind == "lambda-point":
-        point = _lambda_point(stage, path)
-        rows["lambda_points"].append(dataclasses.replace(point, task=sized_task(point.task, sizes)))
-    elif kind == "map":
-        where = f"{sized_task(cfg['task'], sizes)}, {cfg['model']}" + (
-            f", collection {collection}" * bool(collection)
-        )
-        rows["maps"].append((f"{where}: compatibility map per operator", str(path)))
+ROLLOUTS = "rollouts"
+"""The report field every study gathers: the per-rollout tables of its finished evaluations
+(the evaluate kind's gatherer), from which its ``results`` are computed."""
 
 
-def walk_run(
-    run_dir: str | Path, report_kind: str, take: Callable[[Mapping[str, Any], Path], bool]
-) -> dict[str, Any]:
-    """Read a run directory the way every report kind does: its manifest, every stage's
-    config, every finished evaluation's rollouts; ``take(stage, path)`` reads what any other
-    finished stage (not the ``report_kind`` stage) contributes, and returns False when its
-    output is not complete yet.
+def gather_fields(
+    run_dir: str | Path, report_kind: str, kinds: StageKinds, fields: tuple[str, ...]
+) -> tuple[dict[str, Any], dict[str, list[Any]]]:
+    """Read a run directory the way every study kind's report does: its manifest, every
+    stage's config, and each finished stage (not the ``report_kind`` stage) by its kind's
+    gatherers (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather`) into the report
+    ``fields`` the study has and :data:`ROLLOUTS` (the gatherers of other fields are not
+    called). A stage whose output is missing, or whose gatherer finds it incomplete, is
+    listed in a note as not finished.
 
     Returns:
       The fields every report has (:class:`~elicit_jax.pipeline.report_rows.RunReport`:
       definition, run directory, ``results`` of every finished evaluation, ``rollouts``,
-      notes, provenance) and the stage ``configs`` and library ``versions``.
+      notes, provenance) and the stage ``configs`` and library ``versions``; and per report
+      field the items its stages added, in stage order.
     """
     import pandas as pd
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     head = manifest["config"]
-    frames = []
+    rows: dict[str, list[Any]] = {name: [] for name in (ROLLOUTS, *fields)}
     configs: dict[str, dict[str, Any]] = {}
-    missing = []
+    missing, evaluations = [], []
     for stage in manifest["stages"]:
         path = run_dir / stage["output"]
         configs.setdefault(stage["kind"], {})[stage["id"]] = stage["config"]
         if stage["kind"] == report_kind:
             continue
-        if not path.exists():
+        kind = kinds.kind(stage["kind"], run_dir)
+        if not path.exists() or not _take(kind.gather, stage, path, rows):
             missing.append(stage["id"])
-        elif stage["kind"] == "evaluate":
-            frames.append(cell_frame(stage["config"], path))
-        elif not take(stage, path):
-            missing.append(stage["id"])
+        elif ROLLOUTS in kind.gather:
+            evaluations.append(path)
     notes = [training_note(configs["train"])] if configs.get("train") else []
     if missing:
         notes.append(
@@ -299,8 +123,9 @@ def walk_run(
             + ", ".join(missing[:8])
             + (" …" if len(missing) > 8 else "")
         )
+    frames = rows.pop(ROLLOUTS)
     rollouts = pd.concat(frames, ignore_index=True) if frames else empty_rollouts()
-    return {
+    run = {
         "pipeline": head["pipeline"],
         "profile": head["profile"],
         "description": head.get("description", ""),
@@ -311,21 +136,35 @@ def walk_run(
         "configs": configs,
         "versions": manifest.get("versions", {}),
         "notes": tuple(notes),
-        "provenance": run_provenance(manifest, run_dir),
+        "provenance": run_provenance(manifest, evaluations),
     }
+    return run, rows
 
 
-def gather(run_dir: str | Path) -> ReportData:
-    """Everything the report shows, read from ``run_dir``'s finished artifacts, with the
-    study's per-rollout table the results were computed from (``rollouts``:
-    :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished evaluation)."""
-    rows: dict[str, list] = {name: [] for name in (*report_rows.ROW_FIELDS, "maps")}
+def _take(
+    gatherers: Mapping[str, Any], stage: Mapping[str, Any], path: Path, rows: dict[str, list]
+) -> bool:
+    """Add what one finished stage contributes to ``rows`` (the fields it has); False, adding
+    nothing, when a gatherer finds its output incomplete."""
+    added = []
+    for name, gatherer in gatherers.items():
+        if name in rows:
+            found = gatherer(stage, path)
+            if found is None:
+                return False
+            added.append((name, found))
+    for name, found in added:
+        rows[name] += found
+    return True
 
-    def take(stage: Mapping[str, Any], path: Path) -> bool:
-        _gather_stage(stage, path, rows)
-        return True
 
-    run = walk_run(run_dir, "report", take)
+def gather(run_dir: str | Path, kinds: StageKinds) -> ReportData:
+    """Everything a filtering study's report shows, read from ``run_dir``'s finished artifacts
+    by the gatherers of ``kinds``, with the study's per-rollout table the results were computed
+    from (``rollouts``: :func:`elicit_jax.pipeline.evidence.cell_frame` rows of every finished
+    evaluation)."""
+    fields = (*report_rows.ROW_FIELDS, "maps")
+    run, rows = gather_fields(run_dir, REPORT_STAGE, kinds, fields)
     results = run.pop("results")
     return ReportData(
         **run,

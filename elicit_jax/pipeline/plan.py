@@ -28,6 +28,7 @@ from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.curation_stages import cupid_plan, operator_stages, per_demo_source
+from elicit_jax.pipeline.gather import REPORT_STAGE
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.plan_cell import (
     Cell,
@@ -37,6 +38,8 @@ from elicit_jax.pipeline.plan_cell import (
 )
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, dict_of, in_sizes, sized_specs
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
+from elicit_jax.pipeline.stage_kind import StageKinds
+from elicit_jax.pipeline.stages import FILTERING_KINDS
 from elicit_jax.sim.operators import episode_traits
 
 FILTER_METHODS = tuple(m for m in METHODS if m not in ("base", "naive"))
@@ -45,23 +48,16 @@ COLLECT_SEED_OFFSETS = {"base": 0, "holdout": 1, "incompatible": 2}
 NEW_SEED_OFFSET = 10
 COLLECTION_STRIDE = 100
 """Collection ``c`` collects with seeds ``collect_seed + COLLECTION_STRIDE · c + offset``."""
-REPORT_KINDS = (
-    "collect",
-    "fit-thresholds",
-    "evaluate",
-    "map",
-    "filter",
-    "curate",
-    "deminf",
-    "demo-score",
-    "cupid",
-    "quality",
-    "lambda-point",
-    "lambda-valley",
-)
+FILTERING = StageKinds(FILTERING_KINDS)
+"""The filtering study's stage kinds (what this planner places)."""
+REPORTED = FILTERING.reported()
+"""The stage kinds the report stage reads
+(:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
 
-def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+def unresolved(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
+    """The config resolver that keeps every raw config (a graph's shape, without the
+    registry's validation: :meth:`~elicit_jax.pipeline.stage_kind.StageKinds.resolve`)."""
     return raw
 
 
@@ -118,7 +114,7 @@ def threshold_stages(
     return contrast, fit
 
 
-def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Graph:
+def build_graph(spec: PipelineSpec, resolve: ConfigResolver = unresolved) -> Graph:
     """The stage graph of ``spec``: each collection's per-task chains, then one report.
 
     Args:
@@ -131,8 +127,8 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = _identity) -> Grap
         part: list[Stage] = []
         for number, sub in collection_specs(sized):
             part += collection_stages(sub, number, _sized_resolver(resolve, name))
-        stages += [in_sizes(s, name) for s in part]
-    stages.append(report_stage(spec, "report", stages, REPORT_KINDS, resolve))
+        stages += [in_sizes(s, name, FILTERING[s.kind].side_by_side) for s in part]
+    stages.append(report_stage(spec, REPORT_STAGE, stages, REPORTED, resolve))
     return Graph(stages)
 
 
@@ -228,8 +224,8 @@ def collection_stages(spec: PipelineSpec, number: int, resolve: ConfigResolver) 
 
 def in_collection(stage: Stage, number: int) -> Stage:
     """``stage`` moved into collection ``number``: ``c<number>/`` after the first part of its
-    id, output and input ids (a map: ``maps/c<number>-<name>.png``, as reports keep maps side
-    by side under their file names)."""
+    id, output and input ids (a kind whose outputs sit side by side, a map:
+    ``maps/c<number>-<name>.png``, as reports keep maps under their file names)."""
 
     def move(path: str, sep: str = "/") -> str:
         head, _, rest = path.partition("/")
@@ -238,7 +234,7 @@ def in_collection(stage: Stage, number: int) -> Stage:
     return dataclasses.replace(
         stage,
         id=move(stage.id),
-        output=move(stage.output, "-" if stage.kind == "map" else "/"),
+        output=move(stage.output, "-" if FILTERING[stage.kind].side_by_side else "/"),
         inputs={k: move(v) for k, v in stage.inputs.items()},
         label=f"c{number}: {stage.label}",
     )

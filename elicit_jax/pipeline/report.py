@@ -1,9 +1,10 @@
-"""Render a pipeline run as Markdown and as one self-contained HTML page.
+"""A filtering study's report (:data:`LAYOUT`): its tables, figures and intro, for the one
+report path of every study kind (:func:`elicit_jax.pipeline.report_folder.write_report`:
+Markdown and one self-contained HTML page, which inlines its PNG maps as base64 and uses no
+external asset).
 
-The content comes from :mod:`elicit_jax.pipeline.tables`; :func:`render_markdown` and
-:func:`render_html` turn it into text; what every report kind shares (first lines, closing
-blocks, the folder) is :mod:`elicit_jax.pipeline.report_folder`'s. The HTML page inlines its
-PNG maps as base64 and uses no external asset.
+The content comes from :mod:`elicit_jax.pipeline.tables`; what every report kind shares (first
+lines, findings, closing blocks, the folder) is :mod:`elicit_jax.pipeline.report_folder`'s.
 """
 
 from __future__ import annotations
@@ -15,14 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.pipeline.across import across_note, across_tables
-from elicit_jax.pipeline.evidence import selection_lines, write_data
-from elicit_jax.pipeline.render import html_document, markdown_document
-from elicit_jax.pipeline.report_folder import (
-    CPU_NOTE,
-    intro_lines,
-    provenance_blocks,
-    write_report_folder,
-)
+from elicit_jax.pipeline.evidence import data_to_json, selection_lines
+from elicit_jax.pipeline.report_folder import ReportLayout, intro_lines
 from elicit_jax.pipeline.tables import (
     INTERVAL_NOTE,
     STD_NOTE,
@@ -39,6 +34,7 @@ from elicit_jax.pipeline.tables import (
     threshold_table,
 )
 from elicit_jax.pipeline.tables_sizes import sizes_heading, sizes_note, sizes_tables
+from elicit_jax.render import FigureRenderer
 
 
 def _sections(data: ReportData) -> list[tuple[str, Any]]:
@@ -73,7 +69,7 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
         blocks.append(("Compatibility maps (per operator)", list(data.maps)))
     if data.lengths:
         blocks.append(("Mean demonstration length per operator", length_table(data)))
-    return blocks + provenance_blocks(data, "Pipeline definition")
+    return blocks
 
 
 def _intro(data: ReportData) -> list[str]:
@@ -98,71 +94,22 @@ def summary_tables(data: ReportData) -> list[tuple[str, Any]]:
     return sizes_tables(data) + across_tables(data) + paired + models_table(data)
 
 
-def render_markdown(data: ReportData, map_dir: str = "") -> str:
-    """The report as Markdown; maps are linked as files relative to the report."""
+def _figures(_: Path) -> tuple[FigureRenderer, FigureRenderer]:
+    """Maps and the λ-sensitivity figure: linked under ``maps/`` in Markdown, inlined from
+    their files as base64 PNG in HTML."""
 
-    def figure(_: str, item: tuple[str, str]) -> list[str]:
+    def markdown(_: str, item: tuple[str, str]) -> list[str]:
         caption, png = item
-        return [f"![{caption}]({map_dir}{Path(png).name})", "", f"*{caption}*", ""]
+        return [f"![{caption}](maps/{Path(png).name})", "", f"*{caption}*", ""]
 
-    return markdown_document(_heading(data), _intro(data), data.findings, _sections(data), figure)
-
-
-def render_html(data: ReportData) -> str:
-    """The report as one self-contained HTML page (maps inlined as base64 PNG)."""
-
-    def figure(_: str, item: tuple[str, str]) -> list[str]:
+    def page(_: str, item: tuple[str, str]) -> list[str]:
         caption, b64 = html.escape(item[0]), base64.b64encode(Path(item[1]).read_bytes()).decode()
         return [
             f'<figure><img alt="{caption}" src="data:image/png;base64,{b64}">'
             f"<figcaption>{caption}</figcaption></figure>"
         ]
 
-    return html_document(
-        f"elicit-jax report: {data.pipeline}",
-        _heading(data),
-        _intro(data),
-        [CPU_NOTE],
-        data.findings,
-        _sections(data),
-        figure,
-    )
-
-
-def _heading(data: ReportData) -> str:
-    return f"elicit-jax report: {data.pipeline} ({data.profile} profile{sizes_heading(data)})"
-
-
-def write_report(
-    data: ReportData,
-    out_dir: str | Path,
-    rollouts: Any = None,
-    rebuilt_from: Path | None = None,
-) -> tuple[Path, Path]:
-    """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``maps/*.png``,
-    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``
-    (:func:`~elicit_jax.pipeline.report_folder.write_report_folder`); returns the Markdown
-    and HTML paths.
-
-    Args:
-      data: what the report shows.
-      out_dir: the report folder.
-      rollouts: the per-rollout table the results were computed from (default
-        ``data.rollouts``; ``None``: none kept, and the report says it cannot be rebuilt).
-      rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
-        are (byte for byte) instead of written anew.
-    """
-    if rollouts is not None:
-        data = dataclasses.replace(data, rollouts=rollouts)
-    return write_report_folder(
-        data,
-        out_dir,
-        kind="pipeline-report",
-        write_data=write_data,
-        draw=_draw,
-        render=lambda d: (render_markdown(d, map_dir="maps/"), render_html(d)),
-        rebuilt_from=rebuilt_from,
-    )
+    return markdown, page
 
 
 def _draw(folder: Path, data: ReportData) -> tuple[ReportData, list[str]]:
@@ -174,3 +121,22 @@ def _draw(folder: Path, data: ReportData) -> tuple[ReportData, list[str]]:
         (folder / "maps" / Path(png).name).write_bytes(Path(png).read_bytes())
     figures = sensitivity_figure(data, folder / "maps" / "lambda-sensitivity.png")
     return dataclasses.replace(data, figures=tuple(figures)), []
+
+
+LAYOUT = ReportLayout(
+    kind="pipeline-report",
+    title="elicit-jax report",
+    definition="Pipeline definition",
+    notes=(),
+    intro=_intro,
+    sections=lambda data, _: _sections(data),
+    draw=_draw,
+    figures=_figures,
+    to_json=data_to_json,
+    heading=sizes_heading,
+)
+"""A filtering (or models) study's report, for
+:func:`~elicit_jax.pipeline.report_folder.write_report`: the sizes side by side of a run at
+several named sizes (its heading and intro name them), the paper's tables with their
+differences, the models and λ-sensitivity tables, the fit, the filters, the curation scores,
+the maps and the demonstration lengths."""

@@ -1,7 +1,9 @@
-"""What every report kind shares (a filtering or models study's report, an elicitation
-study's): its first lines (provenance, seeds, the run, the CPU note), its closing blocks (the
-definition, the stage configs, the versions) and its folder (:func:`write_report_folder`:
-``report.md``, ``report.html``, the raw results, the figures and ``artifact.json``, written
+"""The one report path of every study kind (a filtering or models study's report, an
+elicitation study's): :func:`write_report` writes the report a study kind's
+:class:`ReportLayout` describes (its tables, figures, intro and raw results). What every
+report shares is here: its first lines (provenance, seeds, the run, the CPU note), the
+findings, its closing blocks (the definition, the stage configs, the versions) and its folder
+(``report.md``, ``report.html``, the raw results, the figures and ``artifact.json``, written
 atomically).
 """
 
@@ -24,7 +26,9 @@ from elicit_jax.artifact import (
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.evidence import DATA_FILE, ROLLOUTS_FILE, write_rollouts_table
 from elicit_jax.pipeline.findings import write_beside
+from elicit_jax.pipeline.render import html_document, markdown_document
 from elicit_jax.pipeline.report_rows import RunReport
+from elicit_jax.render import FigureRenderer
 
 CPU_NOTE = (
     "**CPU profile**: network sizes and epochs are shrunk to fit a 2-core machine "
@@ -120,34 +124,76 @@ def intro_lines(data: RunReport, noun: str) -> list[str]:
     return lines
 
 
-def write_report_folder(
-    data: RunReport,
-    out_dir: str | Path,
-    *,
-    kind: str,
-    write_data: Callable[[Path, Any], None],
-    draw: Callable[[Path, Any], tuple[Any, list[str]]],
-    render: Callable[[Any], tuple[str, str]],
-    rebuilt_from: Path | None = None,
-    **fields: Any,
+@dataclasses.dataclass(frozen=True)
+class ReportLayout:
+    """What a study kind's report is made of: everything :func:`write_report` asks of it.
+
+    Attributes:
+      kind: the report folder's artifact kind (``pipeline-report``, ``study-report``).
+      title: the page's title before the study's name (``elicit-jax report``).
+      definition: the title of the closing block that holds the definition's text.
+      notes: intro lines highlighted on the HTML page besides :data:`CPU_NOTE`.
+      intro: ``data -> lines``: the paragraphs before the findings.
+      sections: ``(data, folder) -> blocks``: its tables and figures, in order (``folder``:
+        the report folder being written, holding what ``draw`` drew).
+      draw: ``(folder, data) -> (data, files)``: writes its figures into the folder being
+        written, returns ``data`` as rendered and the figure files to list in its header.
+      figures: ``folder -> (markdown, HTML)``: how each renderer shows one of its figures.
+      to_json: ``data -> header``: its ``report-data.json`` (everything but the rollouts).
+      fields: ``data -> {field: value}``: further fields of the folder's header.
+      heading: ``data -> text``: what the heading adds after the profile (``; sizes default,
+        paper``), nothing by default.
+    """
+
+    kind: str
+    title: str
+    definition: str
+    notes: tuple[str, ...]
+    intro: Callable[[Any], list[str]]
+    sections: Callable[[Any, Path], list[tuple[str, Any]]]
+    draw: Callable[[Path, Any], tuple[Any, list[str]]]
+    figures: Callable[[Path], tuple[FigureRenderer, FigureRenderer]]
+    to_json: Callable[[Any], dict[str, Any]]
+    fields: Callable[[Any], dict[str, Any]] = lambda _: {}
+    heading: Callable[[Any], str] = lambda _: ""
+
+
+def render_report(layout: ReportLayout, data: RunReport, folder: Path) -> tuple[str, str]:
+    """A report as Markdown and as one self-contained HTML page: heading, intro, findings,
+    the layout's sections and the closing blocks every report ends with."""
+    heading = f"{layout.title}: {data.pipeline} ({data.profile} profile{layout.heading(data)})"
+    blocks = layout.sections(data, folder) + provenance_blocks(data, layout.definition)
+    intro = layout.intro(data)
+    markdown_figure, html_figure = layout.figures(folder)
+    markdown = markdown_document(heading, intro, data.findings, blocks, markdown_figure)
+    page = html_document(
+        f"{layout.title}: {data.pipeline}",
+        heading,
+        intro,
+        [CPU_NOTE, *layout.notes],
+        data.findings,
+        blocks,
+        html_figure,
+    )
+    return markdown, page
+
+
+def write_report(
+    layout: ReportLayout, data: RunReport, out_dir: str | Path, rebuilt_from: Path | None = None
 ) -> tuple[Path, Path]:
-    """Atomically write a report folder; returns the Markdown and HTML paths.
+    """Atomically write the report folder of any study kind, as its ``layout`` says;
+    returns the Markdown and HTML paths.
 
     The folder holds ``report.md``, ``report.html``, the raw results (``rollouts.parquet``
     and ``report-data.json``, when ``data.rollouts`` is kept), the figures, the findings and
     ``artifact.json``.
 
     Args:
+      layout: the study kind's report.
       data: what the report shows.
       out_dir: the report folder.
-      kind: the folder's artifact kind (``pipeline-report``, ``study-report``).
-      write_data: writes the kind's ``report-data.json`` of ``data``.
-      draw: ``(folder, data) -> (data, files)``: writes the report's figures into the folder
-        being written, returns ``data`` as rendered and the figure files to list in its header.
-      render: ``data -> (markdown, html)``.
       rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
         are (byte for byte) instead of written anew.
-      **fields: further fields of the header (counts of the kind's own rows).
     """
     out_dir = Path(out_dir)
     check_report_folder(out_dir)
@@ -158,16 +204,16 @@ def write_report_folder(
                 (tmp / name).write_bytes((rebuilt_from / name).read_bytes())
         elif data.rollouts is not None:
             write_rollouts_table(tmp / ROLLOUTS_FILE, data.rollouts, data.pipeline, data.profile)
-            write_data(tmp / DATA_FILE, data)
+            (tmp / DATA_FILE).write_text(dumps(layout.to_json(data)) + "\n")
         kept = [n for n in RAW_FILES if (tmp / n).is_file()]
-        data, drawn = draw(tmp, dataclasses.replace(data, raw_results=bool(kept)))
-        markdown, html = render(data)
+        data, drawn = layout.draw(tmp, dataclasses.replace(data, raw_results=bool(kept)))
+        markdown, html = render_report(layout, data, tmp)
         (tmp / "report.md").write_text(markdown)
         (tmp / "report.html").write_text(html)
         findings = write_beside(data.findings, tmp)
         seeds = training_seeds(data)
         header = make_header(
-            kind,
+            layout.kind,
             1,
             config={"pipeline": data.pipeline, "profile": data.profile},
             inputs={name: tmp / name for name in kept},
@@ -179,7 +225,7 @@ def write_report_folder(
             files=["report.md", "report.html", *kept, *drawn]
             + ([findings["file"]] if findings else []),
             **({"findings": findings} if findings else {}),
-            **fields,
+            **layout.fields(data),
         )
         for entry in header["inputs"].values():
             entry["path"] = Path(entry["path"]).name

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import make_header, write_json
-from elicit_jax.pipeline.definition import DEFAULT_KIND
 from elicit_jax.pipeline.gather import MANIFEST, MANIFEST_KIND
 from elicit_jax.pipeline.graph import Graph
 from elicit_jax.pipeline.runner import RunResult, StageFn, print_summary, run_graph, run_lock
@@ -147,7 +146,8 @@ def run_pipeline(
     Args:
       config: what to run.
       console: the ``rich`` console to show it on (the CLI's).
-      registry: stage functions (default: the real ones, :func:`stages.real_registry`).
+      registry: stage functions (default: every registered kind's,
+        :func:`elicit_jax.pipeline.study_kinds.stage_functions`).
     """
     spec, graph, default_registry = plan_run(config)
     run_dir = Path(config.out) if config.out else default_run_dir(spec, config.tasks)
@@ -230,7 +230,7 @@ def print_results(run_dir: Path, console: Any) -> None:
     from rich.table import Table
 
     kind = _kind_of_run(run_dir)
-    data = kind.gather(run_dir)
+    data = kind.report_data(run_dir)
     for title, (header, rows) in kind.summary(data):
         table = Table(title=title)
         for col in header:
@@ -244,10 +244,9 @@ def print_results(run_dir: Path, console: Any) -> None:
 
 def _kind_of_run(run_dir: Path) -> Any:
     """The study kind of a run directory (recorded in its manifest)."""
-    from elicit_jax.pipeline.gather import read_manifest
-    from elicit_jax.pipeline.study_kinds import study_kind
+    from elicit_jax.pipeline.study_kinds import kind_of_run
 
-    return study_kind(read_manifest(run_dir)["config"].get("kind", DEFAULT_KIND), run_dir)
+    return kind_of_run(run_dir)
 
 
 def render_run_report(
@@ -268,7 +267,7 @@ def render_run_report(
     target = Path(out) if out else run_dir / REPORT_DIR
     notes = None if findings is None else read_findings(findings)
     kind = _kind_of_run(run_dir)
-    data = kind.round_trip(dataclasses.replace(kind.gather(run_dir), findings=notes))
+    data = kind.round_trip(dataclasses.replace(kind.report_data(run_dir), findings=notes))
     return kind.write_report(data, target)
 
 
@@ -284,10 +283,10 @@ def rebuild_report(folder: str | Path, out: str | Path | None = None) -> tuple[P
     """
     from elicit_jax.pipeline.evidence import read_raw
     from elicit_jax.pipeline.findings import FINDINGS_FILE, read_findings
-    from elicit_jax.pipeline.study_kinds import kind_of_data
+    from elicit_jax.pipeline.study_kinds import data_kinds, kind_of_data
 
     folder = Path(folder)
-    header, rollouts = read_raw(folder)
+    header, rollouts = read_raw(folder, data_kinds())
     findings = None
     if (folder / FINDINGS_FILE).is_file():
         findings = read_findings(folder / FINDINGS_FILE)

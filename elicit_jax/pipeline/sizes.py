@@ -144,9 +144,10 @@ def sized_specs(spec: Any) -> list[tuple[str, Any]]:
     return out
 
 
-def in_sizes(stage: Any, name: str) -> Any:
+def in_sizes(stage: Any, name: str, side_by_side: bool) -> Any:
     """``stage`` moved into the sizes ``name``: ``sizes-<name>/`` after the first part of its
-    id, output and input ids (a map: ``maps/sizes-<name>-<file>``)."""
+    id, output and input ids (a kind whose outputs sit side by side, ``side_by_side``, a map:
+    ``maps/sizes-<name>-<file>``)."""
     if name == DEFAULT_SIZES:
         return stage
 
@@ -157,7 +158,7 @@ def in_sizes(stage: Any, name: str) -> Any:
     return dataclasses.replace(
         stage,
         id=move(stage.id),
-        output=move(stage.output, "-" if stage.kind == "map" else "/"),
+        output=move(stage.output, "-" if side_by_side else "/"),
         inputs={k: move(v) for k, v in stage.inputs.items()},
         label=f"{name} sizes: {stage.label}",
     )

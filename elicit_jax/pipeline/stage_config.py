@@ -1,9 +1,10 @@
-"""Stage configs: :func:`resolve_config` turns a stage's raw overrides into the library's full,
+"""Stage configs: each ``resolve_*`` turns a stage's raw overrides into the library's full,
 validated config (unknown fields are an error naming the section), so a changed library default
-changes the recorded config and re-runs the stage.
-
-A stage planned in another collection than the first (``[collections]``) carries
-``collection = c`` beside its library config.
+changes the recorded config and re-runs the stage. They are the ``resolve`` of the stage kinds
+(:data:`elicit_jax.pipeline.stages.FILTERING_KINDS`); a stage planned in another collection than the
+first (``[collections]``) carries ``collection = c`` beside it, and a stage of named sizes
+other than the default ``sizes = "<name>"`` (:mod:`elicit_jax.pipeline.sizes`)
+(:meth:`~elicit_jax.pipeline.stage_kind.StageKind.config`).
 """
 
 from __future__ import annotations
@@ -13,11 +14,10 @@ from collections.abc import Mapping
 from typing import Any
 
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.curation_stages import resolve_cupid, resolve_quality
 from elicit_jax.pipeline.definition import section_fields
 
 PROVISIONAL_PRESET = "square-nut"
-"""The preset the contrast-set scores are judged under before the fit (see ``_resolve_score``);
+"""The preset the contrast-set scores are judged under before the fit (see :func:`resolve_score`);
 the same values the pipelines have always recorded in their [score] stage configs."""
 
 FILTER_METHODS = {
@@ -36,7 +36,8 @@ def _split(raw: Mapping[str, Any], meta: tuple[str, ...]) -> tuple[dict, dict]:
     return {k: raw[k] for k in meta if k in raw}, {k: v for k, v in raw.items() if k not in meta}
 
 
-def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
+    """A collect stage's config: its role and the collection's config (checks the operator)."""
     from elicit_jax.sim.collect import CollectConfig
     from elicit_jax.sim.operators import operator_names
 
@@ -53,7 +54,8 @@ def _resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "collect": cfg}
 
 
-def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
+    """A train stage's config: where it belongs and the profile's full training config."""
     from elicit_jax.policy.config import TrainConfig
 
     meta, over = _split(raw, ("task", "profile", "method", "operator", "study", "point"))
@@ -61,7 +63,8 @@ def _resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "train": cfg.to_dict()}
 
 
-def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
+    """A score stage's config: where it belongs and its scoring config (provisional preset)."""
     from elicit_jax.compat.measures import ScoreConfig, config_dict
 
     meta, over = _split(raw, ("task", "model", "policy_seed", "set", "checkpoint"))
@@ -75,7 +78,8 @@ def _resolve_score(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "score": config_dict(ScoreConfig.from_preset(PROVISIONAL_PRESET, **fields))}
 
 
-def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
+    """A fit-thresholds stage's config: contrast sets, manual (λ, η) if any, the fit."""
     from elicit_jax.compat.threshold_fit import FitConfig
     from elicit_jax.compat.thresholds import ETA_KEY, LAMBDA_KEY, from_config_fields
 
@@ -103,7 +107,8 @@ def _resolve_fit(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "fit": dataclasses.asdict(fit)}
 
 
-def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
+    """A filter stage's config: the method, and the filter config it runs with."""
     from elicit_jax.compat.filtering import FilterConfig
 
     meta, over = _split(raw, ("task", "model", "method", "operator"))
@@ -115,7 +120,8 @@ def _resolve_filter(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "filter": cfg.to_dict()}
 
 
-def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
+    """An evaluate stage's config: where it belongs, its checkpoint selection, the evaluation."""
     from elicit_jax.pipeline.evidence import selection_meta
     from elicit_jax.sim.evaluate import EvalConfig
 
@@ -127,7 +133,8 @@ def _resolve_evaluate(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, **selection_meta(meta, cfg.seed), "evaluate": dataclasses.asdict(cfg)}
 
 
-def _resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
+    """A DemInf stage's config."""
     from elicit_jax.curation.deminf import DemInfConfig
 
     meta, over = _split(raw, ("task", "operator"))
@@ -137,7 +144,8 @@ def _resolve_deminf(raw: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _resolve_demo_score(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_demo_score(raw: dict[str, Any]) -> dict[str, Any]:
+    """A Demo-SCORE stage's config (its task from the config's own)."""
     from elicit_jax.curation.demo_score import DemoScoreConfig
 
     meta, over = _split(raw, ("model", "operator"))
@@ -145,7 +153,7 @@ def _resolve_demo_score(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "task": cfg.task, "demo_score": dataclasses.asdict(cfg)}
 
 
-def _resolve_curate(raw: dict[str, Any]) -> dict[str, Any]:
+def resolve_curate(raw: dict[str, Any]) -> dict[str, Any]:
     """Level and accept fraction of the M-filter budget (from [filter]) and DemInf's own cut
     (from [deminf]); ``rate`` is ``m`` for the ``*-matched`` methods."""
     from elicit_jax.compat.filtering import FilterConfig
@@ -161,38 +169,3 @@ def _resolve_curate(raw: dict[str, Any]) -> dict[str, Any]:
         "accept_fraction": filt.accept_fraction,
         "drop_fraction": deminf.drop_fraction,
     }
-
-
-_RESOLVERS = {
-    "collect": _resolve_collect,
-    "train": _resolve_train,
-    "score": _resolve_score,
-    "fit-thresholds": _resolve_fit,
-    "filter": _resolve_filter,
-    "evaluate": _resolve_evaluate,
-    "deminf": _resolve_deminf,
-    "demo-score": _resolve_demo_score,
-    "curate": _resolve_curate,
-    "cupid": resolve_cupid,
-    "quality": resolve_quality,
-}
-
-
-def resolve_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
-    """Full, validated config of a stage: pipeline keys plus the library config's fields
-    (``map`` and ``report`` stages keep their raw config); a ``collection`` key (a stage of
-    a later collection) and a ``sizes`` key (a stage of named sizes other than the default:
-    :mod:`elicit_jax.pipeline.sizes`) are kept beside them."""
-    resolver = _RESOLVERS.get(kind)
-    if resolver is None:
-        return raw
-    kept = [k for k in ("collection", "sizes") if k in raw]
-    if not kept:
-        return resolver(raw)
-    rest = {k: v for k, v in raw.items() if k not in kept}
-    out = resolver(rest)
-    if "collection" in raw:
-        out["collection"] = int(raw["collection"])
-    if "sizes" in raw:
-        out["sizes"] = str(raw["sizes"])
-    return out

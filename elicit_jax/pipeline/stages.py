@@ -1,15 +1,17 @@
-"""The real stage functions: thin adapters from a :class:`StageContext` to the library.
+"""The filtering study's stage kinds (:data:`FILTERING_KINDS`: one
+:class:`~elicit_jax.pipeline.stage_kind.StageKind` each) and its curation stage functions.
 
-This module holds the curation stages and the report, and the registry of every stage kind;
-the others live in :mod:`~elicit_jax.pipeline.stages_policy` (collect, train, evaluate) and
-:mod:`~elicit_jax.pipeline.stages_compat` (score, fit, filter, map, λ variants); configs are
-resolved in :mod:`~elicit_jax.pipeline.stage_config`.
+The other stage functions live in :mod:`~elicit_jax.pipeline.stages_policy` (collect, train,
+evaluate), :mod:`~elicit_jax.pipeline.stages_compat` (score, fit, filter, map, λ variants) and
+:mod:`~elicit_jax.pipeline.curation_stages` (CUPID, quality flags); configs are resolved in
+:mod:`~elicit_jax.pipeline.stage_config`, outputs gathered in
+:mod:`~elicit_jax.pipeline.gather_rows`.
 
 Each adapter reads its inputs, builds the library's frozen config from the stage config and
 calls ONE library function (``train_policy``, ``score_file``, ``fit_thresholds``,
 ``filter_demos``, the simulator's collection and evaluation, the map renderer). Stages whose
 library writes sibling files (scores + per-episode summary, filtered demos + drop log) get a
-directory output, written atomically as a whole. :func:`resolve_config` turns a stage's raw
+directory output, written atomically as a whole. A kind's ``resolve`` turns a stage's raw
 overrides into the library's full config, so a changed library default changes the recorded
 config and re-runs the stage.
 """
@@ -17,9 +19,17 @@ config and re-runs the stage.
 from __future__ import annotations
 
 from elicit_jax.artifact import atomic_path
-from elicit_jax.pipeline.curation_stages import cupid_stage, quality_stage
-from elicit_jax.pipeline.runner import StageContext, StageFn
-from elicit_jax.pipeline.stage_config import resolve_config
+from elicit_jax.pipeline import gather_rows as gr
+from elicit_jax.pipeline import stage_config as sc
+from elicit_jax.pipeline.curation_stages import (
+    cupid_stage,
+    quality_stage,
+    resolve_cupid,
+    resolve_quality,
+)
+from elicit_jax.pipeline.gather import ROLLOUTS
+from elicit_jax.pipeline.runner import StageContext
+from elicit_jax.pipeline.stage_kind import StageKind
 from elicit_jax.pipeline.stages_compat import (
     filter_stage,
     fit_stage,
@@ -38,12 +48,10 @@ from elicit_jax.pipeline.stages_policy import (
     train_stage,
 )
 
-__all__ = [  # re-exported for the elicitation study's stages and the run planner
+__all__ = [  # re-exported for the elicitation study's stages
     "DEMOS_FILE",
     "SCORES_FILE",
     "demos_file",
-    "real_registry",
-    "resolve_config",
     "train_stage",
 ]
 
@@ -113,31 +121,66 @@ def curate_stage(ctx: StageContext) -> None:
         write_filter_header(ctx, tmp, thresholds, reason, files, counts, trusted=scores.trusted)
 
 
-def report_stage(ctx: StageContext) -> None:
-    """Gather the run's artifacts and write the Markdown + HTML report."""
-    from elicit_jax.pipeline.evidence import round_trip
-    from elicit_jax.pipeline.gather import gather
-    from elicit_jax.pipeline.report import write_report
-
-    write_report(round_trip(gather(ctx.run_dir)), ctx.output)
-
-
-def real_registry() -> dict[str, StageFn]:
-    """Stage kind -> function, for every stage whose library is wired."""
-    return {
-        "collect": collect_stage,
-        "map": map_stage,
-        "evaluate": evaluate_stage,
-        "train": train_stage,
-        "score": score_stage,
-        "fit-thresholds": fit_stage,
-        "filter": filter_stage,
-        "deminf": deminf_stage,
-        "demo-score": demo_score_stage,
-        "cupid": cupid_stage,
-        "quality": quality_stage,
-        "curate": curate_stage,
-        "lambda-point": lambda_point_stage,
-        "lambda-valley": lambda_valley_stage,
-        "report": report_stage,
-    }
+# fmt: off
+FILTERING_KINDS = (
+    StageKind(
+        "collect", collect_stage, sc.resolve_collect, outputs="data/", reported=True,
+        gather={"lengths": gr.length_rows},
+    ),
+    StageKind(
+        "train", train_stage, sc.resolve_train, inputs=("demos0", "demos1"), outputs="policies/"
+    ),
+    StageKind(
+        "evaluate", evaluate_stage, sc.resolve_evaluate, ("policy",), "evals/", True,
+        gather={ROLLOUTS: gr.rollout_frames},
+    ),
+    StageKind(
+        "score", score_stage, sc.resolve_score, ("policy", "demos0", "demos1", "thresholds"),
+        "scores/",
+    ),
+    StageKind(
+        "fit-thresholds", fit_stage, sc.resolve_fit, ("scores",), "thresholds/", True,
+        gather={"thresholds": gr.threshold_rows},
+    ),
+    StageKind(
+        "filter", filter_stage, sc.resolve_filter, ("scores", "thresholds", "demos"),
+        "filtered/", True, gather={"filters": gr.filter_rows},
+    ),
+    StageKind(
+        "curate", curate_stage, sc.resolve_curate,
+        ("episode_scores", "scores", "thresholds", "demos"), "filtered/", True,
+        gather={"filters": gr.filter_rows},
+    ),
+    StageKind(
+        "deminf", deminf_stage, sc.resolve_deminf, ("demos0", "demos1"), "curation/", True,
+        gather={"curation": gr.curation_rows},
+    ),
+    StageKind(
+        "demo-score", demo_score_stage, sc.resolve_demo_score, ("policy", "demos"),
+        "curation/", True, gather={"curation": gr.curation_rows},
+    ),
+    StageKind(
+        "cupid", cupid_stage, resolve_cupid, ("policy", "demos0", "demos1"), "curation/", True,
+        gather={"curation": gr.curation_rows},
+    ),
+    StageKind(
+        "quality", quality_stage, resolve_quality, ("demos0", "demos1"), "curation/", True,
+        gather={"curation": gr.curation_rows},
+    ),
+    StageKind(
+        "lambda-point", lambda_point_stage, None, ("thresholds",), "thresholds/", True,
+        gather={"lambda_points": gr.lambda_points},
+    ),
+    StageKind(
+        "lambda-valley", lambda_valley_stage, None, ("thresholds", "scores:*"), "thresholds/",
+        True, gather={"thresholds": gr.valley_rows},
+    ),
+    StageKind(
+        "map", map_stage, None, ("thresholds", "scores:*"), "maps/", True, side_by_side=True,
+        gather={"maps": gr.map_figures},
+    ),
+)
+# fmt: on
+"""The stage kinds of the filtering study (the elicitation study reuses them and adds its
+own, :data:`elicit_jax.pipeline.elicitation.stages.ELICITATION_KINDS`; each study's report
+stage kind is added by :mod:`elicit_jax.pipeline.study_kinds`)."""

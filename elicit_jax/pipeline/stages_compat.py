@@ -25,13 +25,11 @@ def score_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.score_file import score_file
     from elicit_jax.compat.show import scoring_bar
     from elicit_jax.data.demos import concat_demos, read_demos, write_demos
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
     cfg = ctx.config
     which = cfg["checkpoint"]
-    policy = load_policy(
-        ctx.inputs["policy"], int(which) if str(which).isdigit() else which, seed=cfg["policy_seed"]
-    )
+    policy = load_policy(ctx.inputs["policy"], which, seed=cfg["policy_seed"]).policy
     config = _score_config(ctx, cfg["score"])
     names = sorted(n for n in ctx.inputs if n.startswith("demos"))
     with atomic_path(ctx.output) as tmp:

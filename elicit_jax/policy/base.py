@@ -6,7 +6,7 @@ serves every checkpoint of it.
 
 Example::
 
-    policy = load_policy("runs/base/seed0")
+    policy = load_policy("runs/base/seed0").policy
     preds = policy.members(obs)        # (K, B, A)
     carry = policy.init_carry(B)
     carry, action = policy.act(carry, obs)   # (B, A), ensemble mean in [-1, 1]

@@ -16,17 +16,20 @@ last epoch's file.
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from elicit_jax.artifact import read_header, write_json
+from elicit_jax.artifact import read_artifact, write_json
 from elicit_jax.errors import ElicitError
-from elicit_jax.policy.kinds import ModelKind, foreign_fields, model_kind
+from elicit_jax.policy.kinds import foreign_fields
+
+if TYPE_CHECKING:
+    from elicit_jax.data.demos import Demos
+    from elicit_jax.policy.base import Policy
 
 CHECKPOINT_KIND = "checkpoint"
 RUN_KIND = "training_run"
@@ -198,15 +201,15 @@ def write_seed_header(seed_dir: Path, header: Mapping[str, Any]) -> None:
     write_json(seed_dir / "artifact.json", dict(header))
 
 
+_WHAT = "a policy checkpoint"
+
+
 def seed_dirs(path: str | Path) -> dict[int, Path]:
     """Seed -> checkpoint directory, for a run directory or a single seed directory."""
     path = Path(path)
-    header = read_header(path)
-    kind = header.get("kind")
-    if kind == CHECKPOINT_KIND:
+    header = read_artifact(path, (CHECKPOINT_KIND, RUN_KIND), SCHEMA_VERSION, what=_WHAT)
+    if header["kind"] == CHECKPOINT_KIND:
         return {int(header["seed"]): path}
-    if kind != RUN_KIND:
-        raise ElicitError(f"is a '{kind}' artifact, expected a policy checkpoint", path)
     return {int(s): path / d for s, d in header["seed_dirs"].items()}
 
 
@@ -224,154 +227,34 @@ def list_checkpoints(path: str | Path) -> dict[int, list[int | str]]:
     return out
 
 
-def _resolve_seed_dir(path: Path, seed: int | None) -> Path:
-    dirs = seed_dirs(path)
-    if seed is not None:
-        if seed not in dirs:
-            raise ElicitError(f"no seed {seed}; available seeds: {sorted(dirs)}", path)
-        return dirs[seed]
-    if len(dirs) > 1:
-        first = sorted(dirs)[0]
-        raise ElicitError(
-            f"holds seeds {sorted(dirs)}; pass a seed directory (e.g. {dirs[first]}) or seed=",
-            path,
-        )
-    return next(iter(dirs.values()))
+_REQUIRED = (
+    "kind",
+    "obs_dim",
+    "action_dim",
+    "n_members",
+    "hidden",
+    "dropout",
+    "n_components",
+    "reset_every",
+)
+"""Spec keys every checkpoint records (the others have defaults for older checkpoints)."""
 
 
-@dataclasses.dataclass(frozen=True)
-class LoadedPolicy:
-    """A checkpoint read once: the policy, its training seed and config, its kind's entry.
-
-    Attributes:
-      policy: the :class:`~elicit_jax.policy.base.Policy` (params, normalisation, spec).
-      seed: the training seed of the checkpoint.
-      config: the training config as stored in its header (``{}`` when it records none).
-      kind: the registry entry of its model kind (:mod:`elicit_jax.policy.kinds`).
-      seed_dir: the seed directory it was read from.
-      source: the path as given (named in errors).
-    """
-
-    policy: Any
-    seed: int
-    config: Mapping[str, Any]
-    kind: ModelKind
-    seed_dir: Path
-    source: str
-
-    def train_config(self) -> Any:
-        """The :class:`~elicit_jax.policy.config.TrainConfig` the policy was trained with,
-        restricted to its own training seed (how π_new is retrained between batches).
-
-        Raises:
-          ElicitError: the header records no training config, or an invalid one.
-        """
-        from elicit_jax.policy.config import TrainConfig
-
-        if not self.config:
-            raise ElicitError(
-                "checkpoint header records no training config to retrain with", self.source
-            )
-        config = TrainConfig.from_dict(self.config)
-        return dataclasses.replace(config, seeds=(self.seed,))
-
-
-def load_checkpoint(
-    path: str | Path, which: str | int = "best", *, seed: int | None = None
-) -> LoadedPolicy:
-    """Read a checkpoint once: its policy, seed, training config and model-kind entry.
-
-    Args:
-      path: a seed directory (``runs/base/seed0``) or a run directory with one seed (or pass
-        ``seed``).
-      which: ``"best"`` (lowest validation loss), ``"final"`` (last epoch) or an epoch number.
-      seed: pick this seed of a run directory.
+def checkpoint_spec(header: Mapping[str, Any], seed_dir: Path) -> Mapping[str, Any]:
+    """The model spec a seed header records, checked to name a kind and its sizes.
 
     Raises:
-      ElicitError: missing directory, checkpoint or seed; an unknown model kind; parameters
-        not matching the spec.
+      ElicitError: no spec, no model kind or a missing size, naming the seed's
+        ``artifact.json`` (a checkpoint is never read as one kind by default).
     """
-    import jax
-    import jax.numpy as jnp
-
-    from elicit_jax.policy.base import Policy
-
-    seed_dir = _resolve_seed_dir(Path(path), seed)
-    header = read_header(seed_dir)
-    if int(header.get("schema_version", -1)) > SCHEMA_VERSION:
-        raise ElicitError(
-            f"checkpoint schema {header['schema_version']} is newer than this elicit-jax "
-            f"understands ({SCHEMA_VERSION}); upgrade elicit-jax",
-            seed_dir,
-        )
-    spec = header["model"]
-    kind = _kind_of(spec, seed_dir)
-    file = _params_file(seed_dir, header, which)
-    params = load_params(file)
-    norm = load_params(seed_dir / NORMALIZATION)
-    check_normalization(norm, seed_dir / NORMALIZATION)
-    check_param_shapes(params, spec, file)
-    for f in (file, seed_dir / "normalization.npz"):
-        check_file_hash(seed_dir, header, f)
-    optional = {k: spec[k] for k in ("layer_norm_eps", "dropout_last", "mdn_min_std") if k in spec}
-    policy = Policy(
-        params=jax.tree.map(jnp.asarray, params),
-        obs_mean=jnp.asarray(norm["obs_mean"]),
-        obs_std=jnp.asarray(norm["obs_std"]),
-        kind=kind.name,
-        obs_dim=int(spec["obs_dim"]),
-        action_dim=int(spec["action_dim"]),
-        n_members=int(spec["n_members"]),
-        hidden=tuple(int(h) for h in spec["hidden"]),
-        dropout=float(spec["dropout"]),
-        n_components=int(spec["n_components"]),
-        reset_every=int(spec["reset_every"]),
-        obs_fields=tuple(spec.get("obs_fields", ())),
-        action_std=jnp.asarray(norm["action_std"]) if "action_std" in norm else None,
-        **_typed(optional),
-    )
-    return LoadedPolicy(
-        policy=policy,
-        seed=int(header["seed"]),
-        config=dict(header.get("config") or {}),
-        kind=kind,
-        seed_dir=seed_dir,
-        source=str(path),
-    )
-
-
-def load_policy(path: str | Path, which: str | int = "best", *, seed: int | None = None) -> Any:
-    """Load a :class:`~elicit_jax.policy.base.Policy` from a checkpoint (the ``policy`` of
-    :func:`load_checkpoint`; same arguments and errors)."""
-    return load_checkpoint(path, which, seed=seed).policy
-
-
-def _kind_of(spec: Mapping[str, Any], seed_dir: Path) -> ModelKind:
-    try:
-        return model_kind(str(spec["kind"]))
-    except ElicitError as e:
-        raise ElicitError(f"{e} (checkpoint model spec)", seed_dir) from None
-
-
-def _typed(optional: Mapping[str, Any]) -> dict[str, Any]:
-    """Spec fields older checkpoints may lack (the Policy's defaults apply), typed."""
-    types = {"layer_norm_eps": float, "dropout_last": bool, "mdn_min_std": float}
-    return {k: types[k](v) for k, v in optional.items()}
-
-
-def _params_file(seed_dir: Path, header: Mapping[str, Any], which: str | int) -> Path:
-    """The parameter file of checkpoint ``which`` (best, final or an epoch number)."""
-    if which == "final":
-        which = int(header["final_epoch"])
-    if which == "best":
-        return seed_dir / "params" / "best.npz"
-    if isinstance(which, int) or str(which).isdigit():
-        file = seed_dir / "params" / epoch_file(int(which))
-        if not file.exists():
-            avail = list_checkpoints(seed_dir)[int(header["seed"])]
-            raise ElicitError(f"no checkpoint for epoch {which}; available: {avail}", seed_dir)
-        return file
-    raise ElicitError(f"unknown checkpoint {which!r}; use best, final or an epoch number")
+    spec = header.get("model")
+    file = seed_dir / "artifact.json"
+    if not isinstance(spec, Mapping) or not spec.get("kind"):
+        raise ElicitError("checkpoint records no model kind ('model.kind' is missing)", file)
+    missing = [k for k in _REQUIRED if k not in spec]
+    if missing:
+        raise ElicitError(f"checkpoint model spec lacks {', '.join(missing)}", file)
+    return spec
 
 
 def check_param_shapes(params: Mapping[str, Any], spec: Mapping[str, Any], file: Path) -> None:
@@ -405,9 +288,9 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
     for seed, d in sorted(seed_dirs(path).items()):
         problems: list[str] = []
         try:
-            header = read_header(d)
-            spec = header["model"]
-        except (ElicitError, KeyError) as e:
+            header = read_artifact(d, CHECKPOINT_KIND, SCHEMA_VERSION, what=_WHAT)
+            spec = checkpoint_spec(header, d)
+        except ElicitError as e:
             out[seed] = [f"{d}: unreadable header ({e})"]
             continue
         files = sorted((d / "params").glob("*.npz"))
@@ -429,7 +312,7 @@ def checkpoint_problems(path: str | Path) -> dict[int, list[str]]:
     return out
 
 
-def policy_spec(policy: Any) -> dict[str, Any]:
+def policy_spec(policy: Policy) -> dict[str, Any]:
     """The static spec of a policy, as stored in ``artifact.json``."""
     spec = {k: getattr(policy, k) for k in SPEC_KEYS}
     spec["hidden"] = list(spec["hidden"])
@@ -439,12 +322,12 @@ def policy_spec(policy: Any) -> dict[str, Any]:
     return spec
 
 
-def check_compatible(policy: Any, demos: Any, path: str | Path | None = None) -> None:
+def check_compatible(policy: Policy, demos: Demos, path: str | Path | None = None) -> None:
     """Raise :class:`ElicitError` if ``demos`` do not fit ``policy`` (dims, obs field names).
 
     Args:
-      policy: a loaded policy.
-      demos: a :class:`~elicit_jax.data.demos.Demos`.
+      policy: the policy (:attr:`~elicit_jax.policy.loaded.LoadedPolicy.policy`).
+      demos: the demonstrations.
       path: the demonstration file, named in the error.
     """
     if demos.obs_dim != policy.obs_dim or demos.action_dim != policy.action_dim:

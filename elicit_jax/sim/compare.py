@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.errors import ElicitError
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +92,7 @@ def mcnemar_exact(a: Any, b: Any) -> PairedSuccess:
 
 
 def compare_backends(
-    task: Any, policy: Any, seeds: np.ndarray, horizon: int | None = None, threads: int = 0
+    task: Any, policy: Policy, seeds: np.ndarray, horizon: int | None = None, threads: int = 0
 ) -> tuple[PairedSuccess, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Roll ``policy`` out on MJX (``a``) and on C MuJoCo (``b``) from the same ``seeds (N,)``.
 

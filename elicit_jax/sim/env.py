@@ -31,7 +31,7 @@ from flax import struct
 from elicit_jax.data.demos import ObsField, fields_from_sizes
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim import mjcf
-from elicit_jax.sim.registry import TASKS, task_entry
+from elicit_jax.sim.registry import ACTION_DIM, OBS_DIM, TASKS, task_entry
 
 WARP_LINES = ("Failed to import warp", "Failed to import mujoco_warp")
 
@@ -59,8 +59,6 @@ def import_mjx() -> Any:
 OBS_FIELDS: tuple[ObsField, ...] = fields_from_sizes(
     [("robot0_eef_pos", 3), ("robot0_eef_quat", 4), ("robot0_gripper_qpos", 2), ("object", 14)]
 )
-OBS_DIM = 23
-ACTION_DIM = 7
 ACTION_NAMES = ("dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper")
 """Names of the action dimensions (delta position, delta rotation, gripper)."""
 N_GRIPPER_Q = 6

@@ -15,12 +15,15 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.stats import sample_std
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 ROLLOUTS_KIND = "rollouts"
 ROLLOUTS_SCHEMA_VERSION = 1
@@ -105,7 +108,7 @@ def is_robosuite_task(name: str) -> bool:
 
 def rollout_mujoco_policy(
     task: Any,
-    policy: Any,
+    policy: Policy,
     seeds: np.ndarray,
     horizon: int,
     threads: int = 0,
@@ -184,8 +187,9 @@ def evaluate_refs(
     """
     import pandas as pd
 
-    from elicit_jax.policy.checkpoint import load_policy
-    from elicit_jax.sim.env import ACTION_DIM, OBS_DIM, make_task
+    from elicit_jax.policy.loaded import load_policy
+    from elicit_jax.sim.env import make_task
+    from elicit_jax.sim.registry import task_entry
     from elicit_jax.sim.rollout_mjx import rollout_mjx
 
     backend = resolve_backend(config.backend, config.task, config.env_from)
@@ -201,14 +205,7 @@ def evaluate_refs(
     horizon = config.horizon or task.config.horizon
     frames, steps = [], []
     for ref in refs:
-        which: str | int = int(ref.checkpoint) if ref.checkpoint.isdigit() else ref.checkpoint
-        policy = load_policy(ref.path, which)
-        if policy.obs_dim != OBS_DIM or policy.action_dim != ACTION_DIM:
-            raise ElicitError(
-                f"policy has obs_dim={policy.obs_dim}, action_dim={policy.action_dim}; task "
-                f"'{task.name}' needs {OBS_DIM} and {ACTION_DIM}",
-                ref.path,
-            )
+        policy = load_policy(ref.path, ref.checkpoint, task=task_entry(task.name)).policy
         if backend == "mjx":
             out = rollout_mjx(task, policy, seeds, horizon)
         else:

@@ -13,12 +13,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.robosuite_env import RobosuiteSpec, spec_from_env_args
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 def file_obs_dims(path: str | Path) -> tuple[dict[str, Any], dict[str, int]]:
@@ -97,14 +100,13 @@ def evaluate_refs_robosuite(
     import time
 
     from elicit_jax.policy.base import jitted_act
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
     from elicit_jax.runtime import available_cpus
     from elicit_jax.sim.rollout_robosuite import rollout_policy, shared_pool
 
     policies = []
     for ref in refs:
-        which: str | int = int(ref.checkpoint) if ref.checkpoint.isdigit() else ref.checkpoint
-        policies.append(load_policy(ref.path, which))
+        policies.append(load_policy(ref.path, ref.checkpoint).policy)
     spec, horizon, file_dims = _spec(config, policies[0])
     workers = min(config.workers or available_cpus(), len(seeds))
     results, timing = [], {"policy_seconds": 0.0, "env_steps": 0, "seconds": 0.0}
@@ -123,7 +125,7 @@ def evaluate_refs_robosuite(
     return results, horizon, timing
 
 
-def _spec(config: Any, policy: Any) -> tuple[RobosuiteSpec, int, dict[str, int] | None]:
+def _spec(config: Any, policy: Policy) -> tuple[RobosuiteSpec, int, dict[str, int] | None]:
     """The environment to evaluate in, its horizon and (for ``--env-from``) the file's
     observation widths."""
     from elicit_jax.sim.env import make_task
@@ -138,7 +140,7 @@ def _spec(config: Any, policy: Any) -> tuple[RobosuiteSpec, int, dict[str, int] 
 
 
 def _check_policy(
-    config: Any, ref: Any, policy: Any, spec: RobosuiteSpec, pool: Any, file_dims: Any
+    config: Any, ref: Any, policy: Policy, spec: RobosuiteSpec, pool: Any, file_dims: Any
 ) -> None:
     if policy.action_dim != 7:
         raise ElicitError(f"policy has action_dim={policy.action_dim}; robosuite needs 7", ref.path)

@@ -24,6 +24,12 @@ from types import MappingProxyType
 
 from elicit_jax.errors import ElicitError
 
+OBS_DIM = 23
+"""Observation size of the simulated tasks (end-effector position 3, quaternion 4, gripper 2,
+object 14)."""
+ACTION_DIM = 7
+"""Action size of the simulated tasks (delta position 3, delta rotation 3, gripper 1)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class TaskEntry:
@@ -41,6 +47,9 @@ class TaskEntry:
       recorded_as: more names (lower case) a training set of this task may record, e.g. the
         robosuite environment a robomimic file names (its own name and ``preset_aliases``
         count too); :mod:`elicit_jax.sim.task_match` checks a policy's task with them.
+      obs_dim: the observation size the task gives (a policy must take it).
+      action_dim: the action size the task takes (a policy must predict it); the policy
+        loader checks both against a checkpoint (:func:`elicit_jax.policy.loaded.load_policy`).
     """
 
     name: str
@@ -50,6 +59,8 @@ class TaskEntry:
     preset_aliases: tuple[str, ...] = ()
     no_preset: str = ""
     recorded_as: tuple[str, ...] = ()
+    obs_dim: int = OBS_DIM
+    action_dim: int = ACTION_DIM
 
 
 _ROBOSUITE = (

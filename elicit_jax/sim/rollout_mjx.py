@@ -20,12 +20,15 @@ import hashlib
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.sharding import batch_shardings, devices_for, pad_rows, place
 from elicit_jax.sim.env import Task
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 EXPORT_FORMAT = 1
 
@@ -45,7 +48,7 @@ def rollout_fn(task: Task, horizon: int) -> Any:
     import jax
     import jax.numpy as jnp
 
-    def run(policy: Any, qpos: Any, mocap: Any) -> dict[str, Any]:
+    def run(policy: Policy, qpos: Any, mocap: Any) -> dict[str, Any]:
         b = qpos.shape[0]
         states = jax.vmap(task.reset_to)(qpos, mocap)
         carry = policy.init_carry(b)
@@ -80,7 +83,7 @@ def rollout_fn(task: Task, horizon: int) -> Any:
 
 def rollout_mjx(
     task: Task,
-    policy: Any,
+    policy: Policy,
     seeds: np.ndarray,
     horizon: int | None = None,
     n_devices: int | None = None,
@@ -109,7 +112,7 @@ def rollout_mjx(
 
 def rollout_mjx_on_devices(
     task: Task,
-    policy: Any,
+    policy: Policy,
     seeds: np.ndarray,
     horizon: int | None = None,
     n_devices: int | None = None,

@@ -23,12 +23,15 @@ import itertools
 import logging
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.runtime import available_cpus
 from elicit_jax.sim.env import N_GRIPPER_Q, OBS_DIM, Task
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 LOG = logging.getLogger("elicit_jax.sim.mujoco")
 _ROUTE_LOCK = threading.Lock()
@@ -199,7 +202,7 @@ class BatchSim:
 def rollout_policy(
     task: Task,
     act: Any,
-    policy: Any,
+    policy: Policy,
     seeds: np.ndarray,
     horizon: int,
     threads: int | None = None,

@@ -21,12 +21,15 @@ import atexit
 import contextlib
 import multiprocessing as mp
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.sim.robosuite_env import RobosuiteSpec
+
+if TYPE_CHECKING:
+    from elicit_jax.policy.base import Policy
 
 
 def _worker(conn: Any, spec: RobosuiteSpec, horizon: int, fast: bool = True) -> None:
@@ -207,7 +210,7 @@ class PoolBatch:
 def rollout_policy(
     spec: RobosuiteSpec,
     act: Any,
-    policy: Any,
+    policy: Policy,
     seeds: np.ndarray,
     horizon: int,
     workers: int,

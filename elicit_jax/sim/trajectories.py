@@ -124,15 +124,10 @@ def read_trajectories(
     """
     import pyarrow.parquet as pq
 
-    from elicit_jax.artifact import read_header
+    from elicit_jax.artifact import read_artifact
 
-    header = read_header(path)
-    if header.get("kind") != STEPS_KIND:
-        raise ElicitError(
-            f"is a '{header.get('kind')}' artifact, expected rollout trajectories "
-            "(elicit-jax evaluate --trajectories)",
-            path,
-        )
+    what = "rollout trajectories (elicit-jax evaluate --trajectories)"
+    header = read_artifact(path, STEPS_KIND, STEPS_SCHEMA_VERSION, what=what)
     df = pq.read_table(path).to_pandas()
     labels = sorted(set(df["policy"]))
     have = sorted({(int(s), str(c)) for s, c in zip(df["seed"], df["checkpoint"], strict=True)})

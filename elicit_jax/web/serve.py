@@ -88,7 +88,7 @@ def preflight(template: SessionConfig) -> None:
     with tempfile.TemporaryDirectory(prefix="elicit-serve-") as tmp:
         setup, _, _ = open_session(config, Path(tmp) / "check")
         zeros_o = np.zeros(setup.obs_dim, np.float32)
-        setup.scorer.score(setup.policy, zeros_o, np.zeros(setup.action_dim, np.float32))
+        setup.scorer.score(setup.policy.policy, zeros_o, np.zeros(setup.action_dim, np.float32))
         if config.mode == "informed" and config.prompt:
             setup.prompt_event()
         scene_description(setup.task.mj_model, setup.task.name)

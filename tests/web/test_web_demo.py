@@ -82,12 +82,12 @@ def _fake_registry(calls: list[str], fail: set[str]):
 
 
 def test_a_build_cut_short_looks_unfinished_and_resumes(tmp_path, monkeypatch):
-    from elicit_jax.pipeline import stages
+    from elicit_jax.pipeline import study_kinds
 
     recipe = demo.DemoRecipe()
     calls: list[str] = []
     fail = {"fit-thresholds/reach-pillar/mlp"}
-    monkeypatch.setattr(stages, "real_registry", lambda: _fake_registry(calls, fail))
+    monkeypatch.setattr(study_kinds, "stage_functions", lambda: _fake_registry(calls, fail))
     with pytest.raises(ElicitError, match="cut short"):
         demo.demo_inputs(recipe, tmp_path, echo=lambda _: None, console=QUIET)
     out = tmp_path / demo.recipe_hash(recipe)[:16]

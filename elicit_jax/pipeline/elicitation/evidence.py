@@ -12,14 +12,16 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from elicit_jax.artifact import dumps, make_header
 from elicit_jax.pipeline.elicitation.gather import FilterCount, SessionData, StudyData
-from elicit_jax.pipeline.evidence import STUDY_DATA_KIND, result_rows_of
+from elicit_jax.pipeline.evidence import result_rows_of
+
+STUDY_DATA_KIND = "study-report-data"
+"""The artifact kind of an elicitation study report's ``report-data.json``."""
 
 
 def study_to_json(data: StudyData) -> dict[str, Any]:
@@ -57,11 +59,6 @@ def study_from_json(header: Mapping[str, Any], rollouts: Any, folder: Any = None
             "rollouts": rollouts,
         }
     )
-
-
-def write_study_data(path: Path, data: StudyData) -> None:
-    """Write a study's ``report-data.json``."""
-    path.write_text(dumps(study_to_json(data)) + "\n")
 
 
 def round_trip_study(data: StudyData) -> StudyData:

@@ -18,9 +18,13 @@ import numpy as np
 
 from elicit_jax.artifact import read_header, read_json
 from elicit_jax.compat.thresholds import read_thresholds, read_thresholds_header
-from elicit_jax.pipeline.gather import kept_counts, walk_run
+from elicit_jax.pipeline.gather import gather_fields
+from elicit_jax.pipeline.gather_rows import kept_counts
 from elicit_jax.pipeline.report_rows import RunReport
+from elicit_jax.pipeline.stage_kind import StageKinds
 
+STUDY_REPORT_STAGE = "study-report"
+"""The stage kind of an elicitation study's report stage."""
 PERSON_FILE = "person.json"
 """Beside a study's session: the person's traits, starting and final choices, every change."""
 DISTANCE_KEY = "distance_from_base"
@@ -134,42 +138,53 @@ def session_data(stage: Mapping[str, Any], path: Path) -> SessionData | None:
     )
 
 
-def _filter_count(cfg: Mapping[str, Any], path: Path) -> FilterCount:
+def session_rows(stage: Mapping[str, Any], path: Path) -> list[SessionData] | None:
+    """A session stage's gatherer: its data, or None while its person record is not written."""
+    data = session_data(stage, path)
+    return None if data is None else [data]
+
+
+def base_lengths(stage: Mapping[str, Any], path: Path) -> list[tuple[str, Any]]:
+    """A collect stage's gatherer: D_base's ``(task, (mean length, std, demos))``."""
+    cfg = stage["config"]
+    return [(cfg["collect"]["task"], _lengths(path))] if cfg.get("role") == "base" else []
+
+
+def base_states(stage: Mapping[str, Any], path: Path) -> list[tuple[str, Any]]:
+    """A collect stage's gatherer: D_base's ``(task, first states)``."""
+    cfg = stage["config"]
+    return [(cfg["collect"]["task"], _first_states(path))] if cfg.get("role") == "base" else []
+
+
+def fitted_thresholds(stage: Mapping[str, Any], path: Path) -> list[tuple[Any, Any]]:
+    """A fit-thresholds stage's gatherer: ``((task, model), the fit)``."""
+    cfg = stage["config"]
+    return [((cfg["task"], cfg["model"]), _thresholds(path))]
+
+
+def filter_counts(stage: Mapping[str, Any], path: Path) -> list[FilterCount]:
+    """A filter-session stage's gatherer: what the M-filter kept of a naive session."""
+    cfg = stage["config"]
     where = {"task": cfg["task"], "model": cfg["model"], "person": cfg["person"]}
-    return FilterCount(**where, **kept_counts(read_header(path)))
+    return [FilterCount(**where, **kept_counts(read_header(path)))]
 
 
-def gather_study(run_dir: str | Path) -> StudyData:
-    """Everything the study report shows, read from ``run_dir``'s finished artifacts."""
-    sessions: list[SessionData] = []
-    filters: list[FilterCount] = []
-    base_lengths: dict[str, tuple[float, float, int]] = {}
-    base_states: dict[str, tuple[Any, ...]] = {}
-    thresholds: dict[tuple[str, str], Mapping[str, Any]] = {}
+STUDY_FIELDS = ("sessions", "base_lengths", "base_states", "study_thresholds", "session_filters")
+"""The report fields an elicitation study gathers (its stage kinds' and its extensions of the
+filtering kinds' :attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather` keys)."""
 
-    def take(stage: Mapping[str, Any], path: Path) -> bool:
-        kind, cfg = stage["kind"], stage["config"]
-        if kind == "session":
-            data = session_data(stage, path)
-            sessions.extend([] if data is None else [data])
-            return data is not None
-        if kind == "collect" and cfg.get("role") == "base":
-            base_lengths[cfg["collect"]["task"]] = _lengths(path)
-            base_states[cfg["collect"]["task"]] = _first_states(path)
-        elif kind == "fit-thresholds":
-            thresholds[(cfg["task"], cfg["model"])] = _thresholds(path)
-        elif kind == "filter-session":
-            filters.append(_filter_count(cfg, path))
-        return True
 
-    run = walk_run(run_dir, "study-report", take)
+def gather_study(run_dir: str | Path, kinds: StageKinds) -> StudyData:
+    """Everything the study report shows, read from ``run_dir``'s finished artifacts by the
+    gatherers of ``kinds``."""
+    run, rows = gather_fields(run_dir, STUDY_REPORT_STAGE, kinds, STUDY_FIELDS)
     return StudyData(
         **run,
-        sessions=tuple(sessions),
-        base_lengths=base_lengths,
-        base_states=base_states,
-        thresholds=thresholds,
-        filters=tuple(filters),
+        sessions=tuple(rows["sessions"]),
+        base_lengths=dict(rows["base_lengths"]),
+        base_states=dict(rows["base_states"]),
+        thresholds=dict(rows["study_thresholds"]),
+        filters=tuple(rows["session_filters"]),
     )
 
 

@@ -16,24 +16,27 @@ pairs before training. One report.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import Any
 
+from elicit_jax.pipeline.elicitation.gather import STUDY_REPORT_STAGE
 from elicit_jax.pipeline.elicitation.spec import StudySpec, StudyTask
+from elicit_jax.pipeline.elicitation.stages import ELICITATION_KINDS
 from elicit_jax.pipeline.graph import Graph, Stage
 from elicit_jax.pipeline.plan import (
     collect_stages,
     contrast_sets,
     report_stage,
     threshold_stages,
+    unresolved,
 )
+from elicit_jax.pipeline.plan_cell import ConfigResolver
+from elicit_jax.pipeline.stage_kind import reported_kinds
+from elicit_jax.pipeline.stages import FILTERING_KINDS
 
-ConfigResolver = Callable[[str, dict[str, Any]], dict[str, Any]]
 SESSION_SEED_STRIDE = 1000
-
-
-def _identity(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
-    return raw
+REPORTED = reported_kinds((*FILTERING_KINDS, *ELICITATION_KINDS))
+"""The stage kinds the study's report stage reads
+(:attr:`~elicit_jax.pipeline.stage_kind.StageKind.reported`)."""
 
 
 def session_modes(spec: StudySpec, task: StudyTask) -> dict[str, dict[str, Any]]:
@@ -65,15 +68,14 @@ def person_id(index: int) -> str:
     return f"p{index}"
 
 
-def build_study_graph(spec: StudySpec, resolve: ConfigResolver = _identity) -> Graph:
+def build_study_graph(spec: StudySpec, resolve: ConfigResolver = unresolved) -> Graph:
     """The stage graph of an elicitation study (see the module docstring)."""
     stages: list[Stage] = []
     for task in spec.tasks:
         stages += _collect_stages(spec, task, resolve)
         for model in spec.models:
             stages += _cell_stages(spec, task, model, resolve)
-    kinds = ("collect", "fit-thresholds", "evaluate", "session", "filter-session")
-    stages.append(report_stage(spec, "study-report", stages, kinds, resolve))
+    stages.append(report_stage(spec, STUDY_REPORT_STAGE, stages, REPORTED, resolve))
     return Graph(stages)
 
 

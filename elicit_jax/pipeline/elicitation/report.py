@@ -1,5 +1,7 @@
-"""Render an elicitation study as Markdown and one self-contained HTML page (the filtering
-report's style: the same table rendering, figures inlined as base64 PNG, no external asset).
+"""An elicitation study's report (:data:`LAYOUT`): its tables, figures and intro, for the one
+report path of every study kind (:func:`elicit_jax.pipeline.report_folder.write_report`: the
+filtering report's Markdown and self-contained HTML page, figures inlined as base64 PNG, no
+external asset).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from elicit_jax.pipeline.elicitation.evidence import write_study_data
+from elicit_jax.pipeline.elicitation.evidence import study_to_json
 from elicit_jax.pipeline.elicitation.gather import StudyData
 from elicit_jax.pipeline.elicitation.success import (
     CONDITION_LABELS,
@@ -31,15 +33,9 @@ from elicit_jax.pipeline.elicitation.tables import (
     threshold_table,
 )
 from elicit_jax.pipeline.evidence import selection_lines
-from elicit_jax.pipeline.render import html_document, markdown_document
-from elicit_jax.pipeline.report_folder import (
-    CPU_NOTE,
-    intro_lines,
-    provenance_blocks,
-    write_report_folder,
-)
+from elicit_jax.pipeline.report_folder import ReportLayout, intro_lines
 from elicit_jax.pipeline.tables import STD_NOTE
-from elicit_jax.render import html_figure
+from elicit_jax.render import FigureRenderer, html_figure
 from elicit_jax.stats import significant
 
 FIGURES = "figures"
@@ -105,7 +101,7 @@ def _figure(data: StudyData, task: str, model: str) -> bytes | None:
     return figure_png(fig)
 
 
-def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any]]:
+def _sections(data: StudyData, folder: Path) -> list[tuple[str, Any]]:
     title = (
         "Base / Naive / Naive + M-filtered / Informed (success %, mean (std) over seeds; "
         f"differences Holm-adjusted over the {table2_tests(data)} of this table)"
@@ -126,7 +122,7 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
         learning = learning_table(data, task, model)
         blocks.append((f"{where}: do the people learn, and how fast?", learning))
         name = f"{task}-{model}-learning.png"
-        if name in figures:
+        if (folder / FIGURES / name).is_file():
             blocks.append((f"{where}: learning curves", [("figure", name)]))
     blocks.append(("Demonstration lengths: accepted demonstrations against D_base",
                    length_table(data)))  # fmt: skip
@@ -137,7 +133,7 @@ def _sections(data: StudyData, figures: dict[str, bytes]) -> list[tuple[str, Any
         blocks.append(("What the M-filter kept of each naive session", filter_table(data)))
     if data.thresholds:
         blocks.append(("Thresholds (every session and the M-filter)", threshold_table(data)))
-    return blocks + provenance_blocks(data, "Study definition")
+    return blocks
 
 
 def _intro(data: StudyData) -> list[str]:
@@ -154,71 +150,44 @@ def summary_tables(data: StudyData) -> list[tuple[str, Any]]:
     ]
 
 
-def render_markdown(data: StudyData, figures: dict[str, bytes]) -> str:
-    """The study report as Markdown; figures are linked as files beside it."""
-
-    def figure(title: str, item: tuple[str, str]) -> list[str]:
-        return [f"![{title}]({FIGURES}/{item[1]})", ""]
-
-    blocks = _sections(data, figures)
-    return markdown_document(_heading(data), _intro(data), data.findings, blocks, figure)
-
-
-def render_html(data: StudyData, figures: dict[str, bytes]) -> str:
-    """The study report as one self-contained HTML page."""
-
-    def figure(title: str, item: tuple[str, str]) -> list[str]:
-        return [html_figure(figures[item[1]], title)]
-
-    return html_document(
-        f"elicit-jax study: {data.pipeline}",
-        _heading(data),
-        _intro(data),
-        [CPU_NOTE, MODEL_NOTE],
-        data.findings,
-        _sections(data, figures),
-        figure,
-    )
-
-
-def _heading(data: StudyData) -> str:
-    return f"elicit-jax study: {data.pipeline} ({data.profile} profile)"
-
-
-def write_study_report(
-    data: StudyData, out_dir: str | Path, rebuilt_from: Path | None = None
-) -> tuple[Path, Path]:
-    """Atomically write ``out_dir/`` with ``report.md``, ``report.html``, ``figures/*.png``,
-    the raw results (``rollouts.parquet``, ``report-data.json``) and ``artifact.json``
-    (:func:`~elicit_jax.pipeline.report_folder.write_report_folder`); returns the Markdown
-    and HTML paths.
-
-    Args:
-      data: what the report shows (``data.rollouts``: the per-rollout table; ``None``: no
-        raw results kept, and the report says it cannot be rebuilt).
-      out_dir: the report folder.
-      rebuilt_from: a report folder being rebuilt: its raw-result files are copied as they
-        are (byte for byte).
-    """
-    figures = {}
+def _draw(folder: Path, data: StudyData) -> tuple[StudyData, list[str]]:
+    """Draw each cell's learning curves into ``folder/figures``."""
+    (folder / FIGURES).mkdir()
+    drawn = []
     for task, model in cells_of(data):
         png = _figure(data, task, model)
         if png is not None:
-            figures[f"{task}-{model}-learning.png"] = png
-
-    def draw(folder: Path, shown: StudyData) -> tuple[StudyData, list[str]]:
-        (folder / FIGURES).mkdir()
-        for name, png in figures.items():
+            name = f"{task}-{model}-learning.png"
             (folder / FIGURES / name).write_bytes(png)
-        return shown, [f"{FIGURES}/{n}" for n in figures]
+            drawn.append(f"{FIGURES}/{name}")
+    return data, drawn
 
-    return write_report_folder(
-        data,
-        out_dir,
-        kind="study-report",
-        write_data=write_study_data,
-        draw=draw,
-        render=lambda d: (render_markdown(d, figures), render_html(d, figures)),
-        rebuilt_from=rebuilt_from,
-        n_sessions=len(data.sessions),
-    )
+
+def _figures(folder: Path) -> tuple[FigureRenderer, FigureRenderer]:
+    """Learning curves: linked under ``figures/`` in Markdown, inlined from the folder being
+    written in HTML."""
+
+    def markdown(title: str, item: tuple[str, str]) -> list[str]:
+        return [f"![{title}]({FIGURES}/{item[1]})", ""]
+
+    def page(title: str, item: tuple[str, str]) -> list[str]:
+        return [html_figure((folder / FIGURES / item[1]).read_bytes(), title)]
+
+    return markdown, page
+
+
+LAYOUT = ReportLayout(
+    kind="study-report",
+    title="elicit-jax study",
+    definition="Study definition",
+    notes=(MODEL_NOTE,),
+    intro=_intro,
+    sections=_sections,
+    draw=_draw,
+    figures=_figures,
+    to_json=study_to_json,
+    fields=lambda data: {"n_sessions": len(data.sessions)},
+)
+"""An elicitation study's report, for :func:`~elicit_jax.pipeline.report_folder.write_report`:
+Table 2, per cell its people, ablation and learning (with its curves), the demonstration
+lengths, HG-DAgger's interventions, the M-filter's counts and the thresholds."""

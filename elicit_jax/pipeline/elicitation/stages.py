@@ -1,6 +1,8 @@
-"""Stage functions of an elicitation study: sessions with simulated people, the M-filter of a
-naive session's demonstrations, and the study report (the other stages are the filtering
-pipeline's own: collect, train, score, fit-thresholds, evaluate).
+"""The stage kinds an elicitation study adds (:data:`ELICITATION_KINDS`): sessions with
+simulated people and the M-filter of a naive session's demonstrations; and what its report
+gathers from the filtering pipeline's own kinds (collect, fit-thresholds:
+:data:`ELICITATION_GATHER`). Its other stages are the filtering pipeline's: collect, train,
+score, fit-thresholds, evaluate.
 
 A session stage runs in its output directory, which is a session directory: a run killed
 mid-session resumes it where it stopped (the session's own resume; the person relives the
@@ -9,13 +11,14 @@ recorded episodes), and a changed config or input starts it again.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from elicit_jax.artifact import atomic_path, write_json
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.elicitation import gather as study_gather
 from elicit_jax.pipeline.elicitation.gather import DISTANCE_KEY, PERSON_FILE
-from elicit_jax.pipeline.runner import StageContext, StageFn
+from elicit_jax.pipeline.runner import StageContext
+from elicit_jax.pipeline.stage_kind import StageKind
 
 # Session fields only known when the stage runs: stand-ins while the settings are validated,
 # removed again before they are recorded.
@@ -41,28 +44,16 @@ def _resolve_session(raw: dict[str, Any]) -> dict[str, Any]:
 
 
 def _resolve_filter_session(raw: dict[str, Any]) -> dict[str, Any]:
-    from elicit_jax.pipeline.stages import resolve_config
+    from elicit_jax.pipeline.stage_config import resolve_filter, resolve_score
 
     where = {"task": raw["task"], "model": raw["model"]}
-    score = resolve_config(
-        "score", {**raw["score"], **where, "policy_seed": raw["policy_seed"], "set": "naive"}
+    score = resolve_score(
+        {**raw["score"], **where, "policy_seed": raw["policy_seed"], "set": "naive"}
     )
-    filt = resolve_config(
-        "filter", {**raw["filter"], **where, "method": "filtered", "operator": raw["person"]}
+    filt = resolve_filter(
+        {**raw["filter"], **where, "method": "filtered", "operator": raw["person"]}
     )
     return {**where, "person": raw["person"], "score": score, "filter": filt}
-
-
-def resolve_study_config(kind: str, raw: dict[str, Any]) -> dict[str, Any]:
-    """Full, validated config of a study stage (the filtering pipeline's resolvers for its
-    own stage kinds)."""
-    from elicit_jax.pipeline.stages import resolve_config
-
-    if kind == "session":
-        return _resolve_session(raw)
-    if kind == "filter-session":
-        return _resolve_filter_session(raw)
-    return resolve_config(kind, raw)
 
 
 def session_stage(ctx: StageContext) -> None:
@@ -144,7 +135,7 @@ def filter_session_stage(ctx: StageContext) -> None:
     from elicit_jax.compat.thresholds import read_thresholds
     from elicit_jax.pipeline.stages import DEMOS_FILE, SCORES_FILE
     from elicit_jax.pipeline.stages_compat import write_filter_output
-    from elicit_jax.policy.checkpoint import load_policy
+    from elicit_jax.policy.loaded import load_policy
 
     thresholds = read_thresholds(ctx.inputs["thresholds"])
     source = ctx.inputs["session"] / DEMOS_FILE
@@ -157,7 +148,7 @@ def filter_session_stage(ctx: StageContext) -> None:
         if source.exists():
             policy = load_policy(
                 ctx.inputs["policy"], score_cfg["checkpoint"], seed=score_cfg["policy_seed"]
-            )
+            ).policy
             score_file(
                 policy,
                 source,
@@ -175,22 +166,25 @@ def filter_session_stage(ctx: StageContext) -> None:
         )
 
 
-def study_report_stage(ctx: StageContext) -> None:
-    """Gather the study's artifacts and write its Markdown + HTML report."""
-    from elicit_jax.pipeline.elicitation.evidence import round_trip_study
-    from elicit_jax.pipeline.elicitation.gather import gather_study
-    from elicit_jax.pipeline.elicitation.report import write_study_report
+# fmt: off
+ELICITATION_KINDS = (
+    StageKind(
+        "session", session_stage, _resolve_session, ("policy", "base", "thresholds"),
+        "sessions/", True, gather={"sessions": study_gather.session_rows},
+    ),
+    StageKind(
+        "filter-session", filter_session_stage, _resolve_filter_session,
+        ("session", "policy", "thresholds"), "filtered/", True,
+        gather={"session_filters": study_gather.filter_counts},
+    ),
+)
+"""The stage kinds an elicitation study adds to the filtering study's."""
 
-    write_study_report(round_trip_study(gather_study(ctx.run_dir)), Path(ctx.output))
-
-
-def study_registry() -> dict[str, StageFn]:
-    """Stage kind -> function for an elicitation study."""
-    from elicit_jax.pipeline.stages import real_registry
-
-    return {
-        **real_registry(),
-        "session": session_stage,
-        "filter-session": filter_session_stage,
-        "study-report": study_report_stage,
-    }
+ELICITATION_GATHER = {
+    "collect": {
+        "base_lengths": study_gather.base_lengths, "base_states": study_gather.base_states,
+    },
+    "fit-thresholds": {"study_thresholds": study_gather.fitted_thresholds},
+}
+# fmt: on
+"""What an elicitation study's report gathers from the filtering study's stage kinds."""
