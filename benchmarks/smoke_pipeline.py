@@ -10,6 +10,8 @@ run cannot fail on a wiring error after hours.
 
     python benchmarks/smoke_pipeline.py filtering --profile cpu --tasks square-nut
     python benchmarks/smoke_pipeline.py models --profile cpu --out /tmp/smoke-models
+    python benchmarks/smoke_pipeline.py phenomenon-robosuite --tasks robosuite-round \
+        --sizes default,paper                  # named sizes shrink too (4 + 2 per operator)
 
 Writes the tiny definition next to the run (``<out>/tiny.toml``) and prints the stage summary.
 """
@@ -78,7 +80,7 @@ def shrink(data: dict[str, Any]) -> dict[str, Any]:
     """The same definition at tiny sizes (graph shape unchanged)."""
     data = dict(data)
     data["pipeline"] = {**data["pipeline"], "seeds": [0, 1]}
-    data["task"] = [{**t, **TINY_TASK} for t in data["task"]]
+    data["task"] = [{**t, **TINY_TASK, **_tiny_sizes(t)} for t in data["task"]]
     data["train"] = {**data.get("train", {}), **TINY_TRAIN}
     data["evaluate"] = {**data.get("evaluate", {}), "rollouts": 4}
     demo_score = data.get("demo_score", {})
@@ -94,11 +96,21 @@ def shrink(data: dict[str, Any]) -> dict[str, Any]:
     return data
 
 
+def _tiny_sizes(task: dict[str, Any]) -> dict[str, Any]:
+    """A task's named sizes shrunk too, each still unlike the tiny default counts (so a
+    ``--sizes default,NAME`` smoke run plans both)."""
+    if "sizes" not in task:
+        return {}
+    small = {"base_episodes": TINY_TASK["base_episodes"] - 2, "new_episodes": 2}
+    return {"sizes": {name: dict(small) for name in task["sizes"]}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("definition", help="a shipped definition name or a TOML file")
     parser.add_argument("--profile", default=None)
     parser.add_argument("--tasks", default=None, help="comma-separated tasks")
+    parser.add_argument("--sizes", default=None, help="named sizes, e.g. default,paper")
     parser.add_argument("--out", default=None, help="run directory [/tmp/smoke-<name>]")
     args = parser.parse_args()
 
@@ -124,6 +136,7 @@ def main() -> None:
             out=str(out / "run"),
             progress=False,
             tasks=tasks,
+            sizes=args.sizes,
         ),
         console=Console(),
     )

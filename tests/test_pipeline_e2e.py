@@ -167,7 +167,7 @@ def test_cli_reports_a_bad_definition_in_one_line(tmp_path):
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines() == [
         f"error: {bad}: [pipeline]: unknown key(s) sedes (allowed: collect_seed, description, "
-        "methods, models, name, profile, seeds)"
+        "methods, models, name, profile, seeds, sizes)"
     ]
 
 

@@ -276,3 +276,49 @@ def test_conflict_down_demos_conflict_by_their_own_states(work, tmp_path):
                     "--require", "conflicts", "-o", str(tmp_path / "no.parquet")])  # fmt: skip
     assert refused.exit_code != 0 and "2 of them not 'conflicts'" in str(refused.exception)
     assert not (tmp_path / "no.parquet").exists()
+
+
+def test_remembered_action_dims_step_exactly_as_robosuite():
+    """The evaluation speed-up (``make_env(fast=True)``: each robot remembers its action size)
+    changes no number: from the same seeded initial states and actions, across a reset (which
+    builds new controllers), both environments give the same observations and successes to
+    the bit, and the remembered size is recomputed for a new controller."""
+    from elicit_jax.sim import robosuite_env as rs
+    from elicit_jax.sim.env import make_task
+
+    spec = make_task("robosuite-round").spec
+    plain, fast = rs.make_env(spec, 1000, fast=False), rs.make_env(spec, 1000)
+    assert not getattr(type(plain.robots[0]), "_elicit_remembers", False)
+    assert type(fast.robots[0])._elicit_remembers and fast.robots[0].action_dim == 7
+    actions = np.random.default_rng(0).uniform(-0.6, 0.6, (2, 12, 7))
+    for seed, steps in zip((5, 6), actions, strict=True):
+        runs = []
+        for env in (plain, fast):
+            obs = [rs.flat_obs(rs.reset_seeded(env, seed), spec.obs_keys)]
+            for a in steps:
+                d, *_ = env.step(a)
+                obs.append(np.append(rs.flat_obs(d, spec.obs_keys), rs.success(env)))
+            runs.append(np.concatenate(obs[1:]))
+        assert np.array_equal(runs[0], runs[1])
+        robot = fast.robots[0]
+        assert robot.__dict__["_elicit_action_dim"][0] is robot.composite_controller
+    plain.close()
+    fast.close()
+
+
+def test_evaluation_loop_gives_the_same_rollouts_with_and_without_the_speed_up(work, pool):
+    """Through the evaluation's own loop (worker processes, refilled slots): a pool built as
+    robosuite builds its environments (``fast=False``) and the shared, sped-up pool record
+    the same states, actions, successes and lengths."""
+    from elicit_jax.policy.base import jitted_act
+    from elicit_jax.policy.loaded import load_policy
+    from elicit_jax.sim.rollout_robosuite import SHARED_HORIZON, EnvPool, rollout_policy
+
+    policy = load_policy(next((work["dir"] / "run").glob("seed*")), "final").policy
+    seeds = np.array([31, 32, 33])
+    with EnvPool(pool.spec, 2, SHARED_HORIZON, fast=False) as plain:
+        old = rollout_policy(pool.spec, jitted_act(), policy, seeds, 6, 2, plain, True)
+    new = rollout_policy(pool.spec, jitted_act(), policy, seeds, 6, 2, pool, True)
+    for key in ("success", "steps_to_success", "ret", "unstable", "init_obs", "states",
+                "state_mask", "actions", "env_steps"):  # fmt: skip
+        assert np.array_equal(old[key], new[key]), key

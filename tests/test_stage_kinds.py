@@ -99,6 +99,8 @@ def test_the_config_resolver_is_the_kinds_own():
     with pytest.raises(ElicitError, match=r"\[toy\] unknown keys \['speed'\]"):
         kinds.resolve("toy", {"speed": 3})
     assert kinds.resolve("toy", {"value": "4", "collection": 2}) == {"value": 4, "collection": 2}
+    sized = kinds.resolve("toy", {"value": "4", "collection": 2, "sizes": "paper"})
+    assert sized == {"value": 4, "collection": 2, "sizes": "paper"}  # named sizes kept too
 
 
 def test_an_unregistered_kind_is_a_one_line_error():

@@ -16,6 +16,11 @@ pipeline_app = command_group(
 
 _PROFILE_HELP = "paper (the paper's sizes) or cpu (shrunk to fit a 2-core machine)."
 _TASKS_HELP = "Comma-separated tasks of the definition to run [all]."
+_SIZES_HELP = (
+    "Named study sizes to run side by side, comma-separated: default (the tasks' own "
+    "D_base/D_new counts) or a [task.sizes.NAME] of the definition, e.g. paper [the "
+    "definition's [pipeline] sizes, else default]."
+)
 
 
 def _tasks(value: str | None) -> tuple[str, ...] | None:
@@ -32,6 +37,7 @@ def pipeline_run(
     profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
     tasks: str = typer.Option(None, "--tasks", help=_TASKS_HELP),
+    sizes: str = typer.Option(None, "--sizes", help=_SIZES_HELP),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bars."),
     ray: str = typer.Option(
         None,
@@ -45,6 +51,7 @@ def pipeline_run(
     Examples:
       elicit-jax pipeline run pipelines/filtering.toml --profile cpu --tasks square-nut
       elicit-jax pipeline run filtering --out runs/filtering --ray auto
+      elicit-jax pipeline run robosuite --profile cpu --sizes default,paper
     """
     from rich.console import Console
 
@@ -57,6 +64,7 @@ def pipeline_run(
         progress=progress,
         ray=ray,
         tasks=_tasks(tasks),
+        sizes=sizes,
     )
     run_pipeline(config, console=Console())
 
@@ -67,6 +75,7 @@ def pipeline_status(
     profile: str = typer.Option(None, "--profile", help=_PROFILE_HELP),
     out: Path = typer.Option(None, "--out", "-o", help="Run directory [runs/<name>-<profile>]."),
     tasks: str = typer.Option(None, "--tasks", help=_TASKS_HELP),
+    sizes: str = typer.Option(None, "--sizes", help=_SIZES_HELP),
 ) -> None:
     """Show which stages are up to date and which the next run would run (runs nothing).
 
@@ -82,6 +91,7 @@ def pipeline_status(
             profile=profile,
             out=None if out is None else str(out),
             tasks=_tasks(tasks),
+            sizes=sizes,
         ),
         Console(),
     )

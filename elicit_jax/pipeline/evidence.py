@@ -3,9 +3,9 @@
 A study's report folder holds, beside ``report.md``:
 
 * ``rollouts.parquet`` — one row per evaluation rollout: the policy cell (collection, task,
-  model, method, operator, study, λ point), training seed, checkpoint, evaluation seed and its role
-  (``select``: rollouts the checkpoint is chosen on; ``report``: rollouts whose success is
-  reported), rollout index, initial-state seed, success and length;
+  model, method, operator, study, λ point, sizes), training seed, checkpoint, evaluation seed
+  and its role (``select``: rollouts the checkpoint is chosen on; ``report``: rollouts whose
+  success is reported), rollout index, initial-state seed, success and length;
 * ``report-data.json`` — everything else the report shows (threshold fits, filter counts,
   curation scores, demonstration lengths, stage configs, versions, the run's provenance).
 
@@ -32,6 +32,7 @@ import numpy as np
 from elicit_jax.artifact import dumps, read_artifact, read_header
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
+from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
 
 ROLLOUTS_FILE = "rollouts.parquet"
 DATA_FILE = "report-data.json"
@@ -40,7 +41,7 @@ DATA_KIND = "report-data"
 SELECTIONS = ("heldout", "reported")
 SELECT_SEED_OFFSET = 100
 """Default selection seed of held-out selection: the reported evaluation seed + this."""
-CELL_KEYS = ("collection", "task", "model", "method", "operator", "study", "point")
+CELL_KEYS = ("collection", "task", "model", "method", "operator", "study", "point", "sizes")
 SELECTION_TEXT = {
     "heldout": "**Checkpoint selection: held-out.** Each training seed's checkpoint is chosen "
     "on the rollouts of one evaluation seed (initial states) and its success is reported on "
@@ -124,6 +125,7 @@ def cell_frame(config: Mapping[str, Any], path: str | Path) -> Any:
         operator=config.get("operator") or "",
         study=str(config.get("study", "main")),
         point=np.int32(-1 if point is None else point),
+        sizes=str(config.get("sizes", DEFAULT_SIZES)),
         selection=selection,
         role=role,
         training_seed=frame["seed"].astype(np.int32),
@@ -182,6 +184,7 @@ def choose_checkpoint(rollouts: Any) -> tuple[str, float]:
 def _cell_rows(cell: Any) -> list[ResultRow]:
     """Per training seed of one cell: the chosen checkpoint and its reported success."""
     first = cell.iloc[0]
+    sizes = str(first["sizes"])
     rows = []
     for seed, g in cell.groupby("training_seed", sort=True):
         report = g[g["role"] == "report"]
@@ -196,7 +199,7 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
         reported = report[report["checkpoint"] == checkpoint]
         rows.append(
             ResultRow(
-                task=str(first["task"]),
+                task=sized_task(str(first["task"]), sizes),
                 model=str(first["model"]),
                 method=str(first["method"]),
                 operator=str(first["operator"]) or None,
@@ -212,6 +215,7 @@ def _cell_rows(cell: Any) -> list[ResultRow]:
                 eval_seeds=tuple(sorted({int(s) for s in g["eval_seed"]})),
                 select_success=select_success,
                 collection=int(first["collection"]),
+                sizes=sizes,
             )
         )
     return rows
@@ -319,7 +323,10 @@ def read_raw(folder: str | Path, data_kinds: Sequence[str]) -> tuple[dict[str, A
             )
     header = read_artifact(folder / DATA_FILE, tuple(data_kinds), 1)
     read_artifact(folder / ROLLOUTS_FILE, ROLLOUTS_KIND, 1, what="a study rollout table")
-    return header, pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
+    frame = pq.read_table(folder / ROLLOUTS_FILE).to_pandas()
+    if "sizes" not in frame:  # kept before named sizes: the default sizes
+        frame = frame.assign(sizes=DEFAULT_SIZES)
+    return header, frame
 
 
 def report_data_of(header: Mapping[str, Any], frame: Any, folder: Path) -> ReportData:

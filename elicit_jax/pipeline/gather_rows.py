@@ -5,7 +5,9 @@ fits and valley rules, filter counts, curation scores, λ points, maps) and the 
 rollouts every study gathers.
 
 Each gatherer takes a stage's record in ``run.json`` and its output path and returns the rows
-it adds, each marked with the stage's collection.
+it adds, each marked with the stage's collection and, for named sizes other than the default
+(:mod:`elicit_jax.pipeline.sizes`), with its sizes in the task label
+(:func:`~elicit_jax.pipeline.sizes.sized_task`), so every table keeps a run's sizes apart.
 """
 
 from __future__ import annotations
@@ -28,13 +30,24 @@ from elicit_jax.compat.thresholds import (
 )
 from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import cell_frame
+from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
 from elicit_jax.provenance import shown_paths_in
 
 
+def _sizes(stage: Mapping[str, Any]) -> str:
+    """The named sizes ``stage`` was planned at (:data:`DEFAULT_SIZES` when its config has
+    none, as every stage of a run without sizes)."""
+    return str(stage["config"].get("sizes", DEFAULT_SIZES))
+
+
 def _mark(stage: Mapping[str, Any], rows: list[Any]) -> list[Any]:
-    """``rows`` marked with the collection of ``stage``."""
+    """``rows`` marked with the collection and the sizes of ``stage``."""
     collection = int(stage["config"].get("collection", 0))
-    return [dataclasses.replace(row, collection=collection) for row in rows]
+    sizes = _sizes(stage)
+    return [
+        dataclasses.replace(row, collection=collection, task=sized_task(row.task, sizes))
+        for row in rows
+    ]
 
 
 def length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.LengthRow]:
@@ -208,13 +221,16 @@ def curation_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.Cura
 
 
 def lambda_points(stage: Mapping[str, Any], path: Path) -> list[report_rows.LambdaPoint]:
-    """One λ point of the sensitivity study (not marked: the study runs on collection 0)."""
-    return [_lambda_point(stage, path)]
+    """One λ point of the sensitivity study (marked with its sizes only: the study runs on
+    collection 0)."""
+    point = _lambda_point(stage, path)
+    return [dataclasses.replace(point, task=sized_task(point.task, _sizes(stage)))]
 
 
 def map_figures(stage: Mapping[str, Any], path: Path) -> list[tuple[str, str]]:
     """A compatibility map: its caption and file."""
     cfg = stage["config"]
     collection = int(cfg.get("collection", 0))
-    where = f"{cfg['task']}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
+    task = sized_task(cfg["task"], _sizes(stage))
+    where = f"{task}, {cfg['model']}" + (f", collection {collection}" * bool(collection))
     return [(f"{where}: compatibility map per operator", str(path))]

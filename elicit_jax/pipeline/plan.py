@@ -36,6 +36,7 @@ from elicit_jax.pipeline.plan_cell import (
     demo_score_stage,
     sensitivity_stages,
 )
+from elicit_jax.pipeline.sizes import DEFAULT_SIZES, dict_of, in_sizes, sized_specs
 from elicit_jax.pipeline.spec import CURATION_METHODS, METHODS, PipelineSpec, TaskSpec
 from elicit_jax.pipeline.stage_kind import StageKinds
 from elicit_jax.pipeline.stages import FILTERING_KINDS
@@ -122,10 +123,21 @@ def build_graph(spec: PipelineSpec, resolve: ConfigResolver = unresolved) -> Gra
         library's full config here (validating field names), so a changed default re-runs.
     """
     stages: list[Stage] = []
-    for number, sub in collection_specs(spec):
-        stages += collection_stages(sub, number, resolve)
+    for name, sized in sized_specs(spec):
+        part: list[Stage] = []
+        for number, sub in collection_specs(sized):
+            part += collection_stages(sub, number, _sized_resolver(resolve, name))
+        stages += [in_sizes(s, name, FILTERING[s.kind].side_by_side) for s in part]
     stages.append(report_stage(spec, REPORT_STAGE, stages, REPORTED, resolve))
     return Graph(stages)
+
+
+def _sized_resolver(resolve: ConfigResolver, name: str) -> ConfigResolver:
+    """``resolve`` recording the sizes ``name`` in every config (none for the default sizes,
+    whose stages keep the identities of a run without sizes)."""
+    if name == DEFAULT_SIZES:
+        return resolve
+    return lambda kind, raw: resolve(kind, {**raw, "sizes": name})
 
 
 def report_stage(
@@ -137,6 +149,9 @@ def report_stage(
     ``spec`` has ``name``, ``profile``, ``text`` and ``section``.
     """
     raw = {**spec.section("report"), "pipeline": spec.name, "profile": spec.profile}
+    sizes = getattr(spec, "sizes", (DEFAULT_SIZES,))
+    if sizes != (DEFAULT_SIZES,):  # each sizes' counts per task, as the report states them
+        raw["sizes"] = {n: {t.name: list(dict_of(t)[n]) for t in spec.tasks} for n in sizes}
     return Stage(
         id="report",
         kind=kind,

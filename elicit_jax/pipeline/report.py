@@ -33,13 +33,14 @@ from elicit_jax.pipeline.tables import (
     sensitivity_tables,
     threshold_table,
 )
+from elicit_jax.pipeline.tables_sizes import sizes_heading, sizes_note, sizes_tables
 from elicit_jax.render import FigureRenderer
 
 
 def _sections(data: ReportData) -> list[tuple[str, Any]]:
     """Ordered (title, content) blocks shared by both renderers; content is a Table, text,
     a list of maps or a code block (``("code", text)``)."""
-    blocks: list[tuple[str, Any]] = list(across_tables(data))
+    blocks: list[tuple[str, Any]] = [*sizes_tables(data), *across_tables(data)]
     diffs = difference_tables(data)
     for (title, table), diff in zip(results_tables(data), diffs, strict=True):
         blocks += [(title, table), diff]
@@ -74,6 +75,7 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
 def _intro(data: ReportData) -> list[str]:
     lines = intro_lines(data, "Pipeline")
     lines += list(data.notes)
+    lines += sizes_note(data)
     lines += selection_lines((*data.results, *data.heldout))
     if data.results or data.heldout:
         lines.append(f"Differences between policies: {INTERVAL_NOTE}")
@@ -83,12 +85,13 @@ def _intro(data: ReportData) -> list[str]:
 
 
 def summary_tables(data: ReportData) -> list[tuple[str, Any]]:
-    """The tables a finished run prints (the paper's layout): the across-collections tables
-    of a study over several collections, then each results table followed by its differences
-    from Naive with their paired 95% intervals, then the model comparison."""
+    """The tables a finished run prints (the paper's layout): the sizes side by side of a run
+    at several sizes, the across-collections tables of a study over several collections, then
+    each results table followed by its differences from Naive with their paired 95%
+    intervals, then the model comparison."""
     results = results_tables(data)
     paired = [t for pair in zip(results, difference_tables(data), strict=True) for t in pair]
-    return across_tables(data) + paired + models_table(data)
+    return sizes_tables(data) + across_tables(data) + paired + models_table(data)
 
 
 def _figures(_: Path) -> tuple[FigureRenderer, FigureRenderer]:
@@ -130,8 +133,10 @@ LAYOUT = ReportLayout(
     draw=_draw,
     figures=_figures,
     to_json=data_to_json,
+    heading=sizes_heading,
 )
 """A filtering (or models) study's report, for
-:func:`~elicit_jax.pipeline.report_folder.write_report`: the paper's tables with their
+:func:`~elicit_jax.pipeline.report_folder.write_report`: the sizes side by side of a run at
+several named sizes (its heading and intro name them), the paper's tables with their
 differences, the models and λ-sensitivity tables, the fit, the filters, the curation scores,
 the maps and the demonstration lengths."""

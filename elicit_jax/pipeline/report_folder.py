@@ -141,6 +141,8 @@ class ReportLayout:
       figures: ``folder -> (markdown, HTML)``: how each renderer shows one of its figures.
       to_json: ``data -> header``: its ``report-data.json`` (everything but the rollouts).
       fields: ``data -> {field: value}``: further fields of the folder's header.
+      heading: ``data -> text``: what the heading adds after the profile (``; sizes default,
+        paper``), nothing by default.
     """
 
     kind: str
@@ -153,12 +155,13 @@ class ReportLayout:
     figures: Callable[[Path], tuple[FigureRenderer, FigureRenderer]]
     to_json: Callable[[Any], dict[str, Any]]
     fields: Callable[[Any], dict[str, Any]] = lambda _: {}
+    heading: Callable[[Any], str] = lambda _: ""
 
 
 def render_report(layout: ReportLayout, data: RunReport, folder: Path) -> tuple[str, str]:
     """A report as Markdown and as one self-contained HTML page: heading, intro, findings,
     the layout's sections and the closing blocks every report ends with."""
-    heading = f"{layout.title}: {data.pipeline} ({data.profile} profile)"
+    heading = f"{layout.title}: {data.pipeline} ({data.profile} profile{layout.heading(data)})"
     blocks = layout.sections(data, folder) + provenance_blocks(data, layout.definition)
     intro = layout.intro(data)
     markdown_figure, html_figure = layout.figures(folder)

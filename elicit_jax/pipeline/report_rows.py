@@ -3,7 +3,9 @@
 :class:`ReportData` holds everything a report shows (gathered from a run directory by
 :mod:`elicit_jax.pipeline.gather`, or read back from a report folder by
 :mod:`elicit_jax.pipeline.evidence`). Every row names the collection it comes from
-(``collection``: 0 for a single-collection study; ``[collections]``).
+(``collection``: 0 for a single-collection study; ``[collections]``); a result of named sizes
+other than the default (:mod:`elicit_jax.pipeline.sizes`) names them (``sizes``) and carries
+them in its task label, as every row of those sizes does.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ class ResultRow:
     eval_seeds: tuple[int, ...] = ()
     select_success: float | None = None
     collection: int = 0
+    sizes: str = "default"
 
 
 @dataclasses.dataclass(frozen=True)

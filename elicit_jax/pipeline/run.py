@@ -35,6 +35,8 @@ class PipelineRunConfig:
       ray: run the stages as Ray tasks at this address (``local``, ``auto``, ``HOST:PORT``,
         ``ray://HOST:PORT``; see :func:`elicit_jax.pipeline.ray_runner.ray_session`); default
         ``None``: run them one after another in this process.
+      sizes: the named sizes to run side by side, comma-separated (``default``, ``paper``:
+        :mod:`elicit_jax.pipeline.sizes`); default: the definition's ``[pipeline] sizes``.
     """
 
     pipeline: str = "quickstart"
@@ -43,6 +45,7 @@ class PipelineRunConfig:
     progress: bool = True
     ray: str | None = None
     tasks: tuple[str, ...] | None = None
+    sizes: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +69,7 @@ def plan_run(config: PipelineRunConfig) -> tuple[Any, Graph, Callable[[], Mappin
     (:mod:`elicit_jax.pipeline.study_kinds`: filtering, elicitation)."""
     from elicit_jax.pipeline.study_kinds import plan_definition
 
-    return plan_definition(config.pipeline, config.profile, config.tasks)
+    return plan_definition(config.pipeline, config.profile, config.tasks, config.sizes)
 
 
 def write_manifest(run_dir: Path, spec: PipelineSpec, graph: Graph) -> None:
@@ -214,7 +217,9 @@ def pipeline_status(config: PipelineRunConfig, console: Any) -> dict[str, list[s
 
 def _collections_note(spec: Any) -> str:
     coll = getattr(spec, "collections", None)
-    return "" if coll is None else f" × {len(coll.seeds)} collections {list(coll.seeds)}"
+    note = "" if coll is None else f" × {len(coll.seeds)} collections {list(coll.seeds)}"
+    sizes = getattr(spec, "sizes", ("default",))
+    return note + (f" × sizes {', '.join(sizes)}" if sizes != ("default",) else "")
 
 
 def print_results(run_dir: Path, console: Any) -> None:

@@ -9,6 +9,7 @@ compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.
     [deminf] [demo_score] [cupid] [quality]   # settings of the curation baselines
     [sensitivity]                   # optional: outcome vs λ across the fitted margin
     [collections]                   # optional: seeds, methods: the study on more collections
+    [task.sizes.paper]              # per task: other named sizes (base_episodes, new_episodes)
     [profiles.cpu.train]            # overrides applied only under that profile
     [profiles.cpu.pipeline]         # seeds, models, methods under that profile
     [profiles.cpu.collections]      # the collections table under that profile
@@ -39,6 +40,7 @@ from elicit_jax.pipeline.definition import (
     sub_table,
     task_table,
 )
+from elicit_jax.pipeline.sizes import DEFAULT_SIZES, choose_sizes
 from elicit_jax.pipeline.spec_parts import (
     CollectionsSpec,
     SensitivitySpec,
@@ -99,10 +101,10 @@ METHODS = (
 )
 LAYOUT = Layout(
     top=frozenset({"pipeline", "task", "profiles", "sensitivity", "collections", *SECTIONS}),
-    head=frozenset({*HEAD_KEYS, "methods"}),
+    head=frozenset({*HEAD_KEYS, "methods", "sizes"}),
     sections=SECTIONS,
     profile=frozenset({*SECTIONS, "task", "pipeline", "collections"}),
-    profile_head=frozenset({"seeds", "models", "methods", "collect_seed"}),
+    profile_head=frozenset({"seeds", "models", "methods", "collect_seed", "sizes"}),
 )
 """The tables and keys a filtering definition allows."""
 
@@ -118,12 +120,15 @@ class PipelineSpec(Definition):
       sensitivity: the λ-sensitivity study, if the definition asks for one.
       collections: the study over several collections, if the definition asks for it.
       kind: the study kind (:mod:`elicit_jax.pipeline.study_kinds`).
+      sizes: the named sizes run side by side (:mod:`elicit_jax.pipeline.sizes`; ``default``:
+        the tasks' own counts).
     """
 
     methods: tuple[str, ...]
     sensitivity: SensitivitySpec | None = None
     collections: CollectionsSpec | None = None
     kind: str = DEFAULT_KIND
+    sizes: tuple[str, ...] = (DEFAULT_SIZES,)
 
     @property
     def n_cells(self) -> int:
@@ -161,6 +166,7 @@ def load_spec(
     profile: str | None = None,
     tasks: tuple[str, ...] | None = None,
     parse: Callable[..., Any] | None = None,
+    sizes: str | None = None,
 ) -> PipelineSpec:
     """Read and validate a pipeline definition.
 
@@ -170,6 +176,9 @@ def load_spec(
       tasks: run only these of the definition's tasks (default: all).
       parse: ``(data, *, source, text, profile) -> spec`` (default :func:`parse_spec`; an
         elicitation study passes its own).
+      sizes: the named sizes to run, comma-separated (default: the file's ``[pipeline]
+        sizes``, else ``default``), checked as the file's are
+        (:func:`~elicit_jax.pipeline.sizes.choose_sizes`) against the tasks run.
 
     Raises:
       ElicitError: one line naming the file and the offending key.
@@ -186,6 +195,10 @@ def load_spec(
                 path,
             )
         spec = dataclasses.replace(spec, tasks=tuple(t for t in spec.tasks if t.name in tasks))
+    if sizes is not None:
+        if not hasattr(spec, "sizes"):
+            raise ElicitError("--sizes applies to filtering studies, not to this kind", path)
+        spec = dataclasses.replace(spec, sizes=choose_sizes(sizes, spec.tasks, str(path)))
     return spec
 
 
@@ -210,6 +223,7 @@ def parse_spec(
         methods=methods,
         sensitivity=sensitivity,
         collections=collections,
+        sizes=choose_sizes(head.get("sizes"), tasks, source),
     )
 
 

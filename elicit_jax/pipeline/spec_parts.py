@@ -11,6 +11,7 @@ from typing import Any
 
 from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline.definition import ContrastTask, check_keys, contrast_fields, sub_table
+from elicit_jax.pipeline.sizes import task_sizes
 
 SENSITIVITY_KEYS = {"points", "seeds", "eval_seed", "operators", "tasks"}
 COLLECTIONS_KEYS = {"seeds", "methods"}
@@ -24,6 +25,7 @@ TASK_KEYS = {
     "incompatible_operator",
     "incompatible_episodes",
     "profiles",
+    "sizes",
 }
 
 
@@ -35,10 +37,13 @@ class TaskSpec(ContrastTask):
     Attributes:
       operators: the new operators, each contributing one D_new.
       new_episodes: size of each D_new.
+      sizes: the task's other named sizes, ``(name, base_episodes, new_episodes)``
+        (``[task.sizes.<name>]``; :mod:`elicit_jax.pipeline.sizes`).
     """
 
     operators: tuple[str, ...]
     new_episodes: int
+    sizes: tuple[tuple[str, int, int], ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,7 +113,8 @@ def parse_task(raw: Mapping[str, Any], source: str) -> TaskSpec:
     operators = tuple(str(o) for o in raw["operators"])
     if not operators:
         raise ElicitError(f"[[task]] {fields['name']}: operators must not be empty", source)
-    return TaskSpec(operators=operators, **fields)
+    sizes = task_sizes(raw.get("sizes"), fields["name"], source)
+    return TaskSpec(operators=operators, sizes=sizes, **fields)
 
 
 @dataclasses.dataclass(frozen=True)

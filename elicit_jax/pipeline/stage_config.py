@@ -2,7 +2,8 @@
 validated config (unknown fields are an error naming the section), so a changed library default
 changes the recorded config and re-runs the stage. They are the ``resolve`` of the stage kinds
 (:data:`elicit_jax.pipeline.stages.FILTERING_KINDS`); a stage planned in another collection than the
-first (``[collections]``) carries ``collection = c`` beside it
+first (``[collections]``) carries ``collection = c`` beside it, and a stage of named sizes
+other than the default ``sizes = "<name>"`` (:mod:`elicit_jax.pipeline.sizes`)
 (:meth:`~elicit_jax.pipeline.stage_kind.StageKind.config`).
 """
 

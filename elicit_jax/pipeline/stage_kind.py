@@ -27,6 +27,11 @@ Gatherer = Callable[[Mapping[str, Any], Path], "list[Any] | None"]
 one field of a report (None: the output is not complete yet, the stage counts as unfinished)."""
 
 
+KEPT_KEYS: Mapping[str, Callable[[Any], Any]] = MappingProxyType({"collection": int, "sizes": str})
+"""The keys a stage's config keeps beside its kind's resolved config (the planner adds them,
+the library's configs have no such field): key -> how its value is recorded."""
+
+
 @dataclasses.dataclass(frozen=True)
 class StageKind:
     """One kind of stage: its config, its plan, its function and its gathering.
@@ -62,13 +67,14 @@ class StageKind:
 
     def config(self, raw: dict[str, Any]) -> dict[str, Any]:
         """The full, validated config of a stage of this kind; a ``collection`` key (a stage
-        of a later collection) is kept beside it."""
+        of a later collection) and a ``sizes`` key (a stage of named sizes other than the
+        default: :mod:`elicit_jax.pipeline.sizes`) are kept beside it (:data:`KEPT_KEYS`)."""
         if self.resolve is None:
             return raw
-        if "collection" not in raw:
+        kept = {key: cast(raw[key]) for key, cast in KEPT_KEYS.items() if key in raw}
+        if not kept:
             return self.resolve(raw)
-        rest = {k: v for k, v in raw.items() if k != "collection"}
-        return {**self.resolve(rest), "collection": int(raw["collection"])}
+        return {**self.resolve({k: v for k, v in raw.items() if k not in kept}), **kept}
 
     def check(self, stage: Stage) -> None:
         """Refuse a planned stage whose inputs or output this kind does not declare.

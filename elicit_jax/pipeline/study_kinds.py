@@ -161,13 +161,16 @@ def kind_of_data(data_kind: str) -> StudyKind:
 
 
 def plan_definition(
-    name_or_path: str | Path, profile: str | None = None, tasks: tuple[str, ...] | None = None
+    name_or_path: str | Path,
+    profile: str | None = None,
+    tasks: tuple[str, ...] | None = None,
+    sizes: str | None = None,
 ) -> tuple[Any, Graph, Callable[[], Mapping[str, StageFn]]]:
     """A definition file's parsed spec, its stage graph and its stage registry, whatever its
     kind (see :func:`elicit_jax.pipeline.spec.load_spec` for the arguments)."""
     path = resolve_path(name_or_path)
     kind = study_kind(read_kind(path), path)
-    spec = load_spec(path, profile, tasks, parse=kind.parse)
+    spec = load_spec(path, profile, tasks, parse=kind.parse, sizes=sizes)
     return spec, _graph(kind, spec, path), lambda: stage_functions()
 
 

@@ -32,8 +32,10 @@ if TYPE_CHECKING:
     from elicit_jax.policy.base import Policy
 
 
-def _worker(conn: Any, spec: RobosuiteSpec, horizon: int) -> None:
-    """Worker loop: build one environment, answer ``(cmd, arg)`` requests until ``close``."""
+def _worker(conn: Any, spec: RobosuiteSpec, horizon: int, fast: bool = True) -> None:
+    """Worker loop: build one environment (``fast``: see
+    :func:`~elicit_jax.sim.robosuite_env.make_env`), answer ``(cmd, arg)`` requests until
+    ``close``."""
     import logging
 
     from elicit_jax.sim import robosuite_env as rs
@@ -41,7 +43,7 @@ def _worker(conn: Any, spec: RobosuiteSpec, horizon: int) -> None:
     try:
         rs.import_robosuite()
         logging.getLogger("robosuite_logs").setLevel(logging.ERROR)  # its chatter, not ours
-        env = rs.make_env(spec, horizon)
+        env = rs.make_env(spec, horizon, fast)
         obs = rs.reset_seeded(env, 0)
         conn.send(("ok", rs.obs_dims(obs)))
     except Exception as e:  # report any failure to build to the parent, then stop
@@ -69,16 +71,20 @@ class EnvPool:
 
     Attributes:
       obs_dims: size of each observation the environment offers (robomimic names).
+
+    ``fast=False`` builds the environments exactly as robosuite does, without the speed-up of
+    :func:`~elicit_jax.sim.robosuite_env.make_env` (``benchmarks/bench_eval_cost.py``
+    compares the two).
     """
 
-    def __init__(self, spec: RobosuiteSpec, workers: int, horizon: int) -> None:
+    def __init__(self, spec: RobosuiteSpec, workers: int, horizon: int, fast: bool = True) -> None:
         ctx = mp.get_context("spawn")
         self.spec = spec
         self.size = int(workers)
         self._conns, self._procs = [], []
         for _ in range(self.size):
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, spec, horizon), daemon=True)
+            proc = ctx.Process(target=_worker, args=(child, spec, horizon, fast), daemon=True)
             proc.start()
             child.close()
             self._conns.append(parent)
