@@ -23,8 +23,11 @@ def files(square_nut_session_inputs, tmp_path_factory):
     d = tmp_path_factory.mktemp("session-binding")
     inputs = square_nut_session_inputs
     own = load_policy(inputs.policy).sha256
-    return inputs, d, _thresholds(d / "own.json", inputs, own), _thresholds(
-        d / "other.json", inputs, "0" * 64
+    return (
+        inputs,
+        d,
+        _thresholds(d / "own.json", inputs, own),
+        _thresholds(d / "other.json", inputs, "0" * 64),
     )
 
 

@@ -130,4 +130,3 @@ def measure(obs: np.ndarray, action: np.ndarray) -> NutTraits:
     return NutTraits(
         g, turn, near, bool(far), height, height < SLIDE_HEIGHT, share, share > LOW_SHARE, still
     )
-
