@@ -116,7 +116,8 @@ def thresholds_fit_policy(
 
     if thresholds is None or thresholds.file is None:
         return
-    loaded = load_policy(policy, which, seed=seed)
-    warning = check_policy(thresholds, loaded.sha256, str(policy), force)
+    # a file that does not record its policy cannot be checked (a warning says so)
+    own = None if thresholds.policy is None else load_policy(policy, which, seed=seed).sha256
+    warning = check_policy(thresholds, own, str(policy), force)
     if warning:
         typer.echo(warning, err=True)
