@@ -36,6 +36,20 @@ import time
 import numpy as np
 
 
+def _untrained_policy():
+    """The cpu profile's policy shape (5 × MLP 2 × 256), untrained: its cost per step is the
+    trained one's, and its rollouts run to the horizon."""
+    import jax
+
+    from elicit_jax.policy.base import init_policy
+    from elicit_jax.sim.registry import ACTION_DIM, OBS_DIM
+
+    return init_policy(
+        jax.random.key(0), kind="mlp", obs_dim=OBS_DIM, action_dim=ACTION_DIM, n_members=5,
+        hidden=(256, 256), dropout=0.5,
+    )  # fmt: skip
+
+
 def log(name: str, value: object) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {name}: {value}", flush=True)
 
@@ -51,17 +65,12 @@ def outcome_key(out: dict) -> tuple:
 
 
 def run(args: argparse.Namespace) -> dict:
-    import jax
-
-    from elicit_jax.policy.base import init_policy, jitted_act
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.sim.env import make_task
     from elicit_jax.sim.rollout_robosuite import SHARED_HORIZON, EnvPool, rollout_policy
 
     spec = make_task(args.task).spec
-    policy = init_policy(
-        jax.random.key(0), kind="mlp", obs_dim=23, action_dim=7, n_members=5,
-        hidden=(256, 256), dropout=0.5,
-    )  # fmt: skip
+    policy = _untrained_policy()
     act = jitted_act()
     seeds = np.arange(1000, 1000 + args.rollouts)
     pools = {
@@ -120,17 +129,13 @@ def run_serial(args: argparse.Namespace) -> dict:
     """One environment of each kind in this process, the same policy and seeds, alternating
     old and new every rollout (load drifts over seconds, so close alternation cancels most of
     it); per round, the ratio of the two loops' seconds."""
-    import jax
 
-    from elicit_jax.policy.base import init_policy, jitted_act
+    from elicit_jax.policy.base import jitted_act
     from elicit_jax.sim import robosuite_env as rs
     from elicit_jax.sim.env import make_task
 
     spec = make_task(args.task).spec
-    policy = init_policy(
-        jax.random.key(0), kind="mlp", obs_dim=23, action_dim=7, n_members=5,
-        hidden=(256, 256), dropout=0.5,
-    )  # fmt: skip
+    policy = _untrained_policy()
     act = jitted_act()
     fast = {"old": False, "new": not args.control}
     envs = {name: rs.make_env(spec, 1_000_000, fast=fast[name]) for name in ("old", "new")}

@@ -55,6 +55,24 @@ class Stage:
         if not self.label:
             object.__setattr__(self, "label", self.id)
 
+    def moved(self, segment: str, side_by_side: bool, label: str) -> Stage:
+        """This stage moved under ``segment`` (a collection's ``c1``, a sizes'
+        ``sizes-paper``): the segment after the first part of its id, output and input ids;
+        a kind whose outputs sit side by side (``side_by_side``, a map) joins it to the file
+        name instead (``maps/c1-<file>``), as reports keep maps under their file names."""
+
+        def move(path: str, sep: str = "/") -> str:
+            head, _, rest = path.partition("/")
+            return f"{head}/{segment}{sep}{rest}"
+
+        return dataclasses.replace(
+            self,
+            id=move(self.id),
+            output=move(self.output, "-" if side_by_side else "/"),
+            inputs={k: move(v) for k, v in self.inputs.items()},
+            label=f"{label}: {self.label}",
+        )
+
     @property
     def record_name(self) -> str:
         """File name of this stage's completion record (the id made filesystem-safe)."""

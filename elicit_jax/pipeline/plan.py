@@ -226,18 +226,7 @@ def in_collection(stage: Stage, number: int) -> Stage:
     """``stage`` moved into collection ``number``: ``c<number>/`` after the first part of its
     id, output and input ids (a kind whose outputs sit side by side, a map:
     ``maps/c<number>-<name>.png``, as reports keep maps under their file names)."""
-
-    def move(path: str, sep: str = "/") -> str:
-        head, _, rest = path.partition("/")
-        return f"{head}/c{number}{sep}{rest}"
-
-    return dataclasses.replace(
-        stage,
-        id=move(stage.id),
-        output=move(stage.output, "-" if FILTERING[stage.kind].side_by_side else "/"),
-        inputs={k: move(v) for k, v in stage.inputs.items()},
-        label=f"c{number}: {stage.label}",
-    )
+    return stage.moved(f"c{number}", FILTERING[stage.kind].side_by_side, f"c{number}")
 
 
 VERIFIED_ROLES = {"holdout": "no-conflict", "incompatible": "conflicts"}

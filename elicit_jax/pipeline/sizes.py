@@ -150,18 +150,7 @@ def in_sizes(stage: Any, name: str, side_by_side: bool) -> Any:
     ``maps/sizes-<name>-<file>``)."""
     if name == DEFAULT_SIZES:
         return stage
-
-    def move(path: str, sep: str = "/") -> str:
-        head, _, rest = path.partition("/")
-        return f"{head}/{SIZES_PREFIX}{name}{sep}{rest}"
-
-    return dataclasses.replace(
-        stage,
-        id=move(stage.id),
-        output=move(stage.output, "-" if side_by_side else "/"),
-        inputs={k: move(v) for k, v in stage.inputs.items()},
-        label=f"{name} sizes: {stage.label}",
-    )
+    return stage.moved(f"{SIZES_PREFIX}{name}", side_by_side, f"{name} sizes")
 
 
 def sized_task(task: str, name: str) -> str:

@@ -227,16 +227,7 @@ def list_checkpoints(path: str | Path) -> dict[int, list[int | str]]:
     return out
 
 
-_REQUIRED = (
-    "kind",
-    "obs_dim",
-    "action_dim",
-    "n_members",
-    "hidden",
-    "dropout",
-    "n_components",
-    "reset_every",
-)
+_REQUIRED = SPEC_KEYS[:8]
 """Spec keys every checkpoint records (the others have defaults for older checkpoints)."""
 
 
