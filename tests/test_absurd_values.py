@@ -130,6 +130,44 @@ def test_batch_sizes_and_dropout_passes_that_cannot_fit_are_one_line(run, tmp_pa
         ScoreConfig.from_preset("square-nut", dropout_samples=1001)
 
 
+def test_a_chunk_size_the_scorer_cannot_hold_is_one_line_and_writes_nothing(
+    run, tmp_path, monkeypatch, capsys
+):
+    """``score --chunk-size`` 0 or beyond 65,536 pairs is refused in one line naming the flag
+    and the range, with a non-zero exit and no output; the same limit holds wherever a chunk
+    size is read (a pipeline's [score] section, a stored score config)."""
+    from fixtures_data import run_cli
+
+    from elicit_jax.compat.measures import (
+        MAX_CHUNK_SIZE,
+        ScoreConfig,
+        config_dict,
+        config_from_dict,
+    )
+    from elicit_jax.pipeline.stage_config import resolve_score
+
+    for value in (10**8, 0):
+        out = tmp_path / "out" / "s.parquet"
+        out.parent.mkdir(exist_ok=True)
+        code, _, err = run_cli(
+            monkeypatch, capsys, "score", "--policy", run / "run", "--demos",
+            run / "demos.parquet", "-o", out, "--preset", "square-nut", "--chunk-size", value,
+        )  # fmt: skip
+        lines = [line for line in err.splitlines() if line.strip()]
+        assert code != 0 and len(lines) == 1, err
+        assert f"--chunk-size) must be an integer in 1..65536, got {value}" in lines[0], err
+        assert not any(out.parent.iterdir())
+    assert ScoreConfig.from_preset("square-nut", chunk_size=MAX_CHUNK_SIZE).chunk_size == 65536
+    stored = config_dict(ScoreConfig.from_preset("square-nut"))
+    for bad in (MAX_CHUNK_SIZE + 1, 0, -1, "4096", 4096.0, True):
+        with pytest.raises(ElicitError, match=r"chunk_size \(--chunk-size\) must be an integer"):
+            ScoreConfig.from_preset("square-nut", chunk_size=bad)
+        with pytest.raises(ElicitError, match=r"must be an integer in 1\.\.65536"):
+            resolve_score({"task": "square-nut", "chunk_size": bad})
+    with pytest.raises(ElicitError, match=r"must be an integer in 1\.\.65536, got 100000000"):
+        config_from_dict({**stored, "chunk_size": 10**8}, "a stored config")
+
+
 def test_many_dropout_passes_score_in_smaller_chunks_with_the_same_scores(run, monkeypatch):
     """Many passes shrink the compiled chunk (bounded memory); scores do not change beyond
     float32 rounding (another compiled shape)."""

@@ -20,7 +20,8 @@ from fixtures_data import (
 
 from elicit_jax.data import robomimic_export
 from elicit_jax.data.demos import concat_demos, read_demos, write_demos
-from elicit_jax.data.export import ExportConfig, export_dataset
+from elicit_jax.data.export import export_dataset
+from elicit_jax.data.export_config import ExportConfig
 from elicit_jax.data.lerobot import import_lerobot
 from elicit_jax.data.robomimic import import_robomimic
 from elicit_jax.errors import ElicitError

@@ -143,7 +143,8 @@ def test_export_overwrite_replaces_only_a_lerobot_dataset_it_exported(tmp_path):
     from fixtures_data import lerobot_episode, robomimic_demo, write_lerobot_v30, write_robomimic
 
     from elicit_jax.data.demos import write_demos
-    from elicit_jax.data.export import ExportConfig, export_dataset
+    from elicit_jax.data.export import export_dataset
+    from elicit_jax.data.export_config import ExportConfig
     from elicit_jax.data.robomimic import import_robomimic
 
     rng = np.random.default_rng(0)

@@ -122,7 +122,7 @@ def test_evaluate_loads_through_the_loader(run, tmp_path):
 def test_session_and_watch_set_up_load_through_the_loader(run, tmp_path):
     from elicit_jax.compat.thresholds import Thresholds
     from elicit_jax.data.demos import read_demos
-    from elicit_jax.elicit.setup import load_session_policy
+    from elicit_jax.elicit.inputs import load_session_policy
     from elicit_jax.elicit.watch import WatchConfig, Watcher
 
     base_path = run / "demos.parquet"

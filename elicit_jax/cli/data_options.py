@@ -18,7 +18,7 @@ from elicit_jax.errors import ElicitError
 
 if TYPE_CHECKING:
     from elicit_jax.data.convert import ImportConfig
-    from elicit_jax.data.export import ExportConfig
+    from elicit_jax.data.export_config import ExportConfig
 
 FORMAT = typer.Option(
     None, "--format", "-f", help="robomimic | lerobot | npz (default: from the path)."
@@ -179,7 +179,7 @@ EXPORT_SEED = typer.Option(
 
 def export_config(selection: Path, flags: Mapping[str, Any]) -> ExportConfig:
     """The ``ExportConfig`` of ``export``'s flags (``flags``: the command's ``ctx.params``)."""
-    from elicit_jax.data.export import ExportConfig
+    from elicit_jax.data.export_config import ExportConfig
     from elicit_jax.data.selection import parse_episode_ids
 
     episodes, out, source = flags["episodes"], flags["out"], flags["source"]

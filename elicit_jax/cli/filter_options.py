@@ -80,7 +80,7 @@ def check_filter_outputs(
     from elicit_jax.artifact import check_outputs
     from elicit_jax.compat.filtering import log_path
     from elicit_jax.curation.select import scores_path_for
-    from elicit_jax.data.export import is_lerobot_dataset
+    from elicit_jax.data.export_config import is_lerobot_dataset
 
     outs = [out, log_path(out)] + ([scores_path_for(out)] if method in CURATORS else [])
     check_outputs(outs, inputs, overwrite=overwrite)

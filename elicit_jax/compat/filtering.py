@@ -383,7 +383,8 @@ def _write_drop_log(
 
 def _export_kept(out_path: str | Path, export: ExportSpec) -> dict[str, Any]:
     """Hand the written selection to the dataset exporter (a robomimic mask, a LeRobot set)."""
-    from elicit_jax.data.export import ExportConfig, export_dataset
+    from elicit_jax.data.export import export_dataset
+    from elicit_jax.data.export_config import ExportConfig
 
     return export_dataset(
         ExportConfig(

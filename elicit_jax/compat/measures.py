@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Literal
@@ -71,12 +72,37 @@ def is_incompatible(ell: Any, nu: Any, lambda_: Any, eta: Any) -> Any:
     return (ell > lambda_) & (nu < eta)
 
 
+MAX_CHUNK_SIZE = 1 << 16
+"""Most pairs one compiled scoring call takes (65,536; the default is 4,096). A chunk holds
+each member's activations for every pair in it, members x pairs x widest layer float32
+values: for the paper's ensemble (5 members of 1024 units) 20 KiB a pair, so 65,536 pairs
+are 1.25 GiB per hidden layer, about what a laptop or a CI runner holds beside the policy,
+and as many rows as the largest training minibatch (``MAX_BATCH_SIZE``) passes forward
+through the same ensemble. The rows of a chunk are also the row batches the demonstrations
+are read in. A larger chunk saves no time once a call fills the device, only memory."""
 MAX_DROPOUT_SAMPLES = 1000
 """Most MC-dropout passes per member a :class:`ScoreConfig` accepts."""
 MC_ROWS_BUDGET = 1 << 16
 """Member passes x rows scored in one compiled MC-dropout call at most: the chunk shrinks to
 fit (the masks do not depend on the chunk; the scores change only by float32 rounding), so
 many passes cost time, not memory."""
+
+
+def check_chunk_size(chunk_size: Any) -> int:
+    """The one validation of a scoring chunk size (``score --chunk-size``, a pipeline's
+    ``[score] chunk_size``, a stored score config): an integer in 1..:data:`MAX_CHUNK_SIZE`.
+
+    Raises:
+      ElicitError: one line naming the setting, the allowed range and the value.
+    """
+    ok = isinstance(chunk_size, numbers.Integral) and not isinstance(chunk_size, bool)
+    if not ok or not 1 <= chunk_size <= MAX_CHUNK_SIZE:
+        raise ElicitError(
+            f"chunk_size (--chunk-size) must be an integer in 1..{MAX_CHUNK_SIZE}, got "
+            f"{chunk_size!r} (pairs per compiled scoring call; a larger chunk does not fit in "
+            "memory beside an ensemble's activations)"
+        )
+    return int(chunk_size)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -91,7 +117,8 @@ class ScoreConfig:
         (:func:`~elicit_jax.compat.scorer.static_config`), which scores nothing by itself.
       accept_fraction: a demonstration is rejected when its number of incompatible pairs
         exceeds this fraction of its length (paper: 5%).
-      chunk_size: pairs per jitted scoring call (the last chunk is padded).
+      chunk_size: pairs per jitted scoring call (the last chunk is padded), in
+        1..:data:`MAX_CHUNK_SIZE` (:func:`check_chunk_size`).
       clip: ``member-average`` clipping bound ±clip; None (default): the scored demos'
         recorded action bounds, per dim.
       action_scale: ``none`` (paper) or ``std``: per-dim scaling by the base policy's training
@@ -123,8 +150,7 @@ class ScoreConfig:
         if self.thresholds is not None and not isinstance(self.thresholds, Thresholds):
             raise ElicitError(f"thresholds must be a Thresholds value, got {self.thresholds!r}")
         check_accept_fraction(self.accept_fraction)
-        if self.chunk_size < 1:
-            raise ElicitError(f"chunk size must be >= 1, got {self.chunk_size}")
+        check_chunk_size(self.chunk_size)
         if self.clip is not None and not (math.isfinite(self.clip) and self.clip > 0):
             raise ElicitError(f"clip must be a finite number > 0, got {self.clip}")
         if self.action_scale not in ACTION_SCALES:

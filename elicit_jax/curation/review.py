@@ -224,7 +224,8 @@ class Review:
         Returns:
           ``{"kept", "dropped", "demos", "export"}`` (paths as strings).
         """
-        from elicit_jax.data.export import ExportConfig, export_dataset
+        from elicit_jax.data.export import export_dataset
+        from elicit_jax.data.export_config import ExportConfig
         from elicit_jax.data.subsets import SubsetSpec, select_file
 
         if fmt not in (None, "robomimic", "lerobot"):

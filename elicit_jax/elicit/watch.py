@@ -186,8 +186,8 @@ class Watcher:
     def __init__(self, config: WatchConfig, echo: Callable[[str], None]) -> None:
         from elicit_jax.compat.feedback import normalizer
         from elicit_jax.data.demos import read_demos
+        from elicit_jax.elicit.inputs import load_session_policy
         from elicit_jax.elicit.rules import AcceptRule
-        from elicit_jax.elicit.setup import load_session_policy
 
         self.config = config
         self.echo = echo

@@ -14,8 +14,8 @@ sent before its indicator event. Each episode waits for the page's ``start`` (th
 reads the instructions, the prompt or the feedback first); a lost connection pauses the
 episode until the page is back. Everything the page needs to redraw itself after a
 reload — the scene, the prompt, the current episode's indicator history and live state, a
-pending verdict — is kept, and sent again to whichever connection attaches next
-(:meth:`OperatorDriver.attach`).
+pending verdict — is kept (:class:`~elicit_jax.web.page.PageFeed`), and sent again to
+whichever connection attaches next (:meth:`OperatorDriver.attach`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import time
 import traceback
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from elicit_jax.elicit.events import (
 )
 from elicit_jax.errors import ElicitError
 from elicit_jax.web import messages
+from elicit_jax.web.page import Outbox, PageFeed
 from elicit_jax.web.protocol import Message, pack_frame
 from elicit_jax.web.scene import body_poses, scene_origin
 
@@ -54,12 +55,6 @@ EARLIEST = 0.5
 """A new command pulls the next step forward by at most this fraction of a control period
 (the key's effect is on screen sooner). The steps stay on their grid: the next one is due a
 period after the one pulled was, so the episode never runs faster than the control rate."""
-
-
-class Outbox(Protocol):
-    """Where a driver's messages go (a WebSocket connection); ``send`` is thread-safe."""
-
-    def send(self, message: str | bytes, droppable: bool = False) -> None: ...
 
 
 class OperatorDriver:
@@ -95,21 +90,11 @@ class OperatorDriver:
         self._command = threading.Event()  # a new command: step soon
         self._stop = threading.Event()
         self._command_seen: Any = None
-        self._in_step = False
-        self._after_frame: list[str] = []
-        self._outbox: Outbox | None = None
+        self._page = PageFeed()
         self._go = self._give_up = False
         self._prompt_pending = self._review_pending = False
         self._index, self._kind, self._step = -1, "", 0
         self._m = math.nan
-        self._static: list[str] = []
-        self._prompt: list[str | bytes] = []
-        self._phase: list[str] = []
-        self._episode: list[str | bytes] = []
-        self._indicators: list[list[float]] = []
-        self._last_indicator: IndicatorEvent | None = None
-        self._frame: bytes | None = None
-        self._review: list[str | bytes] = []
         self._clips: Any = None
         self._origin: Any = None
         self._thread = threading.Thread(target=self._run, name=f"operator-{name}", daemon=True)
@@ -133,7 +118,7 @@ class OperatorDriver:
     @property
     def attached(self) -> bool:
         """A page is attached."""
-        return self._outbox is not None
+        return self._page.outbox is not None
 
     def attach(self, outbox: Outbox) -> Outbox | None:
         """Send everything the page needs to ``outbox`` and make it the operator's page.
@@ -142,7 +127,7 @@ class OperatorDriver:
           The page attached before (the caller closes it), or None.
         """
         with self._lock:
-            old, self._outbox = self._outbox, outbox
+            old, self._page.outbox = self._page.outbox, outbox
             if old is not None and old is not outbox and self.state == RUNNING:
                 self._go, self.state = False, READY  # another window: pause until it starts
             for msg in self._snapshot():
@@ -152,9 +137,9 @@ class OperatorDriver:
     def detach(self, outbox: Outbox) -> None:
         """The page went away: pause the episode until one attaches again."""
         with self._lock:
-            if self._outbox is not outbox:
+            if self._page.outbox is not outbox:
                 return
-            self._outbox = None
+            self._page.outbox = None
             self.detached_at = time.monotonic()
             if self.state == RUNNING:
                 self._go = False
@@ -163,7 +148,7 @@ class OperatorDriver:
     def close_page(self, code: int, reason: str) -> None:
         """Close the attached page's connection with ``code`` and ``reason`` (if one is)."""
         with self._lock:
-            close = getattr(self._outbox, "close", None)
+            close = getattr(self._page.outbox, "close", None)
         if close is not None:
             close(code, reason)
 
@@ -256,12 +241,9 @@ class OperatorDriver:
         if not setup.demos_up_to_date(self.session.progress):
             setup.write_demos(self.session.progress)
         with self._lock:
-            self._static = [
-                messages.welcome(self.name, setup, resumed, self.period),
-                messages.scene(task),
-            ]
-            for msg in self._static:
-                self._send(msg)
+            self._page.opened(
+                [messages.welcome(self.name, setup, resumed, self.period), messages.scene(task)]
+            )
         self.log(
             f"operator {self.name}: session {'resumed' if resumed else 'created'} in {self.out}"
         )
@@ -316,21 +298,17 @@ class OperatorDriver:
             obs = s.observation()
             action = self.operator.act(obs)
             self._m = math.nan
-            self._in_step = True
+            self._page.in_step = True
             try:
                 s.step(action, finish=False)
             finally:
-                self._in_step = False
+                self._page.in_step = False
             self.steps += 1
             self._step = obs.step + 1
             poses = body_poses(s.sim_data, self._origin)
             frame = pack_frame(poses, obs.episode, self._step, self._m, action is not None)
-            with self._lock:
-                self._frame = frame
-                self._send(frame, droppable=not s.episode_over)
-                after, self._after_frame = self._after_frame, []
-                for msg in after:  # the step's indicator: after its pose, off the key's path
-                    self._send(msg)
+            with self._lock:  # the step's indicator goes after its pose, off the key's path
+                self._page.send_frame(frame, droppable=not s.episode_over)
             s.finish_episode()  # after the last frame is out: judging and writing take a while
         if self._review_pending and not s.done:
             with self._lock:
@@ -343,40 +321,20 @@ class OperatorDriver:
         with self._lock:
             if isinstance(event, IndicatorEvent):
                 self._m = event.compatibility
-                self._indicators.append(
-                    [
-                        event.step,
-                        event.compatibility,
-                        float(event.incompatible),
-                        event.live.light if event.live else "",
-                    ]
-                )
-                self._last_indicator = event
-                if self._in_step:
-                    self._after_frame.append(messages.event(event))
-                else:
-                    self._send(messages.event(event))
+                self._page.indicator(event)
             elif isinstance(event, EpisodeStartEvent):
                 self._on_episode_start(event)
             elif isinstance(event, EpisodeEndEvent):
                 self._on_episode_end(event)
             elif isinstance(event, PromptEvent):
-                self._prompt = [messages.prompt(event)]
-                self._prompt += self._clips.prompt_clips(event)
                 self._prompt_pending = True
-                self._sendall(self._prompt)
+                self._page.prompt(event, self._clips)
             elif isinstance(event, ReviewEvent):
                 record = self.setup.store.read_episode(event.episode)
                 allowed = self.setup.rule.allowed(event.scored)
-                review = [
-                    messages.review(event, record, allowed),
-                    *self._clips.review_clips(event, record),
-                ]
-                self._review += review
-                self._sendall(review)
+                self._page.review(event, record, allowed, self._clips)
             elif isinstance(event, PhaseEvent):
-                self._phase = [messages.event(event)]
-                self._send(self._phase[0])
+                self._page.phase(event)
             elif isinstance(event, RetrainEvent):
                 self.state = BUSY if event.status == "start" else READY
                 self._send(messages.event(event))
@@ -388,18 +346,14 @@ class OperatorDriver:
         self._index, self._kind, self._step = event.episode, event.episode_kind, 0
         self._give_up = False
         self.operator.reset(self.config.dagger)
-        self._indicators, self._last_indicator = [], None
         frame = pack_frame(body_poses(self.session.sim_data, self._origin), event.episode, 0)
-        self._episode = [messages.event(event)]
-        self._frame = frame
-        self._sendall([self._episode[0], frame])
+        self._page.episode_start(event, frame)
 
     def _on_episode_end(self, event: EpisodeEndEvent) -> None:
         self._go = False
         self._review_pending = True
         self._step = event.length
-        self._review = [messages.event(event)]  # the episode's last frame went out before
-        self._sendall(self._review)
+        self._page.episode_end(event)
         row = self.session.progress.rows[-1]
         c = event.counts
         self.log(
@@ -409,13 +363,8 @@ class OperatorDriver:
         )
 
     # --- messages -----------------------------------------------------------------------------
-    def _send(self, msg: str | bytes, droppable: bool = False) -> None:
-        if self._outbox is not None:
-            self._outbox.send(msg, droppable)
-
-    def _sendall(self, msgs: list[str | bytes]) -> None:
-        for m in msgs:
-            self._send(m)
+    def _send(self, msg: str | bytes) -> None:
+        self._page.send(msg)
 
     def _push_state(self) -> None:
         self._send(self._state_message())
@@ -439,14 +388,8 @@ class OperatorDriver:
         )
 
     def _snapshot(self) -> list[str | bytes]:
-        out: list[str | bytes] = [*self._static, *self._prompt, *self._phase, *self._episode]
-        if self._indicators:
-            out.append(messages.indicators(self._indicators, self._last_indicator))
-        if self._frame is not None:
-            out.append(self._frame)
-        if self._review_pending:
-            out += self._review
-        if self.state == ERROR:
-            out.append(messages.error(self.message))
-        out.append(self._state_message())
-        return out
+        return self._page.snapshot(
+            review_pending=self._review_pending,
+            error=self.message if self.state == ERROR else None,
+            state=self._state_message(),
+        )

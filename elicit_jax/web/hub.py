@@ -85,7 +85,7 @@ class OperatorHub:
         self.drivers: dict[str, OperatorDriver] = {}
         self.keys = OperatorKeys(self.root)
         self._lock = threading.RLock()
-        from elicit_jax.elicit.setup import task_action_names
+        from elicit_jax.elicit.inputs import task_action_names
         from elicit_jax.sim.env import make_task
 
         self.action_dim = len(task_action_names(make_task(template.task)))

@@ -36,8 +36,8 @@ def dump(kind: str, **fields: Any) -> str:
 
 def welcome(name: str, setup: Any, resumed: bool, period: float) -> str:
     """Who the page is and what the session is (sent first, and again on every reattach)."""
+    from elicit_jax.elicit.inputs import task_action_names
     from elicit_jax.elicit.light import rule_words, whole
-    from elicit_jax.elicit.setup import task_action_names
 
     c, task = setup.config, setup.task
     informed = c.mode == "informed"

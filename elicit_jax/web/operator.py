@@ -80,7 +80,7 @@ class BrowserOperator:
 
 
 def _browser(name: str, context: OperatorContext) -> BrowserOperator:
-    from elicit_jax.elicit.setup import task_action_names
+    from elicit_jax.elicit.inputs import task_action_names
 
     return BrowserOperator(name, task_action_names(context.task), context.dagger)
 
