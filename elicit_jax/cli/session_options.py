@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from elicit_jax.cli.app import check_seed
 from elicit_jax.cli.threshold_options import PRESET  # noqa: F401  (serve spells it so.PRESET)
+
+if TYPE_CHECKING:
+    from elicit_jax.compat.thresholds import Thresholds
 
 TASK = typer.Option(
     None,
@@ -103,7 +106,11 @@ def recorded_task(given: dict[str, Any], force: bool) -> None:
 
 
 def thresholds_fit_policy(
-    thresholds: Any, policy: str | Path, which: str | int, seed: int | None, force: bool
+    thresholds: Thresholds | None,
+    policy: str | Path,
+    which: str | int,
+    seed: int | None,
+    force: bool,
 ) -> None:
     """Refuse thresholds fitted for another policy than the session's (``--force`` turns the
     refusal into a warning), as ``score``, ``filter`` and ``map`` do; prints any warning.
