@@ -58,17 +58,23 @@ from real_human_source import (
 )
 
 
-def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("source", type=Path, help="robosuite-1.0.1 wheel or its nut-assembly demo.hdf5")
-    p.add_argument("--task", choices=sorted(TASKS), default="robosuite-square")
-    p.add_argument("--work", type=Path, default=Path("/tmp/elicit-real-human"))
+def add_study_arguments(p: argparse.ArgumentParser) -> None:
+    """The options both real-operator scripts take: the report, the scripted base and
+    contrast sets, the base policy's training."""
     p.add_argument("--out", type=Path, help="results Markdown to write")
     p.add_argument("--episodes", type=int, default=40, help="scripted base demos for training")
     p.add_argument("--contrast", type=int, default=10, help="demos per contrast set")
     p.add_argument("--conflict", default="conflict-flip-pause", help="the conflicting style")
     p.add_argument("--profile", default="cpu", help="training profile of the base policy")
     p.add_argument("--epochs", type=int, default=0, help="override the profile's epochs (0: no)")
+
+
+def parse_args() -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("source", type=Path, help="robosuite-1.0.1 wheel or its nut-assembly demo.hdf5")
+    p.add_argument("--task", choices=sorted(TASKS), default="robosuite-square")
+    p.add_argument("--work", type=Path, default=Path("/tmp/elicit-real-human"))
+    add_study_arguments(p)
     p.add_argument("--rollouts", type=int, default=0, help="evaluate base/naive/filtered (0: no)")
     p.add_argument("--threads", type=int, default=2, help="robosuite worker processes")
     return p.parse_args()

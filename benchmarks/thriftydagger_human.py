@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from real_human import (
     PAPER_THRESHOLDS,
+    add_study_arguments,
     cli,
     emit_report,
     fmt_ops,
@@ -70,12 +71,7 @@ def parse_args() -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("source", type=Path, help=f"{SOURCE_PATH}, or a clone / git dir holding it")
     p.add_argument("--work", type=Path, default=Path("/tmp/elicit-thrifty"))
-    p.add_argument("--out", type=Path, help="results Markdown to write")
-    p.add_argument("--episodes", type=int, default=40, help="scripted base demos for training")
-    p.add_argument("--contrast", type=int, default=10, help="demos per contrast set")
-    p.add_argument("--conflict", default="conflict-flip-pause", help="the conflicting style")
-    p.add_argument("--profile", default="cpu", help="training profile of the base policy")
-    p.add_argument("--epochs", type=int, default=0, help="override the profile's epochs (0: no)")
+    add_study_arguments(p)
     p.add_argument("--replay", type=int, default=3, help="episodes to replay open loop (0: none)")
     p.add_argument("--threads", type=int, default=2, help="robosuite worker processes")
     args = p.parse_args()
