@@ -305,7 +305,7 @@ force = true
 
 def test_tiny_run_scores_with_the_scorer_and_checks_its_training_demos(tmp_path):
     from elicit_jax.artifact import read_header, read_json
-    from elicit_jax.pipeline.run import PipelineRunConfig, run_pipeline
+    from elicit_jax.pipeline.run import PipelineRunConfig, rebuild_report, run_pipeline
     from elicit_jax.pipeline.study_kinds import STUDY_KINDS
 
     spec = tmp_path / "tiny.toml"
@@ -330,4 +330,7 @@ def test_tiny_run_scores_with_the_scorer_and_checks_its_training_demos(tmp_path)
     assert "hidden [8, 8]" in note
     assert "by a policy of its own trained on D_base, not the base policy: mlp: 2 member(s)" in note
     assert "hidden [16, 16], 6 epochs" in note and "training profile cpu, seed 0" in note
-    assert "Scoring (the contrast sets and every D_new)" in outcome.report_md.read_text()
+    report = outcome.report_md.read_text()
+    assert "Scoring (the contrast sets and every D_new)" in report
+    md, _ = rebuild_report(out / "report", tmp_path / "rebuilt")  # from the folder alone
+    assert md.read_text() == report
