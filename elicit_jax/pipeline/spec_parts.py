@@ -237,9 +237,8 @@ def parse_scorer(raw: Mapping[str, Any], models: tuple[str, ...], source: str) -
     if not isinstance(profile, str):
         raise ElicitError(f"[scorer] profile must be a profile name, got {profile!r}", source)
     for model in models:
-        meta = {"profile": profile, "method": "scorer"}
         try:
-            resolve_train({**settings, "model": model, **meta}, "scorer", ("profile",))
+            resolve_train({**settings, "model": model, "profile": profile}, "scorer", ("profile",))
         except ElicitError as e:
             text = str(e)
             text = text if text.startswith("[scorer]") else f"[scorer] {text}"
