@@ -1,9 +1,11 @@
 """Run a shipped pipeline definition end to end at tiny sizes, before committing to the long run.
 
 The definition keeps everything that shapes the stage graph — its tasks, operators, methods,
-models, profile overrides, [sensitivity] — and only the sizes shrink: a few demonstrations per
-set, tiny networks trained for a few epochs with two checkpoints, a few rollouts, two training
-seeds, two λ points on one held-out seed. Every stage kind the real run uses runs once for
+models, profile overrides, [sensitivity], [scorer] — and only the sizes shrink: a few
+demonstrations per set, tiny networks trained for a few epochs with two checkpoints (the
+scorer's a little wider, so it stays a policy of its own — also under a profile where the real
+one trains as the base policy and is not planned), a few rollouts, two training seeds,
+two λ points on one held-out seed. Every stage kind the real run uses runs once for
 real (collection, training, scoring, the fit, every filter, DemInf, Demo-SCORE rollouts and
 classifier, evaluation, the report). The numbers mean nothing; the point is that the long
 run cannot fail on a wiring error after hours.
@@ -38,6 +40,9 @@ TINY_TRAIN = {
     "progress_every": 3,
     "batch_size": 128,
 }
+
+TINY_SCORER_HIDDEN = [24, 24]
+"""A ``[scorer]``'s hidden sizes in the smoke run: tiny, and unlike :data:`TINY_TRAIN`'s."""
 
 
 def _value(v: Any) -> str:
@@ -82,13 +87,15 @@ def shrink(data: dict[str, Any]) -> dict[str, Any]:
     data["pipeline"] = {**data["pipeline"], "seeds": [0, 1]}
     data["task"] = [{**t, **TINY_TASK, **_tiny_sizes(t)} for t in data["task"]]
     data["train"] = {**data.get("train", {}), **TINY_TRAIN}
+    if "scorer" in data:  # tiny too, and still unlike the compared policies (so it is planned)
+        data["scorer"] = {**data["scorer"], **TINY_TRAIN, "hidden": TINY_SCORER_HIDDEN}
     data["evaluate"] = {**data.get("evaluate", {}), "rollouts": 4}
     demo_score = data.get("demo_score", {})
     classifier = {**demo_score.get("classifier", {}), "steps": 100}
     data["demo_score"] = {**demo_score, "rollouts": 4, "classifier": classifier}
     profiles = {}
     for name, prof in data.get("profiles", {}).items():
-        prof = {k: v for k, v in prof.items() if k not in ("train", "pipeline")}
+        prof = {k: v for k, v in prof.items() if k not in ("train", "pipeline", "scorer")}
         profiles[name] = prof
     data["profiles"] = profiles
     if "sensitivity" in data:

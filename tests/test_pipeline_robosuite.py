@@ -46,6 +46,9 @@ TINY_TASK = {
 TINY_SECTIONS = {
     "train": {"hidden": [8], "ensemble_size": 2, "epochs": 4, "checkpoint_every": 2,
               "progress_every": 2, "batch_size": 32},
+    # the shipped scorer (the paper's size) shrunk too, still unlike the compared policies
+    "scorer": {"hidden": [12], "ensemble_size": 2, "epochs": 4, "checkpoint_every": 2,
+               "progress_every": 2, "batch_size": 32},
     "evaluate": {"rollouts": 2, "horizon": 5, "workers": 2},
     "demo_score": {"rollouts": 2, "horizon": 5, "threads": 2, "classifier": {"steps": 50}},
     "cupid": {"rollouts": 2, "horizon": 5, "proj_dim": 32},
@@ -98,3 +101,8 @@ def test_robosuite_study_runs_end_to_end_and_reports(tmp_path):
     assert "the one checkpoint evaluated per seed" in report  # final only: nothing chosen
     rolls = pq.read_table(out / "report" / "rollouts.parquet").to_pandas()
     assert set(rolls["method"]) == set(methods)
+    # the contrast sets and D_new were scored by the scorer, trained on D_base
+    scorer = out / "policies/robosuite-square/mlp/scorer"
+    assert read_header(scorer)["config"]["hidden"] == [12]
+    scores = read_header(out / "scores/robosuite-square/mlp/contrast/scores.parquet")
+    assert Path(scores["inputs"]["policy"]["path"]).name == "scorer"

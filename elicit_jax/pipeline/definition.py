@@ -322,17 +322,25 @@ def contrast_fields(
     }
 
 
-def section_fields(cls: type, overrides: Mapping[str, Any], section: str) -> dict[str, Any]:
+def section_fields(
+    cls: type, overrides: Mapping[str, Any], section: str, also: tuple[str, ...] = ()
+) -> dict[str, Any]:
     """A section's keys as fields of the library config ``cls`` they set.
 
+    Args:
+      cls: the library config.
+      overrides: the section's keys (those it takes besides ``cls``'s fields removed).
+      section: how the error names the section (``train`` -> ``[train]``).
+      also: the keys the section takes besides ``cls``'s fields, listed as allowed.
+
     Raises:
-      ElicitError: a key that is no field of ``cls`` (the fields are listed).
+      ElicitError: a key that is no field of ``cls`` (the allowed keys are listed).
     """
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(overrides) - names)
     if unknown:
         raise ElicitError(
             f"[{section}] unknown option(s) {', '.join(unknown)} "
-            f"(allowed: {', '.join(sorted(names))})"
+            f"(allowed: {', '.join(sorted(names | set(also)))})"
         )
     return dict(overrides)

@@ -52,29 +52,58 @@ def result_rows(config: Mapping[str, Any], path: Path) -> list[ResultRow]:
     return result_rows_of(cell_frame(config, path))
 
 
-def training_note(train: Mapping[str, Any]) -> str:
-    """One line per distinct training setup (model, sizes, epochs), as the report states it."""
-    setups = {}
-    for cfg in train.values():
-        t = cfg["train"]
-        key = (
-            t["model"],
-            tuple(t["hidden"]),
-            t["ensemble_size"],
-            t["epochs"],
-            t["checkpoint_every"],
-            t["batch_size"],
-            t["lr"],
-        )
-        setups[key] = None
-    parts = [
+SCORER_METHOD = "scorer"
+"""The ``method`` a scorer's train stage records
+(:func:`elicit_jax.pipeline.plan_cell.scorer_stage`), by which the report tells it apart."""
+
+
+def _setup(t: Mapping[str, Any]) -> tuple[Any, ...]:
+    """What the report states of one training config: model, sizes, epochs, batch, lr."""
+    return (
+        t["model"],
+        tuple(t["hidden"]),
+        t["ensemble_size"],
+        t["epochs"],
+        t["checkpoint_every"],
+        t["batch_size"],
+        t["lr"],
+    )
+
+
+def _describe(setup: tuple[Any, ...]) -> str:
+    m, h, e, ep, ck, b, lr = setup
+    return (
         f"{m}: {e} member(s) × hidden {list(h)}, {ep} epochs (checkpoint every {ck}), "
         f"batch {b}, lr {lr:g}"
-        for m, h, e, ep, ck, b, lr in setups
-    ]
-    return (
-        "Training: " + "; ".join(parts) + ". The paper: 5 × [1024, 1024], 1000 epochs, every 200."
     )
+
+
+def training_note(train: Mapping[str, Any]) -> str:
+    """One line per distinct training setup (model, sizes, epochs), as the report states it;
+    then, when a scorer (``[scorer]``) was trained with another setup than every compared
+    policy, the scorer's, with its training profile and seed."""
+    setups: dict[tuple[Any, ...], None] = {}
+    scorers: dict[tuple[Any, ...], None] = {}
+    for cfg in train.values():
+        if cfg.get("method") == SCORER_METHOD:
+            seeds = tuple(cfg["train"]["seeds"])
+            scorers[(_setup(cfg["train"]), cfg.get("profile"), seeds)] = None
+        else:
+            setups[_setup(cfg["train"])] = None
+    parts = [_describe(s) for s in setups]
+    paper = "The paper: 5 × [1024, 1024], 1000 epochs, every 200."
+    line = "Training: " + "; ".join(parts) + ". " + paper
+    own = [
+        f"{_describe(s)}, training profile {p}, seed {','.join(map(str, seeds))}"
+        for s, p, seeds in scorers
+        if s not in setups
+    ]
+    if own:
+        line += (
+            " Scoring (the contrast sets and every D_new) by a policy of its own trained on "
+            "D_base, not the base policy: " + "; ".join(own) + "."
+        )
+    return line
 
 
 ROLLOUTS = "rollouts"

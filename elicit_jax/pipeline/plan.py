@@ -7,7 +7,11 @@ policy (all seeds in one stage: the policy library vmaps over seeds); per operat
 D_base ∪ D_new (naive); score the contrast sets with the first seed's base policy, fit (λ, η)
 on their scores, score each D_new under the fitted (λ, η), filter D_new (M-filter and baseline
 filters), retrain on D_base ∪ filtered (all seeds), evaluate every policy (all seeds and
-checkpoints); draw the maps; one report.
+checkpoints); draw the maps; one report. With a ``[scorer]`` table a policy of its own scores
+instead of the base policy: trained on the same D_base, the first seed only, with the scorer's
+training settings (``train/<task>/<model>/scorer``: :func:`~.plan_cell.scorer_stage`); when
+those train exactly as the base policy does (seeds aside), the base policy is that scorer and
+none is planned.
 
 A ``[collections]`` table repeats every task's chain, from collection to evaluation, on other
 collections of the same demo sets (:func:`collection_specs`): collection 0 keeps the ids and
@@ -24,6 +28,7 @@ held-out seeds and evaluated on held-out initial states.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 from elicit_jax.errors import ElicitError
@@ -34,6 +39,7 @@ from elicit_jax.pipeline.plan_cell import (
     Cell,
     ConfigResolver,
     demo_score_stage,
+    scorer_stage,
     sensitivity_stages,
 )
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, dict_of, in_sizes, sized_specs
@@ -72,7 +78,8 @@ def threshold_stages(
     spec: Any, task: Any, model: str, base_policy: str, resolve: ConfigResolver
 ) -> tuple[Stage, Stage]:
     """Score the contrast sets (held-out base demos, the known-incompatible operator's demos)
-    with the first seed's base policy of stage ``base_policy``, and fit (λ, η) on them.
+    with the first seed of the policy trained by stage ``base_policy`` (the base policy, or
+    the filtering study's scorer), and fit (λ, η) on them.
 
     ``spec`` and ``task`` are a filtering pipeline's or an elicitation study's: both have
     ``seeds``, ``collect_seed`` and ``section``, and ``name``, ``base_operator`` and
@@ -284,6 +291,15 @@ def _collect_stages(
     return collect_stages(spec, task, sets, resolve)
 
 
+def _training_of(stage: Stage) -> dict[str, Any]:
+    """What a train stage trains, seeds aside: its training config (resolved configs), else its
+    raw config without the seeds and what it is called (``method``, ``operator``)."""
+    train = stage.config.get("train")
+    if isinstance(train, Mapping):
+        return {k: v for k, v in train.items() if k != "seeds"}
+    return {k: v for k, v in stage.config.items() if k not in ("seeds", "method", "operator")}
+
+
 def _cell_stages(
     spec: PipelineSpec, task: TaskSpec, model: str, needs_scores: bool, resolve: ConfigResolver
 ) -> list[Stage]:
@@ -299,7 +315,13 @@ def _cell_stages(
     if not needs_scores:
         return stages
     score_raw = {**spec.section("score"), **c.where, "policy_seed": spec.seeds[0]}
-    contrast, fit = threshold_stages(spec, task, model, base.id, resolve)
+    scorer = base
+    if spec.scorer is not None:
+        own = scorer_stage(c)
+        if _training_of(own) != _training_of(base):  # else the base policy is that scorer
+            scorer = own
+            stages.append(scorer)
+    contrast, fit = threshold_stages(spec, task, model, scorer.id, resolve)
     stages += [contrast, fit]
     map_inputs = {"thresholds": fit.id, "scores:contrast": contrast.id}
     scores: dict[str, Stage] = {}
@@ -309,7 +331,7 @@ def _cell_stages(
             kind="score",
             output=f"scores/{c.cell}/new-{op}",
             config=resolve("score", {**score_raw, "set": op}),
-            inputs={"policy": base.id, "demos0": c.new(op), "thresholds": fit.id},
+            inputs={"policy": scorer.id, "demos0": c.new(op), "thresholds": fit.id},
             label=f"score {c.t} {model} D_new of {op}",
         )
         stages.append(score)

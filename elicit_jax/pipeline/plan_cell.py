@@ -1,6 +1,7 @@
 """The stage builders of one task × model cell of the filtering study (:class:`Cell`): train,
-evaluate, filter and curate stages with their ids and outputs; the Demo-SCORE stage of an
-operator; and the λ-sensitivity study's stages (:func:`sensitivity_stages`).
+evaluate, filter and curate stages with their ids and outputs; the scoring policy's training
+(:func:`scorer_stage`); the Demo-SCORE stage of an operator; and the λ-sensitivity study's
+stages (:func:`sensitivity_stages`).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from elicit_jax.errors import ElicitError
+from elicit_jax.pipeline.gather import SCORER_METHOD
 from elicit_jax.pipeline.graph import Stage
 from elicit_jax.pipeline.spec import PipelineSpec, TaskSpec
 
@@ -114,6 +116,26 @@ class Cell:
     def new(self, op: str) -> str:
         """The id of the stage that collects ``op``'s D_new."""
         return f"collect/{self.t}/new/{op}"
+
+
+def scorer_stage(c: Cell) -> Stage:
+    """The policy that scores the contrast sets and every D_new of the cell, when the
+    definition has ``[scorer]``: trained on D_base, one seed (the first training seed, which
+    the score stages read), with the scorer's own training profile and options (``[train]``
+    does not apply to it)."""
+    scorer = c.spec.scorer
+    assert scorer is not None
+    seed = c.spec.seeds[0]
+    raw = {**scorer.settings, **c.where, "seeds": [seed]}
+    raw |= {"profile": scorer.profile, "method": SCORER_METHOD, "operator": None}
+    return Stage(
+        id=f"train/{c.cell}/{SCORER_METHOD}",
+        kind="train",
+        output=f"policies/{c.cell}/{SCORER_METHOD}",
+        config=c.resolve("train", raw),
+        inputs={"demos0": f"collect/{c.t}/base"},
+        label=f"train {c.t} {c.model} {SCORER_METHOD} ({scorer.profile} profile, seed {seed})",
+    )
 
 
 def demo_score_stage(c: Cell, op: str, naive: Stage) -> Stage:

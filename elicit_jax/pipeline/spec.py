@@ -9,10 +9,12 @@ compare (``methods``) and per-stage config overrides. Layout (see ``pipelines/*.
     [deminf] [demo_score] [cupid] [quality]   # settings of the curation baselines
     [sensitivity]                   # optional: outcome vs λ across the fitted margin
     [collections]                   # optional: seeds, methods: the study on more collections
+    [scorer]                        # optional: profile and [train] keys of the scoring policy
     [task.sizes.paper]              # per task: other named sizes (base_episodes, new_episodes)
     [profiles.cpu.train]            # overrides applied only under that profile
     [profiles.cpu.pipeline]         # seeds, models, methods under that profile
     [profiles.cpu.collections]      # the collections table under that profile
+    [profiles.cpu.scorer]           # the scorer's keys under that profile (over [scorer])
     [task.profiles.cpu]             # per-task overrides under that profile (after the above)
 
 Section keys are passed to the stage's library config by field name; unknown fields are
@@ -43,10 +45,12 @@ from elicit_jax.pipeline.definition import (
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, choose_sizes
 from elicit_jax.pipeline.spec_parts import (
     CollectionsSpec,
+    ScorerSpec,
     SensitivitySpec,
     TaskSpec,
     check_rollout_methods,
     parse_collections,
+    parse_scorer,
     parse_sensitivity,
     parse_task,
 )
@@ -55,6 +59,7 @@ __all__ = [  # the parts re-exported: other parsers (elicitation studies) use th
     "PROFILES",
     "CollectionsSpec",
     "PipelineSpec",
+    "ScorerSpec",
     "SensitivitySpec",
     "TaskSpec",
     "check_keys",
@@ -100,10 +105,12 @@ METHODS = (
     *CURATION_METHODS,
 )
 LAYOUT = Layout(
-    top=frozenset({"pipeline", "task", "profiles", "sensitivity", "collections", *SECTIONS}),
+    top=frozenset(
+        {"pipeline", "task", "profiles", "sensitivity", "collections", "scorer", *SECTIONS}
+    ),
     head=frozenset({*HEAD_KEYS, "methods", "sizes"}),
     sections=SECTIONS,
-    profile=frozenset({*SECTIONS, "task", "pipeline", "collections"}),
+    profile=frozenset({*SECTIONS, "task", "pipeline", "collections", "scorer"}),
     profile_head=frozenset({"seeds", "models", "methods", "collect_seed", "sizes"}),
 )
 """The tables and keys a filtering definition allows."""
@@ -122,6 +129,8 @@ class PipelineSpec(Definition):
       kind: the study kind (:mod:`elicit_jax.pipeline.study_kinds`).
       sizes: the named sizes run side by side (:mod:`elicit_jax.pipeline.sizes`; ``default``:
         the tasks' own counts).
+      scorer: the policy that scores the contrast sets and every D_new, if the definition
+        gives one (``[scorer]``); None: the first training seed's base policy scores.
     """
 
     methods: tuple[str, ...]
@@ -129,6 +138,7 @@ class PipelineSpec(Definition):
     collections: CollectionsSpec | None = None
     kind: str = DEFAULT_KIND
     sizes: tuple[str, ...] = (DEFAULT_SIZES,)
+    scorer: ScorerSpec | None = None
 
     @property
     def n_cells(self) -> int:
@@ -218,12 +228,22 @@ def parse_spec(
     collections = None
     if "collections" in data or "collections" in frame.overrides:
         collections = parse_collections(frame.table(data, "collections", source), methods, source)
+    scorer = None
+    if "scorer" in data or "scorer" in frame.overrides:
+        scorer = parse_scorer(frame.table(data, "scorer", source), frame.models, source)
+        if set(methods) <= {"base", "naive"}:
+            raise ElicitError(
+                f"[scorer]: no method of this study scores demonstrations (methods: "
+                f"{', '.join(methods)}); remove [scorer]",
+                source,
+            )
     return PipelineSpec(
         **frame.definition(source, text, tasks),
         methods=methods,
         sensitivity=sensitivity,
         collections=collections,
         sizes=choose_sizes(head.get("sizes"), tasks, source),
+        scorer=scorer,
     )
 
 

@@ -1,12 +1,13 @@
-"""The parts of a pipeline definition below ``[pipeline]``: its tasks, the λ-sensitivity study
-and the collections table, each a frozen dataclass with its parser. The TOML table helpers
-every definition parser shares are :mod:`elicit_jax.pipeline.definition`'s.
+"""The parts of a pipeline definition below ``[pipeline]``: its tasks, the λ-sensitivity study,
+the collections table and the scoring policy, each a frozen dataclass with its parser. The
+TOML table helpers every definition parser shares are :mod:`elicit_jax.pipeline.definition`'s.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
 from elicit_jax.errors import ElicitError
@@ -186,3 +187,60 @@ def check_rollout_methods(methods: tuple[str, ...], where: str, source: str) -> 
                 f"to {where}methods",
                 source,
             )
+
+
+SCORER_DEFAULT_PROFILE = "paper"
+"""The training profile of a ``[scorer]`` table without ``profile``: the paper's sizes (a
+scorer exists to be bigger than the compared policies)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ScorerSpec:
+    """The policy that scores the contrast sets and every D_new, when it is not the base
+    policy: trained on D_base of the same collection, one seed (the first training seed), with
+    training settings of its own.
+
+    Attributes:
+      profile: the policy library's training profile its settings start from
+        (:data:`elicit_jax.policy.config.PROFILES`; default :data:`SCORER_DEFAULT_PROFILE`).
+      settings: training options over that profile (the keys of ``[train]``); ``[train]``
+        and ``[profiles.<name>.train]`` do not apply to it.
+    """
+
+    profile: str
+    settings: Mapping[str, Any]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "settings", MappingProxyType(dict(self.settings)))
+
+
+def parse_scorer(raw: Mapping[str, Any], models: tuple[str, ...], source: str) -> ScorerSpec:
+    """The ``[scorer]`` table (``[profiles.<name>.scorer]`` already merged), validated as the
+    train stages validate ``[train]`` (:func:`~elicit_jax.pipeline.stage_config.resolve_train`,
+    for every model of the definition), plus ``profile``.
+
+    Raises:
+      ElicitError: one line naming ``source``: an unknown key or profile, ``seeds`` (the scorer
+        trains the first training seed: the seed every score stage reads), or an invalid
+        training option.
+    """
+    from elicit_jax.pipeline.stage_config import resolve_train
+
+    settings = {k: v for k, v in raw.items() if k != "profile"}
+    profile = raw.get("profile", SCORER_DEFAULT_PROFILE)
+    if "seeds" in settings:
+        raise ElicitError(
+            "[scorer] seeds: the scorer trains one seed, the first of [pipeline] seeds (the "
+            "seed every score stage reads); remove it",
+            source,
+        )
+    if not isinstance(profile, str):
+        raise ElicitError(f"[scorer] profile must be a profile name, got {profile!r}", source)
+    for model in models:
+        try:
+            resolve_train({**settings, "model": model, "profile": profile}, "scorer", ("profile",))
+        except ElicitError as e:
+            text = str(e)
+            text = text if text.startswith("[scorer]") else f"[scorer] {text}"
+            raise ElicitError(text, source) from None
+    return ScorerSpec(profile=profile, settings=settings)

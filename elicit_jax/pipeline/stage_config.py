@@ -54,12 +54,27 @@ def resolve_collect(raw: dict[str, Any]) -> dict[str, Any]:
     return {**meta, "collect": cfg}
 
 
-def resolve_train(raw: dict[str, Any]) -> dict[str, Any]:
-    """A train stage's config: where it belongs and the profile's full training config."""
+TRAIN_META = ("task", "profile", "method", "operator", "study", "point")
+"""The keys of a train stage's config beside its training config (``profile``: the policy
+library's training profile the config starts from)."""
+
+
+def resolve_train(
+    raw: dict[str, Any], section: str = "train", also: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """A train stage's config: where it belongs and the profile's full training config.
+
+    Args:
+      raw: the stage's :data:`TRAIN_META` and its training options.
+      section: the definition's table the options come from, as errors name it (``[train]``;
+        the scorer's ``[scorer]``: :func:`elicit_jax.pipeline.spec_parts.parse_scorer`).
+      also: the keys that table takes besides the training options (listed as allowed).
+    """
     from elicit_jax.policy.config import TrainConfig
 
-    meta, over = _split(raw, ("task", "profile", "method", "operator", "study", "point"))
-    cfg = TrainConfig.from_profile(meta["profile"], **section_fields(TrainConfig, over, "train"))
+    meta, over = _split(raw, TRAIN_META)
+    fields = section_fields(TrainConfig, over, section, also)
+    cfg = TrainConfig.from_profile(meta["profile"], **fields)
     return {**meta, "train": cfg.to_dict()}
 
 

@@ -134,6 +134,7 @@ def parse_study(
     head = data.get("pipeline")
     if not isinstance(head, Mapping) or head.get("kind") != KIND:
         raise ElicitError(f'an elicitation study needs [pipeline] kind = "{KIND}"', source)
+    _refuse_scorer(data, source)
     frame = read_frame(data, LAYOUT, source, profile)
     bad = sorted(set(frame.sections["session"]) & _SESSION_FIXED)
     if bad:
@@ -149,6 +150,21 @@ def parse_study(
         ablation=_names(frame.head, "ablation", ABLATION, source),
         dagger_conditions=_names(frame.head, "dagger_conditions", DAGGER, source),
     )
+
+
+def _refuse_scorer(data: Mapping[str, Any], source: str) -> None:
+    """A filtering study's ``[scorer]`` has no place here: the sessions score live with the
+    base policy, so the thresholds they are judged under must be fitted on its scores."""
+    profiles = data.get("profiles")
+    in_profile = isinstance(profiles, Mapping) and any(
+        isinstance(p, Mapping) and "scorer" in p for p in profiles.values()
+    )
+    if "scorer" in data or in_profile:
+        raise ElicitError(
+            "[scorer] applies to filtering studies only: an elicitation study's sessions score "
+            "with the base policy, so its thresholds are fitted on that policy's scores",
+            source,
+        )
 
 
 CONTRAST_TOL = 0.05
