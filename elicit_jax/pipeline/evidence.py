@@ -7,7 +7,8 @@ A study's report folder holds, beside ``report.md``:
   and its role (``select``: rollouts the checkpoint is chosen on; ``report``: rollouts whose
   success is reported), rollout index, initial-state seed, success and length;
 * ``report-data.json`` — everything else the report shows (threshold fits, filter counts,
-  curation scores, demonstration lengths, stage configs, versions, the run's provenance).
+  curation scores, demonstration lengths, the demos that conflict, stage configs, versions,
+  the run's provenance).
 
 ``elicit-jax report --rebuild DIR`` (:func:`elicit_jax.pipeline.run.rebuild_report`; an
 elicitation study: :mod:`elicit_jax.pipeline.elicitation.evidence`) recomputes every table, interval
@@ -31,7 +32,12 @@ import numpy as np
 
 from elicit_jax.artifact import dumps, read_artifact, read_header
 from elicit_jax.errors import ElicitError
-from elicit_jax.pipeline.report_rows import ROW_FIELDS, ReportData, ResultRow
+from elicit_jax.pipeline.report_rows import (
+    OPTIONAL_ROW_FIELDS,
+    ROW_FIELDS,
+    ReportData,
+    ResultRow,
+)
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
 
 ROLLOUTS_FILE = "rollouts.parquet"
@@ -248,13 +254,15 @@ def _rows(cls: type, items: Sequence[Mapping[str, Any]], tuples: tuple[str, ...]
 
 
 def data_to_json(data: ReportData) -> dict[str, Any]:
-    """``data`` without its results (they live in the rollout table), as a JSON header."""
+    """``data`` without its results (they live in the rollout table), as a JSON header (an
+    optional row field without rows left out: :data:`OPTIONAL_ROW_FIELDS`)."""
     from elicit_jax.artifact import make_header
 
     body = {
         f.name: getattr(data, f.name)
         for f in dataclasses.fields(data)
         if f.name not in ("results", "heldout", "figures", "findings", "maps", "rollouts")
+        and not (f.name in OPTIONAL_ROW_FIELDS and not getattr(data, f.name))
     }
     body["maps"] = [[caption, f"maps/{Path(png).name}"] for caption, png in data.maps]
     seeds = sorted({r.seed for r in (*data.results, *data.heldout)})
@@ -262,8 +270,11 @@ def data_to_json(data: ReportData) -> dict[str, Any]:
 
 
 def data_from_json(header: Mapping[str, Any], folder: Path) -> ReportData:
-    """The inverse of :func:`data_to_json` (maps resolved inside ``folder``)."""
+    """The inverse of :func:`data_to_json` (maps resolved inside ``folder``; an optional row
+    field it does not hold has no rows)."""
     body = dict(header["data"])
+    for name in OPTIONAL_ROW_FIELDS:
+        body.setdefault(name, [])
     return ReportData(
         **{
             **body,

@@ -1,8 +1,8 @@
 """What each finished stage of a filtering study adds to its report: the gatherers of the
 stage kinds (:attr:`~elicit_jax.pipeline.stage_kind.StageKind.gather`), one per report field
-of :class:`~elicit_jax.pipeline.report_rows.ReportData` (demonstration lengths, threshold
-fits and valley rules, filter counts, curation scores, λ points, maps) and the evaluations'
-rollouts every study gathers.
+of :class:`~elicit_jax.pipeline.report_rows.ReportData` (demonstration lengths, the demos
+that conflict, threshold fits and valley rules, filter counts, curation scores, λ points,
+maps) and the evaluations' rollouts every study gathers.
 
 Each gatherer takes a stage's record in ``run.json`` and its output path and returns the rows
 it adds, each marked with the stage's collection and, for named sizes other than the default
@@ -28,6 +28,7 @@ from elicit_jax.compat.thresholds import (
     read_thresholds,
     read_thresholds_header,
 )
+from elicit_jax.errors import ElicitError
 from elicit_jax.pipeline import report_rows
 from elicit_jax.pipeline.evidence import cell_frame
 from elicit_jax.pipeline.sizes import DEFAULT_SIZES, sized_task
@@ -69,6 +70,51 @@ def length_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.Length
                 n_episodes=len(lens),
                 mean_length=float(lens.mean()),
                 std_length=float(lens.std(ddof=1)) if lens.size > 1 else 0.0,
+            )
+        )
+    return _mark(stage, rows)
+
+
+CONFLICTS = "conflicts"
+"""The per-step column of collected demos that says whether the episode conflicts with the
+base operator's way (:func:`elicit_jax.sim.collect.trait_columns`; constant within an
+episode)."""
+
+
+def conflict_rows(stage: Mapping[str, Any], path: Path) -> list[report_rows.ConflictRow]:
+    """Per operator of a collected demo set whose demos carry the :data:`CONFLICTS` column:
+    its number of demos and how many of them conflict; none when the column is absent (a task
+    that measures no episode traits).
+
+    Raises:
+      ElicitError: the column is not constant within an episode (naming the file).
+    """
+    import pyarrow.parquet as pq
+
+    if CONFLICTS not in pq.read_schema(path).names:
+        return []
+    table = pq.read_table(path, columns=["episode", "operator", CONFLICTS])
+    episode = table.column("episode").to_numpy()
+    operator = np.asarray(table.column("operator").to_pylist(), dtype=str)
+    flags = np.asarray(table.column(CONFLICTS).to_pylist(), dtype=bool)
+    ids, first, inverse = np.unique(episode, return_index=True, return_inverse=True)
+    varies = np.flatnonzero(np.bincount(inverse, flags, len(ids)) % np.bincount(inverse))
+    if varies.size:
+        raise ElicitError(
+            f"column '{CONFLICTS}' is not constant within episode {ids[varies[0]]}", path
+        )
+    cfg = stage["config"]
+    rows = []
+    for op in dict.fromkeys(operator[first].tolist()):
+        mine = flags[first][operator[first] == op]
+        rows.append(
+            report_rows.ConflictRow(
+                task=cfg["collect"]["task"],
+                role=str(cfg.get("role", "")),
+                operator=op,
+                n_demos=int(mine.size),
+                n_conflicts=int(mine.sum()),
+                require=str(cfg["collect"].get("require", "")),
             )
         )
     return _mark(stage, rows)

@@ -33,6 +33,7 @@ from elicit_jax.pipeline.tables import (
     sensitivity_tables,
     threshold_table,
 )
+from elicit_jax.pipeline.tables_conflicts import conflict_tables
 from elicit_jax.pipeline.tables_sizes import sizes_heading, sizes_note, sizes_tables
 from elicit_jax.render import FigureRenderer
 
@@ -50,6 +51,7 @@ def _sections(data: ReportData) -> list[tuple[str, Any]]:
         blocks.append((title, table))
     if data.figures:
         blocks.append(("λ sensitivity", list(data.figures)))
+    blocks += conflict_tables(data)
     blocks.append(("Mean rollout length and selected checkpoints", rollout_length_table(data)))
     if data.thresholds:
         blocks.append(
@@ -138,5 +140,6 @@ LAYOUT = ReportLayout(
 """A filtering (or models) study's report, for
 :func:`~elicit_jax.pipeline.report_folder.write_report`: the sizes side by side of a run at
 several named sizes (its heading and intro name them), the paper's tables with their
-differences, the models and λ-sensitivity tables, the fit, the filters, the curation scores,
-the maps and the demonstration lengths."""
+differences, the models and λ-sensitivity tables, the share of the demos that conflict
+(measured per demo, when the demos carry it), the fit, the filters, the curation scores, the
+maps and the demonstration lengths."""

@@ -89,6 +89,28 @@ class LengthRow:
 
 
 @dataclasses.dataclass(frozen=True)
+class ConflictRow:
+    """How many demos of one collected demo set conflict with the base operator's way,
+    measured per demo from its own states (the demos' ``conflicts`` column, recorded by
+    ``collect`` on tasks that measure episode traits).
+
+    Attributes:
+      role: the set's role: ``base`` (D_base), ``new`` (a D_new), ``holdout`` or
+        ``incompatible`` (the contrast sets of the threshold fit).
+      require: what the set's collection kept only (``conflicts``, ``no-conflict``: its demos
+        were verified as they were collected), or empty.
+    """
+
+    task: str
+    role: str
+    operator: str
+    n_demos: int
+    n_conflicts: int
+    require: str = ""
+    collection: int = 0
+
+
+@dataclasses.dataclass(frozen=True)
 class FilterRow:
     """What one filter kept of one D_new."""
 
@@ -168,6 +190,7 @@ class ReportData(RunReport):
 
     thresholds: tuple[ThresholdRow, ...] = ()
     lengths: tuple[LengthRow, ...] = ()
+    conflicts: tuple[ConflictRow, ...] = ()
     filters: tuple[FilterRow, ...] = ()
     curation: tuple[CurationRow, ...] = ()
     heldout: tuple[ResultRow, ...] = ()
@@ -181,11 +204,15 @@ class ReportData(RunReport):
 ROW_FIELDS = {
     "thresholds": ThresholdRow,
     "lengths": LengthRow,
+    "conflicts": ConflictRow,
     "filters": FilterRow,
     "curation": CurationRow,
     "lambda_points": LambdaPoint,
 }
 """The :class:`ReportData` fields that hold rows read from the run's stages, and their row type."""
+OPTIONAL_ROW_FIELDS = ("conflicts",)
+"""Row fields a ``report-data.json`` holds only when they have rows: absent from those kept
+before the field existed (and from a run that has none), so those rebuild as they were."""
 
 Table = tuple[list[str], list[list[str]]]
 

@@ -125,7 +125,7 @@ def curate_stage(ctx: StageContext) -> None:
 FILTERING_KINDS = (
     StageKind(
         "collect", collect_stage, sc.resolve_collect, outputs="data/", reported=True,
-        gather={"lengths": gr.length_rows},
+        gather={"lengths": gr.length_rows, "conflicts": gr.conflict_rows},
     ),
     StageKind(
         "train", train_stage, sc.resolve_train, inputs=("demos0", "demos1"), outputs="policies/"
