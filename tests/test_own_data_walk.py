@@ -97,7 +97,7 @@ def test_scores_fit_and_filter_separate_the_operators(walk):
     # on are found, by content, among the scored ones; nothing is left unchecked
     assert rep["trust"]["unchecked"] == []
     assert rep["training_check"]["demos"] == 20
-    assert "base policy's training demos" in walk["outputs"]["fit-thresholds --scores"]
+    assert "scoring policy's training demos rejected" in walk["outputs"]["fit-thresholds --scores"]
     assert rep["per_operator"]["direct_operator_1"]["rejected_episodes"] <= 2
     assert rep["per_operator"]["axis_operator_2"]["rejected_episodes"] >= 15
     kept = read_demos(d / "filtered.parquet")

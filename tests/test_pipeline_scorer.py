@@ -322,9 +322,15 @@ def test_tiny_run_scores_with_the_scorer_and_checks_its_training_demos(tmp_path)
     for scores in ("contrast", "new-conflict-right"):
         header = read_header(out / "scores/reach-pillar/mlp" / scores / "scores.parquet")
         assert Path(header["inputs"]["policy"]["path"]).name == "scorer"
-    # the fit's check of "the base policy's training demos": the scorer's, i.e. D_base
-    check = read_json(out / "thresholds/reach-pillar/mlp.json")["report"]["training_check"]
+    # the fit checks the training demos of the policy that scored (the scorer's: D_base)
+    fitted = read_json(out / "thresholds/reach-pillar/mlp.json")["report"]
+    check = fitted["training_check"]
     assert check["demos"] == 5 and "scorer" in check["source"]
+    # the tiny scorer's fit rejects some of them, and the report's fit table says whose
+    assert check["rejected"] > 0, "the planted case: the tiny fit rejects training demos"
+    said = f"reject {check['rejected']} of the 5 training demos of the policy that scored (D_base)"
+    assert any(said in p for p in fitted["trust"]["problems"])
+    assert "base policy's" not in " ".join(fitted["trust"]["problems"])
     data = STUDY_KINDS["filtering"].report_data(out)
     (note,) = [n for n in data.notes if n.startswith("Training:")]
     assert "hidden [8, 8]" in note
@@ -332,5 +338,6 @@ def test_tiny_run_scores_with_the_scorer_and_checks_its_training_demos(tmp_path)
     assert "hidden [16, 16], 6 epochs" in note and "training profile cpu, seed 0" in note
     report = outcome.report_md.read_text()
     assert "Scoring (the contrast sets and every D_new)" in report
+    assert said in report and "base policy's 5 own training" not in report
     md, _ = rebuild_report(out / "report", tmp_path / "rebuilt")  # from the folder alone
     assert md.read_text() == report

@@ -93,6 +93,12 @@ def test_the_recorded_task_comes_with_the_policy(run, tmp_path):
     copy, _ = _planted(run, tmp_path, lambda h: h.update(task="round-nut"))
     assert load_policy(copy).task == "round-nut"
     assert read_header(copy / "seed0")["task"] == "round-nut"
+    # what --task defaults to is read the same way, from the headers alone (no parameters)
+    from elicit_jax.sim.task_match import recorded_task
+
+    for f in (copy / "seed0" / "params").iterdir():
+        f.unlink()
+    assert recorded_task(copy / "seed0") == "round-nut"
 
 
 def test_score_loads_through_the_loader(run, tmp_path):

@@ -121,6 +121,25 @@ def test_contrast_sets_inside_the_training_data_are_flagged(d, tmp_path):
     assert "5 of the 5 demonstrations of the incompatible set (episode 0, 1, 2, 3, 4)" in text
 
 
+def test_a_scorer_s_checks_name_the_training_demos_of_the_policy_that_scored(d, tmp_path):
+    """With ``scorer`` (a pipeline's ``[scorer]`` scored), checks (a) and (c) say whose
+    training demos they checked: the scoring policy's (D_base), not the base policy's."""
+    s = _scores(d, "inc.parquet", "all.parquet", incompatible=[*range(5), *range(20, 25)])
+    with pytest.raises(ElicitError) as refused:
+        _fit(s, tmp_path / "c.json", "episodes:10-14", "episodes:0-4", scorer=True)
+    assert "base policy" not in str(refused.value)
+    assert "reject 5 of the 10 training demos of the policy that scored (D_base) (50%" in str(
+        refused.value
+    )
+    h = _fit(s, tmp_path / "c.json", "episodes:10-14", "episodes:0-4", force=True, scorer=True)
+    problems = h["report"]["trust"]["problems"]
+    assert not any("base policy" in p for p in problems)
+    assert (
+        "5 of the 5 demonstrations of the incompatible set (episode 0, 1, 2, 3, 4) are in the "
+        "training demos of the policy that scored (D_base): the policy has fitted them"
+    ) in " ".join(problems)
+
+
 def test_training_demos_not_in_the_scores_are_scored_under_the_policy(d, tmp_path):
     s = _scores(d, "new-scores.parquet", "new.parquet", incompatible=range(20, 25))
     src = f"10 scored now under {d / 'run' / 'seed0'}"

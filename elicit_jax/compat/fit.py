@@ -59,6 +59,9 @@ class FitJob:
       base: the base policy's training demonstrations (``--base``), to check the thresholds
         against; default: those the scores file holds and the files the checkpoint records
         (:mod:`elicit_jax.compat.training_data`).
+      scorer: the scores were computed by a policy of their own trained on D_base (a
+        pipeline's ``[scorer]``), not the base policy: the training-data checks' messages
+        name that policy's training demos.
     """
 
     compatible: str | None = None
@@ -67,6 +70,7 @@ class FitJob:
     manual: Thresholds | None = None
     force: bool = False
     base: tuple[str, ...] = ()
+    scorer: bool = False
 
     def __post_init__(self) -> None:
         if (self.compatible is None) != (self.incompatible is None):
@@ -173,17 +177,19 @@ def _contrast_verdict(
 
 
 def _training_verdict(
-    ev: TrainingEvidence, labels: dict[int, bool], out: dict[str, Any], f: float
+    ev: TrainingEvidence, labels: dict[int, bool], out: dict[str, Any], job: FitJob
 ) -> tuple[Verdict, dict[str, Any]]:
-    """Checks (a) and (c) against the base policy's training demos, and their report."""
-    rejected = ev.rejected(out["thresholds"], f)
-    verdict = Verdict(unchecked=ev.notes) + training_rejections(rejected, ev.n_demos, ev.source)
+    """Checks (a) and (c) against the scoring policy's training demos, and their report."""
+    rejected = ev.rejected(out["thresholds"], job.fit.accept_fraction)
+    verdict = Verdict(unchecked=ev.notes) + training_rejections(
+        rejected, ev.n_demos, ev.source, scorer=job.scorer
+    )
     if labels and ev.training is not None and ev.scored is not None:
         sets = {
             "compatible": [e for e, c in labels.items() if c],
             "incompatible": [e for e, c in labels.items() if not c],
         }
-        verdict += training_overlap(sets, ev.scored, ev.training)
+        verdict += training_overlap(sets, ev.scored, ev.training, scorer=job.scorer)
     check = {"demos": ev.n_demos, "rejected": rejected, "source": ev.source}
     return verdict, check
 
@@ -233,7 +239,7 @@ def fit_scores_file(
     evidence = gather(scores_path, scores_header, s, job.base)
     out = _fit_report(s, labels, job)
     report = out["report"]
-    verdict, report["training_check"] = _training_verdict(evidence, labels, out, f)
+    verdict, report["training_check"] = _training_verdict(evidence, labels, out, job)
     verdict = _contrast_verdict(s, labels, out, f) + verdict
     verdict = dataclasses.replace(verdict, forced=job.force and verdict.meaningless)
     report["trust"] = verdict.to_dict()

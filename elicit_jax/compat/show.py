@@ -49,7 +49,7 @@ def print_report(header: dict[str, Any], console: Any) -> None:
     check = rep.get("training_check") or {}
     if check.get("demos"):
         t.add_row(
-            "base policy's training demos rejected",
+            "scoring policy's training demos rejected",  # short: fits 80 columns
             f"{check['rejected']} / {check['demos']} ({check['source']})",
         )
     if "n_compatible" in rep:
@@ -101,7 +101,7 @@ def print_trust(report: dict[str, Any], console: Any) -> None:
     if verdict.trustworthy:
         console.print(
             "[green]trust: no problems found[/] (margin, held-out check, pair counts, operators, "
-            "the base policy's training demos)" + ("" if verdict.clean else ", but:")
+            "the scoring policy's training demos (D_base))" + ("" if verdict.clean else ", but:")
         )
         if unchecked:
             console.print(f"[yellow]{unchecked}[/]")

@@ -52,6 +52,9 @@ CHANCE_ACCURACY = 0.6
 WEAK_ACCURACY = 0.75
 MOST = 0.5
 TRAINING_SHARE = 0.10
+SCORER_TRAINING_DEMOS = "training demos of the policy that scored (D_base)"
+"""What checks (a) and (c) are against when a policy of its own scored (a pipeline's
+``[scorer]``, trained on the same D_base as the base policy)."""
 _OLD = (
     "the checks against the base policy's training data were not run (written by an older "
     "elicit-jax): refit to run them"
@@ -218,21 +221,26 @@ def assess_fit(
     return Verdict(tuple(problems + severe), tuple(severe))
 
 
-def training_rejections(rejected: int, total: int, source: str) -> Verdict:
-    """Check (a): thresholds must accept the base policy's own training demonstrations.
+def training_rejections(rejected: int, total: int, source: str, *, scorer: bool = False) -> Verdict:
+    """Check (a): thresholds must accept the scoring policy's own training demonstrations.
 
     Args:
       rejected: training demos the 5% rule rejects under the thresholds.
       total: training demos checked (0: the check could not be run).
       source: where their scores came from (said in the message).
+      scorer: the scores come from a policy of their own trained on D_base (a pipeline's
+        ``[scorer]``), not the base policy: the message names that policy's training demos.
     """
     if total == 0:
         return Verdict()
     if rejected > TRAINING_SHARE * total:
+        share = f"{100 * rejected / total:.0f}% > {100 * TRAINING_SHARE:.0f}%; {source}"
         msg = (
-            f"the thresholds reject {rejected} of the base policy's {total} own training "
-            f"demonstrations ({100 * rejected / total:.0f}% > {100 * TRAINING_SHARE:.0f}%; "
-            f"{source}): they would reject the very data the policy learned from"
+            f"the thresholds reject {rejected} of the {total} {SCORER_TRAINING_DEMOS} "
+            f"({share}): they would reject the very data that policy learned from"
+            if scorer
+            else f"the thresholds reject {rejected} of the base policy's {total} own training "
+            f"demonstrations ({share}): they would reject the very data the policy learned from"
         )
         return Verdict((msg,), (msg,))
     return Verdict()
@@ -263,24 +271,28 @@ def training_overlap(
     sets: Mapping[str, Collection[int]],
     digests: Mapping[int, str],
     training: Collection[str],
+    *,
+    scorer: bool = False,
 ) -> Verdict:
-    """Check (c): no contrast demonstration may be one the base policy was trained on.
+    """Check (c): no contrast demonstration may be one the scoring policy was trained on.
 
     Args:
       sets: set name (``compatible``/``incompatible``) -> episode ids in the scores.
       digests: episode id -> content hash of the scored demonstrations.
-      training: content hashes of the base policy's training demonstrations.
+      training: content hashes of the scoring policy's training demonstrations.
+      scorer: as for :func:`training_rejections`.
     """
     problems = []
     train = set(training)
+    where = SCORER_TRAINING_DEMOS if scorer else "base policy's training data"
     for name, ids in sets.items():
         inside = sorted(e for e in ids if digests.get(int(e)) in train)
         if inside:
             more = f" and {len(inside) - 5} more" if len(inside) > 5 else ""
             problems.append(
                 f"{len(inside)} of the {len(ids)} demonstrations of the {name} set "
-                f"(episode {', '.join(map(str, inside[:5]))}{more}) are in the base policy's "
-                "training data: the policy has fitted them, so their scores say nothing "
+                f"(episode {', '.join(map(str, inside[:5]))}{more}) are in the {where}: "
+                "the policy has fitted them, so their scores say nothing "
                 "about new demonstrations"
             )
     return Verdict(tuple(problems))

@@ -78,7 +78,8 @@ def _score_config(ctx: StageContext, stored: dict[str, Any]) -> Any:
 
 
 def fit_stage(ctx: StageContext) -> None:
-    """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report."""
+    """Fit (λ, η) on the contrast scores (or record manual thresholds) with a fit report; its
+    training-data checks name the policy that scored: the base policy, or the cell's scorer."""
     from elicit_jax.compat.fit import FitJob, fit_scores_file
     from elicit_jax.compat.show import print_report
     from elicit_jax.compat.threshold_fit import FitConfig
@@ -91,9 +92,21 @@ def fit_stage(ctx: StageContext) -> None:
         fit=FitConfig(**cfg["fit"]),
         manual=from_config_fields(dict(cfg), "the pipeline's [thresholds] (manual)"),
         force=bool(cfg.get("force", False)),
+        scorer=scored_by_scorer(ctx.inputs["scores"]),
     )
     scores = ctx.inputs["scores"] / SCORES_FILE
     fit_scores_file(scores, ctx.output, job, show=lambda header: print_report(header, ctx.console))
+
+
+def scored_by_scorer(scores_dir: Path) -> bool:
+    """Whether a score stage's output was scored by the cell's own scorer (``[scorer]``,
+    whose train stage writes ``policies/<task>/<model>/scorer``), not the base policy: the
+    policy input its header records."""
+    from elicit_jax.artifact import read_header
+    from elicit_jax.pipeline.gather import SCORER_METHOD
+
+    policy = (read_header(scores_dir).get("inputs") or {}).get("policy") or {}
+    return Path(policy.get("path", "")).name == SCORER_METHOD
 
 
 def filter_stage(ctx: StageContext) -> None:

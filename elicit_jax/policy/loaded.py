@@ -190,7 +190,7 @@ def load_policy(
     loaded = LoadedPolicy(
         policy=policy,
         kind=kind,
-        task=_recorded_task(seed_dir, header),
+        task=recorded_task(seed_dir, header),
         seed=int(header["seed"]),
         config=dict(header.get("config") or {}),
         seed_dir=seed_dir,
@@ -250,14 +250,25 @@ def _spec_of(header: Mapping[str, Any], seed_dir: Path) -> tuple[Mapping[str, An
         raise ElicitError(f"{e} (checkpoint model spec)", seed_dir / "artifact.json") from None
 
 
-def _recorded_task(seed_dir: Path, header: Mapping[str, Any]) -> str | None:
-    """The task the run's training data recorded (a seed directory of an older run: the
-    run's header), or None for none / ``unknown``."""
+def recorded_task(path: str | Path, header: Mapping[str, Any] | None = None) -> str | None:
+    """The task a policy's training data recorded, from headers alone (no parameters read):
+    what :attr:`LoadedPolicy.task` holds, and what ``--task`` defaults to
+    (:mod:`elicit_jax.sim.task_match`).
+
+    Args:
+      path: a run directory, one of its seed directories (of an older run, which records no
+        task itself: its run's), or a demos artifact.
+      header: ``path``'s header when already read (read here otherwise).
+
+    Returns:
+      The recorded task, or None for none / ``unknown``.
+    """
     from elicit_jax.artifact import read_header
 
-    task = header.get("task")
-    if task is None and (seed_dir.parent / "artifact.json").is_file():
-        task = read_header(seed_dir.parent).get("task")
+    path = Path(path)
+    task = (read_header(path) if header is None else header).get("task")
+    if task is None and path.is_dir() and (path.parent / "artifact.json").is_file():
+        task = read_header(path.parent).get("task")
     return None if task is None or str(task).strip().lower() in UNKNOWN_TASKS else str(task)
 
 

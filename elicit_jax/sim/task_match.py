@@ -9,7 +9,9 @@ unless forced (:func:`resolve_task`).
 A run records its training demonstrations' task: a simulated task's name for collected
 demos, the environment's name (``NutAssemblySquare``) for imported ones, or ``unknown``. A
 task accepts its own name, its preset aliases and its ``recorded_as`` names
-(:class:`~elicit_jax.sim.registry.TaskEntry`).
+(:class:`~elicit_jax.sim.registry.TaskEntry`). The recorded task is read from headers alone by
+:func:`~elicit_jax.policy.loaded.recorded_task`, the reader
+:attr:`~elicit_jax.policy.loaded.LoadedPolicy.task` comes from too (no policy is loaded here).
 """
 
 from __future__ import annotations
@@ -17,26 +19,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from elicit_jax.artifact import read_header
 from elicit_jax.errors import ElicitError
+from elicit_jax.policy.loaded import UNKNOWN_TASKS, recorded_task
 from elicit_jax.sim.registry import TASKS
 
-UNKNOWN = ("", "unknown")
-
-
-def recorded_task(policy: str | Path) -> str | None:
-    """The task a policy's training run (or a demos file) records (``None``: none, or
-    ``unknown``).
-
-    Args:
-      policy: a run directory, one of its seed directories, or a demos artifact.
-    """
-    path = Path(policy)
-    header = read_header(path)
-    task = header.get("task")
-    if task is None and path.is_dir() and (path.parent / "artifact.json").is_file():
-        task = read_header(path.parent).get("task")  # a seed directory of an older run
-    return None if task is None or str(task).strip().lower() in UNKNOWN else str(task)
+__all__ = ["check_same_task", "recorded_task", "resolve_task", "tasks_accepting"]
 
 
 def tasks_accepting(recorded: str) -> list[str]:
@@ -124,7 +111,7 @@ def check_same_task(data_task: str, policy: str | Path, source: str | Path) -> N
       ElicitError: both name simulated tasks, and no task plays both.
     """
     trained = recorded_task(policy)
-    if trained is None or data_task.strip().lower() in UNKNOWN:
+    if trained is None or data_task.strip().lower() in UNKNOWN_TASKS:
         return
     ours, theirs = set(tasks_accepting(data_task)), set(tasks_accepting(trained))
     if ours and theirs and not ours & theirs:

@@ -235,39 +235,75 @@ REACH_PILLAR = ParamSpace(
     compatible=(0.12, 0.2, 0.0),
 )
 
-# --- square-nut / round-nut: wrist yaw, grasp point, approach and carry blends, pauses --------
-_NUT_PAUSE = (0, 1, 5)  # before the first move, the descent and the lowering onto the peg
+
+# --- the handle tasks (the nuts, the hammer): wrist yaw, grasp point, a choice of the task's
+# own, carry order, pause ------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _HandleTask:
+    """θ → choices and choices → regions of a task whose person grasps a handle: θ is (wrist
+    yaw offset, grasp offset along the handle, the task's own choice, carry order, pause), the
+    first two choices as they are, the carry order a two-way choice thresholded at 0.5.
+    Each task states only what differs.
+
+    Attributes:
+      pause_phases: the phases a pause holds still before.
+      own: the task's own coordinate's value -> the choices it drives.
+      own_region: a style's choices -> ``{name: region}`` of the task's own coordinate (empty
+        when the choices do not set it).
+      carry: the carry order's choice below 0.5 and at or above it.
+    """
+
+    pause_phases: tuple[int, ...]
+    own: Callable[[float], dict[str, Any]]
+    own_region: Callable[[Choices], dict[str, Region]]
+    carry: tuple[str, str]
+
+    def choices(self, t: np.ndarray) -> dict[str, Any]:
+        """The operator's choices for θ (already clipped)."""
+        yaw, grasp, own, carry, pause = (float(v) for v in t)
+        out: dict[str, Any] = {"yaw_offset": yaw, "grasp_offset": grasp, **self.own(own)}
+        out["carry"] = self.carry[1] if carry >= 0.5 else self.carry[0]
+        return _with_pause(out, pause, self.pause_phases)
+
+    def regions(self, c: Choices) -> dict[str, Region]:
+        """``{name: region}`` of the coordinates the choices ``c`` pin down."""
+        out = _pause(c, self.pause_phases)
+        for name in ("yaw_offset", "grasp_offset"):
+            if name in c:
+                out[name] = point(c[name])
+        out |= self.own_region(c)
+        if "carry" in c:
+            out["carry"] = _side(c["carry"], self.carry[1])
+        return out
+
+
 _YAW_PRIOR: Region = ((0.1, 0.4), (np.pi - 0.4, np.pi - 0.1))
 """A wrist turned 0.1-0.4 rad (one way) off either way of holding the handle: as the base
 does, or half a turn round."""
 
 
-def _nut_choices(t: np.ndarray) -> dict[str, Any]:
-    yaw, grasp, approach, carry, pause = (float(v) for v in t)
-    out: dict[str, Any] = {"yaw_offset": yaw, "grasp_offset": grasp}
-    out["approach"] = "tip" if approach >= 0.5 else "above"
-    out["carry"] = "diagonal" if carry >= 0.5 else "lift-first"
-    return _with_pause(out, pause, _NUT_PAUSE)
+# --- square-nut / round-nut: approach from the tip or from above, carry diagonally ----------
+def _approach(v: float) -> dict[str, Any]:
+    return {"approach": "tip" if v >= 0.5 else "above"}
 
 
-def _nut_regions(c: Choices) -> dict[str, Region]:
-    out = _pause(c, _NUT_PAUSE)
-    for name in ("yaw_offset", "grasp_offset"):
-        if name in c:
-            out[name] = point(c[name])
-    if "approach" in c:
-        out["approach"] = _side(c["approach"], "tip")
-    if "carry" in c:
-        out["carry"] = _side(c["carry"], "diagonal")
-    return out
+def _approach_region(c: Choices) -> dict[str, Region]:
+    return {"approach": _side(c["approach"], "tip")} if "approach" in c else {}
 
+
+_NUT = _HandleTask(
+    pause_phases=(0, 1, 5),  # before the first move, the descent and the lowering onto the peg
+    own=_approach,
+    own_region=_approach_region,
+    carry=("lift-first", "diagonal"),
+)
 
 NUT = ParamSpace(
     names=("yaw_offset", "grasp_offset", "approach", "carry", "pause"),
     low=(-np.pi, 0.035, 0.0, 0.0, 0.0),
     high=(np.pi, 0.075, 1.0, 1.0, 80.0),
-    to_choices=_nut_choices,
-    from_choices=_nut_regions,
+    to_choices=_NUT.choices,
+    from_choices=_NUT.regions,
     # the grasp 5-17 mm further out along the handle; either approach and carry; a pause of up
     # to 40 steps (the contrast set's style holds still 80)
     prior=(
@@ -281,46 +317,40 @@ NUT = ParamSpace(
     angular=("yaw_offset",),
 )
 
-# --- hammer-drawer: wrist yaw, grasp point, placing yaw (3-way), carry order, pause ----------
-_HAMMER_PAUSE = (4,)  # above the opened drawer, before going to the hammer
+# --- hammer-drawer: the head laid towards +y, -y or the nearest way (3-way), carry low -----
 _THIRD = 1 / 3
 
 
-def _hammer_choices(t: np.ndarray) -> dict[str, Any]:
-    yaw, grasp, place, carry, pause = (float(v) for v in t)
-    out: dict[str, Any] = {"yaw_offset": yaw, "grasp_offset": grasp}
-    if place > _THIRD:
-        out["place_yaw"] = np.pi / 2
-    elif place < -_THIRD:
-        out["place_yaw"] = -np.pi / 2
-    else:
-        out["place_yaw"] = "nearest"
-    out["carry"] = "low-first" if carry >= 0.5 else "lift-first"
-    return _with_pause(out, pause, _HAMMER_PAUSE)
+def _place(v: float) -> dict[str, Any]:
+    if v > _THIRD:
+        return {"place_yaw": np.pi / 2}
+    if v < -_THIRD:
+        return {"place_yaw": -np.pi / 2}
+    return {"place_yaw": "nearest"}
 
 
-def _hammer_regions(c: Choices) -> dict[str, Region]:
-    out = _pause(c, _HAMMER_PAUSE)
-    for name in ("yaw_offset", "grasp_offset"):
-        if name in c:
-            out[name] = point(c[name])
-    if "place_yaw" in c:
-        place = c["place_yaw"]
-        if isinstance(place, str):
-            out["place"] = ((-_THIRD, _THIRD),)
-        else:
-            out["place"] = ((_THIRD + BELOW, 1.0),) if place > 0 else ((-1.0, -_THIRD - BELOW),)
-    if "carry" in c:
-        out["carry"] = _side(c["carry"], "low-first")
-    return out
+def _place_region(c: Choices) -> dict[str, Region]:
+    if "place_yaw" not in c:
+        return {}
+    place = c["place_yaw"]
+    if isinstance(place, str):
+        return {"place": ((-_THIRD, _THIRD),)}
+    return {"place": ((_THIRD + BELOW, 1.0),) if place > 0 else ((-1.0, -_THIRD - BELOW),)}
 
+
+_HAMMER = _HandleTask(
+    pause_phases=(4,),  # above the opened drawer, before going to the hammer
+    own=_place,
+    own_region=_place_region,
+    carry=("lift-first", "low-first"),
+)
 
 HAMMER_DRAWER = ParamSpace(
     names=("yaw_offset", "grasp_offset", "place", "carry", "pause"),
     low=(-np.pi, -0.04, -1.0, 0.0, 0.0),
     high=(np.pi, 0.02, 1.0, 1.0, 40.0),
-    to_choices=_hammer_choices,
-    from_choices=_hammer_regions,
+    to_choices=_HAMMER.choices,
+    from_choices=_HAMMER.regions,
     # the grasp 10-40 mm further along the handle; the head laid towards +y or the nearest
     # way, never towards -y (the contrast set's way); lifted first (carrying low first, with a
     # flip and a pause, runs out of the 175 steps: measured, docs/people.md); a pause up to 30
