@@ -3,8 +3,9 @@ side by side: per task, model and operator, at each sizes, D_base and D_new's co
 Naive and Naive − Base with its interval.
 
 Read across a row's sizes it tells two readings apart: if Naive − Base is positive at every
-sizes, extra data help whoever gave them (the base policy is data-starved); if it turns
-negative where D_new is a larger share, the operator's data conflict. A sizes whose counts for
+sizes, extra data help whoever gave them (the base policy is data-starved); if it is negative
+at some sizes, there the operator's data cost more than they add — the title claims no
+direction in D_new's share, which the counts column gives. A sizes whose counts for
 a task equal the default's trained the same policies: its row shows them, marked ``= default``.
 """
 
@@ -87,8 +88,8 @@ def sizes_tables(data: ReportData) -> list[tuple[str, Table]]:
         "Sizes side by side: success % mean (std) of Base and Naive at each sizes, and Naive − "
         "Base in points [paired 95% interval; over the collections' means when there are "
         f"several]; Holm-adjusted over the {tested(family)} differences of this table, * only "
-        "where the adjusted p < 0.05. Positive at every sizes: extra data help; negative "
-        "where D_new is the larger share: the operator's data conflict"
+        "where the adjusted p < 0.05. Positive at every sizes: extra data help whoever gave "
+        "them; negative at a sizes: there the operator's data cost more than they add"
     )
     return [(title, (header, lines))]
 
